@@ -1,0 +1,30 @@
+# Each target creates .venv and installs the package (with its extras) when it
+# is missing or older than pyproject.toml. Only python3 is needed beforehand.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+JOBS   ?= 2
+
+.PHONY: test figures bench lint clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev,dask]'
+	touch $(STAMP)
+
+test: $(STAMP)
+	MPLBACKEND=Agg $(BIN)/python -m pytest -q -n $(JOBS)
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+
+figures: $(STAMP)
+	MPLBACKEND=Agg $(BIN)/python -m dfcoa_opt figures --out paper_figures
+
+bench: $(STAMP)
+	MPLBACKEND=Agg $(BIN)/python -m benchmarks.run
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache

@@ -1,0 +1,226 @@
+"""Controller and safety-filter interfaces, and the per-step observation.
+
+Distributed by construction: :class:`Observation` is batched for speed, but row
+``i`` of every array is what robot ``i`` knows -- its own (estimated) state and
+scan, the neighbours within communication range, the moving obstacles within
+sensing range, its own slot, and the virtual leader's broadcast state. A
+controller must compute row ``i`` of its command from row ``i`` of the
+observation only; :meth:`Observation.take` and the test helper
+``tests/helpers.py::assert_distributed`` check that.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dfcoa_opt.robots.models import CommandKind
+from dfcoa_opt.world.lidar import LaserScan
+
+if TYPE_CHECKING:
+    from dfcoa_opt.sim.scenario import Scenario
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Neighbours:
+    """Up to K nearest other robots of each robot, padded with index -1.
+
+    Attributes:
+        index: ``(N, K)`` robot indices, -1 where there is no neighbour.
+        position: ``(N, K, 2)`` their positions (as they broadcast them), m; 0 when padded.
+        velocity: ``(N, K, 2)`` their world velocities, m/s; 0 when padded.
+        distance: ``(N, K)`` centre distances, m, ascending; ``inf`` when padded.
+    """
+
+    index: NDArray[np.intp]
+    position: FloatArray
+    velocity: FloatArray
+    distance: FloatArray
+
+    @property
+    def mask(self) -> NDArray[np.bool_]:
+        """``(N, K)`` True where a neighbour exists."""
+        return self.index >= 0
+
+    def take(self, rows: NDArray[np.intp]) -> Neighbours:
+        """The rows of the given robots."""
+        return Neighbours(self.index[rows], self.position[rows], self.velocity[rows],
+                          self.distance[rows])
+
+
+@dataclass(frozen=True)
+class MovingObstacles:
+    """Moving obstacles each robot senses (within ``sensors.obstacle_range``), padded.
+
+    Attributes:
+        position: ``(N, M, 2)`` m; 0 when padded.
+        velocity: ``(N, M, 2)`` m/s; 0 when padded.
+        radius: ``(N, M)`` m; 0 when padded.
+        mask: ``(N, M)`` True where an obstacle is sensed.
+    """
+
+    position: FloatArray
+    velocity: FloatArray
+    radius: FloatArray
+    mask: NDArray[np.bool_]
+
+    def take(self, rows: NDArray[np.intp]) -> MovingObstacles:
+        """The rows of the given robots."""
+        return MovingObstacles(self.position[rows], self.velocity[rows], self.radius[rows],
+                               self.mask[rows])
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What every robot knows at one step (row i = robot i).
+
+    Attributes:
+        t: Time, s.
+        dt: Control step, s.
+        robot_ids: ``(N,)`` global indices of the rows (``arange(N)`` in a full observation).
+        pose: ``(N, 3)`` own pose (x, y, theta) -- the estimate, or truth in 'truth' mode.
+        velocity: ``(N, 2)`` own world velocity, m/s.
+        twist: ``(N, 2)`` own (v, omega) of the last step.
+        scan: Own LiDAR scan (``ranges`` is ``(N, B)``), or None when disabled.
+        neighbours: Robots within communication range.
+        obstacles: Moving obstacles within sensing range.
+        leader: ``(5,)`` broadcast virtual-leader state (x, y, theta, v, omega).
+        goal: ``(2,)`` mission goal, m.
+        slot_offset: ``(N, 2)`` own slot offset in the leader frame, m.
+        slot: ``(N, 2)`` own slot in the world (from ``leader`` and ``slot_offset``), m.
+    """
+
+    t: float
+    dt: float
+    robot_ids: NDArray[np.intp]
+    pose: FloatArray
+    velocity: FloatArray
+    twist: FloatArray
+    scan: LaserScan | None
+    neighbours: Neighbours
+    obstacles: MovingObstacles
+    leader: FloatArray
+    goal: FloatArray
+    slot_offset: FloatArray
+    slot: FloatArray
+
+    @property
+    def n(self) -> int:
+        """Number of rows (robots)."""
+        return len(self.pose)
+
+    def take(self, rows: NDArray[np.intp] | list[int]) -> Observation:
+        """Sub-observation with only the given rows (for checking distributedness)."""
+        rows = np.asarray(rows, dtype=np.intp)
+        scan = None if self.scan is None else self.scan.take(rows)
+        return Observation(self.t, self.dt, self.robot_ids[rows], self.pose[rows],
+                           self.velocity[rows], self.twist[rows], scan,
+                           self.neighbours.take(rows), self.obstacles.take(rows), self.leader,
+                           self.goal, self.slot_offset[rows], self.slot[rows])
+
+
+@runtime_checkable
+class Controller(Protocol):
+    """A multi-robot controller: one command row per robot.
+
+    Attributes:
+        name: Registry id.
+        command: Kind of the rows ``act`` returns: ``"unicycle"`` (v, omega),
+            ``"velocity"`` (vx, vy) or ``"acceleration"`` (ax, ay).
+    """
+
+    name: str
+    command: CommandKind
+
+    def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
+        """Prepare for a run; ``rng`` is the run's only source of randomness."""
+
+    def act(self, obs: Observation) -> FloatArray:
+        """Return ``(N, k)`` commands, row i computed from row i of ``obs`` only."""
+
+
+@dataclass
+class FilterResult:
+    """Output of a safety filter for one step.
+
+    Attributes:
+        command: ``(N, k)`` safe commands (the filter's command kind).
+        status: ``(N,)`` int8, ``dfcoa_opt.sim.log.STATUS_*``.
+        slack: ``(N,)`` constraint violation left (0 when feasible), in the
+            command's units.
+        solve_time: ``(N,)`` wall time per robot, s.
+    """
+
+    command: FloatArray
+    status: NDArray[np.int8]
+    slack: FloatArray
+    solve_time: FloatArray
+
+
+@runtime_checkable
+class SafetyFilter(Protocol):
+    """Maps nominal commands to safe ones.
+
+    Attributes:
+        name: Registry id.
+        command: Command kind it consumes and returns.
+    """
+
+    name: str
+    command: CommandKind
+
+    def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
+        """Prepare for a run."""
+
+    def filter(self, obs: Observation, nominal: FloatArray) -> FilterResult:
+        """Return safe commands for ``nominal`` (same kind as ``self.command``)."""
+
+
+@dataclass
+class Filtered:
+    """A controller whose output passes through a safety filter; itself a Controller.
+
+    The nominal command is converted to the filter's kind with
+    :func:`dfcoa_opt.control.adapters.convert` before filtering.
+
+    Attributes:
+        controller: The nominal controller.
+        safety: The filter.
+        last_result: The filter's result at the latest step (the simulator logs it).
+    """
+
+    controller: Controller
+    safety: SafetyFilter
+    last_result: FilterResult | None = field(default=None, init=False)
+    _nid: float = field(default=0.1, init=False, repr=False)
+
+    @property
+    def name(self) -> str:
+        """``controller+filter``."""
+        return f"{self.controller.name}+{self.safety.name}"
+
+    @property
+    def command(self) -> CommandKind:
+        """The filter's command kind."""
+        return self.safety.command
+
+    def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
+        """Reset both parts."""
+        self._nid = scenario.spec.robots.nid_distance
+        self.controller.reset(scenario, rng)
+        self.safety.reset(scenario, rng)
+        self.last_result = None
+
+    def act(self, obs: Observation) -> FloatArray:
+        """Nominal command, converted, then filtered."""
+        from dfcoa_opt.control.adapters import convert
+
+        nominal = convert(self.controller.act(obs), self.controller.command, self.safety.command,
+                          obs.pose, obs.velocity, obs.dt, self._nid)
+        self.last_result = self.safety.filter(obs, nominal)
+        return self.last_result.command

@@ -1,0 +1,48 @@
+"""Error types of the toolkit.
+
+Every error a user can cause by bad input is a :class:`DfcoaError`. Its string
+form is one line, ``FILE: KEY.PATH: problem``, which the CLI prints as it is and
+exits with code 2 (no traceback).
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
+
+
+class DfcoaError(Exception):
+    """Base class of every user-facing error; ``str(err)`` is a single line."""
+
+
+class ScenarioError(DfcoaError):
+    """A scenario, sweep or parameter file is invalid.
+
+    Args:
+        source: File name (or another description of where the data came from).
+        key: Dotted key path inside the file, e.g. ``"robots.radius"``; empty
+            for problems with the whole file.
+        problem: What is wrong, in words.
+    """
+
+    def __init__(self, source: str, key: str, problem: str) -> None:
+        self.source = str(source)
+        self.key = key
+        self.problem = " ".join(str(problem).split())  # force a single line
+        where = f"{self.source}: {key}: " if key else f"{self.source}: "
+        super().__init__(where + self.problem)
+
+
+class UnknownNameError(DfcoaError):
+    """A name (controller id, planner, ...) that is not registered."""
+
+
+def did_you_mean(name: str, choices: Iterable[str]) -> str:
+    """Return a ``" (did you mean 'x'?)"`` hint, or ``""`` when nothing is close.
+
+    Args:
+        name: The unknown name.
+        choices: The valid names.
+    """
+    close = difflib.get_close_matches(name, list(choices), n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""

@@ -1,0 +1,200 @@
+"""Typed, validated construction of frozen dataclasses from plain dicts (TOML).
+
+Every dataclass field may carry metadata made by :func:`param`: a docstring, a
+unit and bounds. :func:`build` walks a dict against the dataclass, and each
+problem is raised as one :class:`~dfcoa_opt.errors.ScenarioError` that names the
+file, the dotted key path and the problem (unknown keys get a "did you mean"
+hint). The same code validates scenario files, sweep files and per-controller
+parameter overrides, and :func:`describe` renders the key reference.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+import typing
+from collections.abc import Mapping
+from typing import Any, Literal, TypeVar, get_args, get_origin, get_type_hints
+
+from dfcoa_opt.errors import ScenarioError, did_you_mean
+
+T = TypeVar("T")
+_MISSING = dataclasses.MISSING
+
+
+def param(default: Any = _MISSING, *, doc: str, unit: str = "", ge: float | None = None,
+          gt: float | None = None, le: float | None = None, lt: float | None = None,
+          finite: bool = True, default_factory: Any = _MISSING) -> Any:
+    """A dataclass field with documentation and validation metadata.
+
+    Args:
+        default: Default value; omit for a required key.
+        doc: One-sentence description shown in the key reference.
+        unit: SI unit, e.g. ``"m"`` or ``"rad/s"``; empty when dimensionless.
+        ge: Inclusive lower bound (numbers, and every number inside tuples).
+        gt: Exclusive lower bound.
+        le: Inclusive upper bound.
+        lt: Exclusive upper bound.
+        finite: Reject NaN and infinities (default). ``False`` still rejects NaN.
+        default_factory: Factory for mutable defaults.
+    """
+    meta = {"doc": doc, "unit": unit, "ge": ge, "gt": gt, "le": le, "lt": lt, "finite": finite}
+    if default_factory is not _MISSING:
+        return dataclasses.field(default_factory=default_factory, metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def _typename(tp: Any) -> str:
+    origin = get_origin(tp)
+    if tp is float:
+        return "a number"
+    if tp is int:
+        return "an integer"
+    if tp is bool:
+        return "true or false"
+    if tp is str:
+        return "a string"
+    if origin is Literal:
+        return "one of " + ", ".join(repr(a) for a in get_args(tp))
+    if dataclasses.is_dataclass(tp):
+        return "a table"
+    if origin in (dict, Mapping):
+        return "a table"
+    if origin is tuple:
+        return "an array"
+    return str(tp)
+
+
+def _check_number(x: float, meta: Mapping[str, Any], src: str, key: str) -> None:
+    if math.isnan(x):
+        raise ScenarioError(src, key, "must be a number, got NaN")
+    if meta.get("finite", True) and math.isinf(x):
+        raise ScenarioError(src, key, f"must be finite, got {x}")
+    for name, ok, word in (("ge", lambda b: x >= b, ">="), ("gt", lambda b: x > b, ">"),
+                           ("le", lambda b: x <= b, "<="), ("lt", lambda b: x < b, "<")):
+        bound = meta.get(name)
+        if bound is not None and not ok(bound):
+            raise ScenarioError(src, key, f"must be {word} {bound}, got {x}")
+
+
+def _convert(value: Any, tp: Any, meta: Mapping[str, Any], src: str, key: str) -> Any:
+    """Convert/validate one value against a type annotation."""
+    origin = get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in get_args(tp) if a is not type(None)]
+        if value is None:
+            return None
+        return _convert(value, args[0], meta, src, key)
+    if tp is Any:
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ScenarioError(src, key, f"must be a number, got {type(value).__name__} {value!r}")
+        value = float(value)
+        _check_number(value, meta, src, key)
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ScenarioError(src, key, f"must be an integer, got {type(value).__name__} {value!r}")
+        _check_number(float(value), meta, src, key)
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ScenarioError(src, key, f"must be true or false, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ScenarioError(src, key, f"must be a string, got {type(value).__name__} {value!r}")
+        return value
+    if origin is Literal:
+        choices = get_args(tp)
+        if value not in choices:
+            hint = did_you_mean(str(value), [str(c) for c in choices])
+            raise ScenarioError(src, key, f"must be one of {', '.join(map(repr, choices))}, "
+                                          f"got {value!r}{hint}")
+        return value
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, Mapping):
+            raise ScenarioError(src, key, f"must be a table, got {type(value).__name__}")
+        return build(tp, value, src, key)
+    if origin in (dict, Mapping):
+        if not isinstance(value, Mapping):
+            raise ScenarioError(src, key, f"must be a table, got {type(value).__name__}")
+        vt = get_args(tp)[1] if get_args(tp) else Any
+        return {str(k): _convert(v, vt, meta, src, f"{key}.{k}") for k, v in value.items()}
+    if origin is tuple:
+        args = get_args(tp)
+        if not isinstance(value, (list, tuple)):
+            raise ScenarioError(src, key, f"must be an array, got {type(value).__name__} {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_convert(v, args[0], meta, src, f"{key}[{i}]") for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise ScenarioError(src, key, f"must have {len(args)} elements, got {len(value)}")
+        return tuple(_convert(v, a, meta, src, f"{key}[{i}]")
+                     for i, (v, a) in enumerate(zip(value, args, strict=True)))
+    raise TypeError(f"unsupported annotation {tp!r} at {key}")  # programming error
+
+
+def build(cls: type[T], data: Mapping[str, Any], src: str, prefix: str = "") -> T:
+    """Build dataclass ``cls`` from ``data``, validating every key.
+
+    Args:
+        cls: A dataclass whose fields use :func:`param` metadata.
+        data: The mapping read from the file.
+        src: File name used in error messages.
+        prefix: Dotted key path of ``data`` inside the file.
+
+    Raises:
+        ScenarioError: On an unknown key, a missing required key, a wrong type,
+            NaN/inf or a value out of bounds.
+    """
+    hints = get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    kwargs: dict[str, Any] = {}
+    for k, v in data.items():
+        key = f"{prefix}.{k}" if prefix else str(k)
+        if k not in fields:
+            raise ScenarioError(src, key, "unknown key" + did_you_mean(str(k), fields))
+        kwargs[k] = _convert(v, hints[k], fields[k].metadata, src, key)
+    for name, f in fields.items():
+        if name not in kwargs and f.default is _MISSING and f.default_factory is _MISSING:
+            key = f"{prefix}.{name}" if prefix else name
+            raise ScenarioError(src, key, f"is required ({_typename(hints[name])})")
+    try:
+        obj = cls(**kwargs)
+    except (ValueError, TypeError) as exc:
+        raise ScenarioError(src, prefix, str(exc)) from None
+    check = getattr(obj, "check", None)
+    if callable(check):
+        check(src, prefix)
+    return obj
+
+
+def describe(cls: type, prefix: str = "") -> list[tuple[str, str, str, str, str]]:
+    """Key reference of a dataclass: rows ``(key, type, default, unit, doc)``.
+
+    Nested dataclasses are expanded; arrays of tables use ``key[]``.
+    """
+    rows: list[tuple[str, str, str, str, str]] = []
+    hints = get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        tp = hints[f.name]
+        key = f"{prefix}.{f.name}" if prefix else f.name
+        inner = get_args(tp)[0] if get_origin(tp) is tuple and get_args(tp) else None
+        if dataclasses.is_dataclass(tp):
+            rows.extend(describe(tp, key))
+            continue
+        if inner is not None and dataclasses.is_dataclass(inner):
+            rows.append((f"{key}[]", "array of tables", "[]", "", f.metadata.get("doc", "")))
+            rows.extend(describe(inner, f"{key}[]"))
+            continue
+        if f.default is not _MISSING:
+            default = repr(f.default)
+        elif f.default_factory is not _MISSING:
+            default = repr(f.default_factory())
+        else:
+            default = "required"
+        rows.append((key, _typename(tp), default, f.metadata.get("unit", ""),
+                     f.metadata.get("doc", "")))
+    return rows

@@ -1,0 +1,232 @@
+"""Batched kinematic robot models (one row per robot).
+
+State of every model: ``pose (N, 3)`` = (x, y, theta) in m, m, rad and
+``velocity (N, 2)`` = world-frame (vx, vy) in m/s, plus the applied
+``twist (N, 2)`` = (v, omega) in m/s, rad/s that the metrics use.
+
+* :class:`Unicycle` -- differential drive, command (v, omega). Wheel mapping of
+  paper 000 eq 1-2; v, omega and wheel speeds saturate (the wheel limit scales
+  both wheels by one factor, which keeps the path curvature). Integrated
+  exactly along the arc for a constant (v, omega) over the step.
+* :class:`SingleIntegrator` -- command (vx, vy[, omega]).
+* :class:`DoubleIntegrator` -- command (ax, ay[, omega]); paper 001 eq 1 and
+  paper 004 eq 3: ``p+ = p + T v``, ``v+ = v + T u`` (explicit Euler).
+
+Holonomic models carry a heading too: with a third command column it turns at
+that rate (so a unicycle command runs exactly), otherwise it points along the
+velocity when moving.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dfcoa_opt.geometry import wrap_angle
+from dfcoa_opt.sim.schema import RobotSpec
+
+FloatArray = NDArray[np.float64]
+CommandKind = Literal["unicycle", "velocity", "acceleration"]
+
+#: Speeds below this (m/s) leave a holonomic robot's heading unchanged.
+HEADING_SPEED_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class RobotState:
+    """State of N robots.
+
+    Attributes:
+        pose: ``(N, 3)`` x, y in m and heading in rad.
+        velocity: ``(N, 2)`` world-frame velocity in m/s.
+        twist: ``(N, 2)`` applied forward speed (m/s) and turn rate (rad/s).
+    """
+
+    pose: FloatArray
+    velocity: FloatArray
+    twist: FloatArray
+
+    @classmethod
+    def at_rest(cls, pose: FloatArray) -> RobotState:
+        """Robots at ``pose (N, 3)`` with zero velocity."""
+        pose = np.array(pose, dtype=float).reshape(-1, 3)
+        n = len(pose)
+        return cls(pose, np.zeros((n, 2)), np.zeros((n, 2)))
+
+
+def wheel_speeds(v: FloatArray, w: FloatArray, r: float, d: float) -> tuple[FloatArray, FloatArray]:
+    """Inverse of paper 000 eq 2: wheel speeds from (v, omega).
+
+    Args:
+        v: Forward speed, m/s.
+        w: Turn rate, rad/s.
+        r: Wheel radius, m.
+        d: Track width, m.
+
+    Returns:
+        ``(phi_dot_R, phi_dot_L)`` in rad/s.
+    """
+    return (v + 0.5 * d * w) / r, (v - 0.5 * d * w) / r
+
+
+def twist_from_wheels(phi_r: FloatArray, phi_l: FloatArray, r: float, d: float) -> tuple[FloatArray, FloatArray]:
+    """Paper 000 eq 2: ``v = r/2 (phiR + phiL)``, ``omega = r/d (phiR - phiL)``."""
+    return 0.5 * r * (phi_r + phi_l), r / d * (phi_r - phi_l)
+
+
+class Unicycle:
+    """Differential-drive robots, native command ``(v, omega)``.
+
+    Args:
+        spec: Robot limits and wheel geometry.
+    """
+
+    native: CommandKind = "unicycle"
+
+    def __init__(self, spec: RobotSpec) -> None:
+        self.spec = spec
+
+    def saturate(self, command: FloatArray) -> FloatArray:
+        """Clip v to [v_min, v_max], |omega| to w_max, then scale both wheels to the wheel limit.
+
+        Args:
+            command: ``(N, 2)`` (v, omega) in m/s, rad/s.
+
+        Returns:
+            The admissible ``(N, 2)`` command.
+        """
+        s = self.spec
+        v = np.clip(command[:, 0], s.v_lower, s.v_max)
+        w = np.clip(command[:, 1], -s.w_max, s.w_max)
+        if np.isfinite(s.wheel_speed_max):
+            pr, pl = wheel_speeds(v, w, s.wheel_radius, s.track_width)
+            peak = np.maximum(np.abs(pr), np.abs(pl))
+            scale = np.where(peak > s.wheel_speed_max, s.wheel_speed_max / np.maximum(peak, 1e-300), 1.0)
+            v, w = twist_from_wheels(pr * scale, pl * scale, s.wheel_radius, s.track_width)
+        return np.stack((v, w), axis=1)
+
+    def step(self, state: RobotState, command: FloatArray, dt: float,
+             disturbance: FloatArray | None = None) -> RobotState:
+        """Advance ``dt`` seconds with a constant command, exactly along the arc.
+
+        Args:
+            state: Current state.
+            command: ``(N, 2)`` (v, omega); saturated here.
+            dt: Step in s.
+            disturbance: ``(N, 2)`` world-frame velocity added to the motion, m/s.
+
+        Returns:
+            The new state.
+        """
+        u = self.saturate(command)
+        v, w = u[:, 0], u[:, 1]
+        x, y, th = state.pose[:, 0], state.pose[:, 1], state.pose[:, 2]
+        dth = w * dt
+        small = np.abs(dth) < 1e-9
+        th_mid = th + 0.5 * dth
+        # chord length of the arc: 2 v/w sin(w dt / 2); -> v dt as w -> 0
+        safe_w = np.where(small, 1.0, w)
+        chord = np.where(small, v * dt, 2.0 * v / safe_w * np.sin(0.5 * dth))
+        nx = x + chord * np.cos(th_mid)
+        ny = y + chord * np.sin(th_mid)
+        th_new = wrap_angle(th + dth)
+        vel = np.stack((v * np.cos(th_new), v * np.sin(th_new)), axis=1)
+        if disturbance is not None:
+            nx = nx + disturbance[:, 0] * dt
+            ny = ny + disturbance[:, 1] * dt
+            vel = vel + disturbance
+        return RobotState(np.stack((nx, ny, th_new), axis=1), vel, u)
+
+
+class _Holonomic:
+    """Shared heading handling of the integrator models."""
+
+    def __init__(self, spec: RobotSpec) -> None:
+        self.spec = spec
+
+    def _heading(self, state: RobotState, command: FloatArray, vel: FloatArray,
+                 dt: float) -> tuple[FloatArray, FloatArray]:
+        th = state.pose[:, 2]
+        if command.shape[1] >= 3:
+            w = np.clip(command[:, 2], -self.spec.w_max, self.spec.w_max)
+            return wrap_angle(th + w * dt), w
+        speed = np.hypot(vel[:, 0], vel[:, 1])
+        th_new = np.where(speed > HEADING_SPEED_EPS, np.arctan2(vel[:, 1], vel[:, 0]), th)
+        return th_new, wrap_angle(th_new - th) / dt
+
+    @staticmethod
+    def _clip_norm(a: FloatArray, limit: float) -> FloatArray:
+        n = np.hypot(a[:, 0], a[:, 1])
+        return a * np.where(n > limit, limit / np.maximum(n, 1e-300), 1.0)[:, None]
+
+
+class SingleIntegrator(_Holonomic):
+    """Velocity-controlled point robots, native command ``(vx, vy[, omega])``."""
+
+    native: CommandKind = "velocity"
+
+    def saturate(self, command: FloatArray) -> FloatArray:
+        """Scale ``(vx, vy)`` to ``|v| <= v_max`` (other columns pass)."""
+        out = command.astype(float, copy=True)
+        out[:, :2] = self._clip_norm(command[:, :2], self.spec.v_max)
+        return out
+
+    def step(self, state: RobotState, command: FloatArray, dt: float,
+             disturbance: FloatArray | None = None) -> RobotState:
+        """``p+ = p + T (u + disturbance)`` with the saturated velocity ``u``."""
+        u = self.saturate(command)
+        vel = u[:, :2]
+        th, w = self._heading(state, u, vel, dt)
+        if disturbance is not None:
+            vel = vel + disturbance
+        pos = state.pose[:, :2] + vel * dt
+        twist = np.stack((np.hypot(vel[:, 0], vel[:, 1]), w), axis=1)
+        return RobotState(np.column_stack((pos, th)), vel, twist)
+
+
+class DoubleIntegrator(_Holonomic):
+    """Acceleration-controlled point robots, native command ``(ax, ay[, omega])``."""
+
+    native: CommandKind = "acceleration"
+
+    def saturate(self, command: FloatArray) -> FloatArray:
+        """Scale ``(ax, ay)`` to ``|a| <= a_max`` (other columns pass)."""
+        out = command.astype(float, copy=True)
+        out[:, :2] = self._clip_norm(command[:, :2], self.spec.a_max)
+        return out
+
+    def step(self, state: RobotState, command: FloatArray, dt: float,
+             disturbance: FloatArray | None = None, force: FloatArray | None = None) -> RobotState:
+        """Paper 004 eq 3: ``p+ = p + T v``, ``v+ = clip(v + T (u + F/m))``.
+
+        Args:
+            state: Current state.
+            command: ``(N, 2|3)`` accelerations in m/s^2 (and optional turn rate).
+            dt: Step in s.
+            disturbance: ``(N, 2)`` world velocity added to the motion, m/s.
+            force: ``(N, 2)`` disturbance force in N.
+        """
+        u = self.saturate(command)
+        acc = u[:, :2]
+        if force is not None:
+            acc = acc + force / self.spec.mass
+        move = state.velocity if disturbance is None else state.velocity + disturbance
+        pos = state.pose[:, :2] + move * dt
+        vel = self._clip_norm(state.velocity + acc * dt, self.spec.v_max)
+        th, w = self._heading(state, u, vel, dt)
+        twist = np.stack((np.hypot(vel[:, 0], vel[:, 1]), w), axis=1)
+        return RobotState(np.column_stack((pos, th)), vel, twist)
+
+
+RobotModel = Unicycle | SingleIntegrator | DoubleIntegrator
+
+
+def make_model(spec: RobotSpec) -> RobotModel:
+    """The model named by ``spec.model``."""
+    return {"unicycle": Unicycle, "single_integrator": SingleIntegrator,
+            "double_integrator": DoubleIntegrator}[spec.model](spec)
+
+

@@ -1,0 +1,121 @@
+"""The run log: every array a run produces, saved to one ``.npz``.
+
+Index ``k`` of every time axis is the instant ``t[k] = k * dt``: the state the
+robots sensed, and the command they then applied during ``[t[k], t[k] + dt)``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+#: Filter status codes stored in ``RunLog.filter_status``.
+STATUS_OK = 0          # nominal command passed unchanged
+STATUS_MODIFIED = 1    # filter changed the command, constraints met
+STATUS_FALLBACK = 2    # infeasible: the configured fallback policy was applied
+STATUS_SOLVER_FAIL = 3  # solver error: the configured fallback policy was applied
+
+
+@dataclass
+class RunLog:
+    """Arrays of one run (T steps, N robots, M moving obstacles).
+
+    Attributes:
+        t: ``(T,)`` time, s.
+        pose: ``(T, N, 3)`` true pose (m, m, rad).
+        pose_est: ``(T, N, 3)`` pose the controller was given (estimate or truth).
+        velocity: ``(T, N, 2)`` true world-frame velocity, m/s.
+        twist: ``(T, N, 2)`` applied (v, omega) during step k, m/s and rad/s.
+        command: ``(T, N, k)`` raw controller output (its own command kind).
+        leader: ``(T, 5)`` virtual leader (x, y, theta, v, omega).
+        slots: ``(T, N, 2)`` desired positions from the leader and the offsets, m.
+        offsets: ``(N, 2)`` formation slot offsets in the leader frame, m.
+        clearance: ``(T, N)`` distance from each robot centre to the nearest static
+            obstacle (capped at ``metrics.clearance_cap``), m.
+        min_inter_robot: ``(T,)`` smallest centre distance between two robots, m
+            (``inf`` with one robot).
+        robot_contacts: ``(T,)`` robot pairs overlapping at t[k].
+        obstacle_contacts: ``(T,)`` robots touching a static obstacle at t[k].
+        dynamic_contacts: ``(T,)`` robots overlapping a moving obstacle at t[k].
+        collision_events: ``(T,)`` contacts that began at t[k] (a contact that
+            lasts several steps counts once).
+        dyn_pos: ``(T, M, 2)`` moving obstacle positions, m.
+        dyn_radius: ``(M,)`` moving obstacle radii, m.
+        filter_status: ``(T, N)`` int8 safety-filter status (``STATUS_*``; 0 when
+            there is no filter).
+        filter_slack: ``(T, N)`` constraint violation left by the filter.
+        filter_time: ``(T, N)`` filter solve time per robot, s.
+        meta: JSON-serialisable run facts: scenario, controller, seed, dt, n,
+            robot_radius, reached_goal, time_to_goal, steps, ...
+    """
+
+    t: FloatArray
+    pose: FloatArray
+    pose_est: FloatArray
+    velocity: FloatArray
+    twist: FloatArray
+    command: FloatArray
+    leader: FloatArray
+    slots: FloatArray
+    offsets: FloatArray
+    clearance: FloatArray
+    min_inter_robot: FloatArray
+    robot_contacts: NDArray[np.int32]
+    obstacle_contacts: NDArray[np.int32]
+    dynamic_contacts: NDArray[np.int32]
+    collision_events: NDArray[np.int32]
+    dyn_pos: FloatArray
+    dyn_radius: FloatArray
+    filter_status: NDArray[np.int8]
+    filter_slack: FloatArray
+    filter_time: FloatArray
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_steps(self) -> int:
+        """Number of logged steps T."""
+        return len(self.t)
+
+    @property
+    def n_robots(self) -> int:
+        """Number of robots N."""
+        return self.pose.shape[1]
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """All array fields by name."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "meta"}
+
+    def digest(self) -> str:
+        """SHA-256 over every array's bytes: equal digests mean bit-identical runs."""
+        h = hashlib.sha256()
+        for name, arr in sorted(self.arrays().items()):
+            a = np.ascontiguousarray(arr)
+            h.update(name.encode())
+            h.update(str(a.dtype).encode() + str(a.shape).encode())
+            h.update(a.tobytes())
+        return h.hexdigest()
+
+    def save(self, path: str | Path) -> Path:
+        """Write a compressed ``.npz`` (meta as JSON) atomically; returns the path."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp.npz")
+        np.savez_compressed(tmp, meta=np.array(json.dumps(self.meta, default=str)), **self.arrays())
+        tmp.replace(path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> RunLog:
+        """Read a log written by :meth:`save`."""
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+        meta = json.loads(str(data.pop("meta")))
+        return cls(meta=meta, **data)

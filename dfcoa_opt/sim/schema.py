@@ -1,0 +1,302 @@
+"""Scenario schema: frozen dataclasses, one per TOML section.
+
+Every key is documented here once (doc, unit, bounds); ``scenarios/README.md``
+is generated from these definitions (``dfcoa schema``) and a test keeps the two
+in sync. Cross-key rules live in each class's ``check`` method and in
+:mod:`dfcoa_opt.sim.loader`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.params import param
+
+Vec2 = tuple[float, float]
+Pose = tuple[float, float, float]
+
+
+def _need(src: str, key: str, value: Any, what: str) -> None:
+    if value is None or value == ():
+        raise ScenarioError(src, key, f"is required {what}")
+
+
+@dataclass(frozen=True)
+class ObstacleSpec:
+    """A static geometric obstacle (rasterised into the grid, kept as exact geometry)."""
+
+    type: Literal["polygon", "circle", "rectangle"] = param(doc="Shape kind.")
+    vertices: tuple[Vec2, ...] = param((), doc="Polygon vertices, counter-clockwise.", unit="m")
+    center: Vec2 | None = param(None, doc="Circle centre.", unit="m")
+    radius: float | None = param(None, doc="Circle radius.", unit="m", gt=0.0)
+    min: Vec2 | None = param(None, doc="Rectangle lower-left corner.", unit="m")
+    max: Vec2 | None = param(None, doc="Rectangle upper-right corner.", unit="m")
+
+    def check(self, src: str, key: str) -> None:
+        """Per-type required keys."""
+        need = {"polygon": ("vertices",), "circle": ("center", "radius"),
+                "rectangle": ("min", "max")}[self.type]
+        for name in need:
+            _need(src, f"{key}.{name}", getattr(self, name), f"for type = '{self.type}'")
+        for name in ("vertices", "center", "radius", "min", "max"):
+            if name not in need and getattr(self, name) not in (None, ()):
+                raise ScenarioError(src, f"{key}.{name}", f"does not apply to type = '{self.type}'")
+
+
+@dataclass(frozen=True)
+class DynamicObstacleSpec:
+    """A disc moving along waypoints at constant speed (paper 002 humans, paper 004 robots)."""
+
+    radius: float = param(doc="Disc radius.", unit="m", gt=0.0)
+    speed: float = param(doc="Speed along the waypoints.", unit="m/s", ge=0.0)
+    waypoints: tuple[Vec2, ...] = param(doc="Polyline to follow, first point = start.", unit="m")
+    start_time: float = param(0.0, doc="Time the disc starts moving.", unit="s", ge=0.0)
+    end: Literal["stop", "loop", "bounce"] = param("stop", doc="Behaviour at the last waypoint.")
+
+    def check(self, src: str, key: str) -> None:
+        """At least one waypoint."""
+        _need(src, f"{key}.waypoints", self.waypoints, "(at least one point)")
+
+
+@dataclass(frozen=True)
+class WorldSpec:
+    """The map: occupancy grid plus exact and moving obstacles."""
+
+    resolution: float = param(10.0, doc="Grid resolution.", unit="cells/m", gt=0.0)
+    size: Vec2 | None = param(None, doc="(width, height); required unless a map gives it.",
+                              unit="m", gt=0.0)
+    origin: Vec2 = param((0.0, 0.0), doc="World position of the map's bottom-left corner.",
+                         unit="m")
+    map_ascii: str | None = param(None, doc="ASCII map, top row first: '#' occupied, '.' free.")
+    map_image: str | None = param(None, doc="PNG map (relative to the scenario file); dark = "
+                                            "occupied, one pixel per cell.")
+    image_threshold: float = param(0.5, doc="Grey level below which an image pixel is occupied.",
+                                   ge=0.0, le=1.0)
+    obstacles: tuple[ObstacleSpec, ...] = param((), doc="Static geometric obstacles.")
+    dynamic_obstacles: tuple[DynamicObstacleSpec, ...] = param((), doc="Moving discs.")
+
+    def check(self, src: str, key: str) -> None:
+        """Exactly one source of the grid extent."""
+        if self.map_ascii is not None and self.map_image is not None:
+            raise ScenarioError(src, f"{key}.map_image", "give map_ascii or map_image, not both")
+        if self.map_ascii is None and self.map_image is None and self.size is None:
+            raise ScenarioError(src, f"{key}.size", "is required when there is no map_ascii "
+                                                    "or map_image")
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """Robot model and its limits (all robots of a team are identical)."""
+
+    model: Literal["unicycle", "single_integrator", "double_integrator"] = param(
+        "unicycle", doc="Kinematic model.")
+    radius: float = param(0.2, doc="Body radius (collision disc).", unit="m", gt=0.0)
+    v_max: float = param(0.5, doc="Largest forward speed (speed norm for integrators).",
+                         unit="m/s", gt=0.0)
+    v_min: float | None = param(None, doc="Smallest forward speed of a unicycle; default -v_max.",
+                                unit="m/s")
+    w_max: float = param(1.5, doc="Largest turn rate.", unit="rad/s", gt=0.0)
+    a_max: float = param(1.0, doc="Largest acceleration norm (double integrator).",
+                         unit="m/s^2", gt=0.0)
+    wheel_radius: float = param(0.05, doc="Wheel radius r of paper 000 eq 1-2.", unit="m", gt=0.0)
+    track_width: float = param(0.3, doc="Track width d of paper 000 eq 1-2.", unit="m", gt=0.0)
+    wheel_speed_max: float = param(math.inf, doc="Largest wheel speed (inf = no limit).",
+                                   unit="rad/s", gt=0.0, finite=False)
+    nid_distance: float = param(0.1, doc="Offset of the near-identity point used to run "
+                                         "velocity commands on unicycles.", unit="m", gt=0.0)
+    mass: float = param(1.0, doc="Mass, turns force disturbances into acceleration.",
+                        unit="kg", gt=0.0)
+
+    @property
+    def v_lower(self) -> float:
+        """Effective smallest forward speed in m/s."""
+        return -self.v_max if self.v_min is None else self.v_min
+
+    def check(self, src: str, key: str) -> None:
+        """v_min <= v_max."""
+        if self.v_min is not None and self.v_min > self.v_max:
+            raise ScenarioError(src, f"{key}.v_min", f"must be <= v_max ({self.v_max})")
+
+
+@dataclass(frozen=True)
+class TeamSpec:
+    """How many robots and where they start."""
+
+    n: int = param(doc="Number of robots.", ge=1)
+    placement: Literal["formation", "explicit"] = param(
+        "formation", doc="'formation': start on the formation slots around the leader's start; "
+                         "'explicit': use poses.")
+    poses: tuple[Pose, ...] = param((), doc="Initial (x, y, theta) per robot when explicit.",
+                                    unit="m, m, rad")
+    ids: tuple[int, ...] = param((), doc="Optional robot labels (unique); default 0..n-1.")
+
+    def check(self, src: str, key: str) -> None:
+        """Poses match n; ids unique."""
+        if self.placement == "explicit" and len(self.poses) != self.n:
+            raise ScenarioError(src, f"{key}.poses", f"has {len(self.poses)} poses, team.n = {self.n}")
+        if self.placement == "formation" and self.poses:
+            raise ScenarioError(src, f"{key}.poses", "only applies when placement = 'explicit'")
+        if self.ids:
+            if len(self.ids) != self.n:
+                raise ScenarioError(src, f"{key}.ids", f"has {len(self.ids)} ids, team.n = {self.n}")
+            if len(set(self.ids)) != len(self.ids):
+                dup = sorted({i for i in self.ids if self.ids.count(i) > 1})
+                raise ScenarioError(src, f"{key}.ids", f"duplicate robot id(s) {dup}")
+
+
+@dataclass(frozen=True)
+class FormationSpec:
+    """Desired formation, as offsets from the virtual leader in its body frame."""
+
+    shape: Literal["rectangle", "offsets", "polar", "v", "line", "grid"] = param(
+        "rectangle", doc="rectangle (paper 000 eq 3-5, 4 robots), offsets (x, y), polar (d, phi) "
+                         "(paper 000 Alg. 2), v (paper 002 eq 5-6), line, grid.")
+    width: float = param(2.0, doc="Rectangle width w (across the heading).", unit="m", gt=0.0)
+    length: float = param(2.0, doc="Rectangle length l (along the heading).", unit="m", gt=0.0)
+    offsets: tuple[Vec2, ...] = param((), doc="Per-robot (x, y) [offsets] or (d, phi) [polar].",
+                                      unit="m or (m, rad)")
+    spacing: float = param(1.0, doc="Neighbour spacing for v, line and grid.", unit="m", gt=0.0)
+    angle: float = param(math.pi / 6, doc="V half-angle phi between a wing and the backward "
+                                          "axis (paper 002 eq 5-6).", unit="rad", gt=0.0,
+                         lt=math.pi)
+    columns: int = param(0, doc="Grid columns; 0 = ceil(sqrt(n)).", ge=0)
+
+
+@dataclass(frozen=True)
+class LeaderSpec:
+    """The virtual leader's mission."""
+
+    start: Vec2 = param(doc="Start position.", unit="m")
+    goal: Vec2 = param(doc="Goal position.", unit="m")
+    heading: float | None = param(None, doc="Initial heading; default: towards the first path "
+                                            "point.", unit="rad")
+    speed: float = param(0.3, doc="Desired speed.", unit="m/s", gt=0.0)
+    w_max: float = param(1.5, doc="Largest leader turn rate.", unit="rad/s", gt=0.0)
+    lookahead: float = param(0.5, doc="Pure-pursuit look-ahead distance.", unit="m", gt=0.0)
+    goal_radius: float = param(0.5, doc="Leader is at the goal within this distance.",
+                               unit="m", gt=0.0)
+    settle_tolerance: float = param(0.5, doc="Formation is settled when every robot is this "
+                                             "close to its slot.", unit="m", gt=0.0)
+    planner: str = param("straight", doc="Global planner of the leader path (registered name).")
+    waypoints: tuple[Vec2, ...] = param((), doc="Via points for the 'straight' planner.", unit="m")
+
+
+@dataclass(frozen=True)
+class LidarSpec:
+    """2-D LiDAR, the same on every robot (angles in the robot frame)."""
+
+    enabled: bool = param(True, doc="Simulate the LiDAR.")
+    beams: int = param(120, doc="Number of beams.", ge=1)
+    fov: float = param(2 * math.pi, doc="Field of view, centred on the heading.", unit="rad",
+                       gt=0.0, le=2 * math.pi)
+    range_min: float = param(0.0, doc="Returns closer than this are reported as -inf.",
+                             unit="m", ge=0.0)
+    range_max: float = param(10.0, doc="Largest range; beyond it: +inf (no return).", unit="m",
+                             gt=0.0)
+    noise_std: float = param(0.0, doc="Gaussian range noise standard deviation.", unit="m",
+                             ge=0.0)
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """What each robot senses besides its own state."""
+
+    lidar: LidarSpec = field(default_factory=LidarSpec, metadata={"doc": "LiDAR."})
+    comm_radius: float = param(10.0, doc="Neighbours within this distance are observed.",
+                               unit="m", gt=0.0, finite=False)
+    max_neighbors: int = param(10, doc="At most this many nearest neighbours are observed.",
+                               ge=0)
+    obstacle_range: float | None = param(None, doc="Moving obstacles within this distance are "
+                                                   "observed; default lidar.range_max.",
+                                         unit="m", gt=0.0, finite=False)
+
+
+@dataclass(frozen=True)
+class LocalizationSpec:
+    """Where the pose in each observation comes from."""
+
+    mode: str = param("truth", doc="'truth' (ground truth) or a registered estimator, e.g. 'mcl'.")
+
+
+@dataclass(frozen=True)
+class DisturbanceSpec:
+    """An additive disturbance on one robot during a time window."""
+
+    robot: int = param(doc="Robot index (0-based).", ge=0)
+    t_start: float = param(doc="Window start.", unit="s", ge=0.0)
+    t_end: float = param(doc="Window end (exclusive).", unit="s", ge=0.0)
+    value: Vec2 = param(doc="Disturbance vector, world frame.", unit="m/s or N")
+    kind: Literal["velocity", "force"] = param(
+        "velocity", doc="'velocity': world-frame velocity added to the motion (any model); "
+                        "'force': force on a double integrator.")
+
+    def check(self, src: str, key: str) -> None:
+        """Window ordering."""
+        if self.t_end <= self.t_start:
+            raise ScenarioError(src, f"{key}.t_end", f"must be > t_start ({self.t_start})")
+
+
+@dataclass(frozen=True)
+class MetricSpec:
+    """Settings of the metrics (docs/metrics.md)."""
+
+    fste_window: float = param(5.0, doc="Window T of the formation stability error, eq 8.",
+                               unit="s", gt=0.0)
+    stability_threshold: float = param(0.5, doc="A step is stable when the formation shape "
+                                                "error (eq 7) is below this.", unit="m", gt=0.0)
+    risk_lambda1: float = param(1.0, doc="Inter-robot weight lambda_1 of eq 11.", ge=0.0)
+    risk_lambda2: float = param(1.0, doc="Obstacle weight lambda_2 of eq 11.", ge=0.0)
+    risk_reference_distance: float = param(
+        0.5, doc="Eq 11 is normalised so that one pair at this distance gives risk 1 (clipped "
+                 "to [0, 1]).", unit="m", gt=0.0)
+    risk_detection_range: float = param(3.5, doc="Obstacles farther than this add no risk.",
+                                        unit="m", gt=0.0)
+    clearance_cap: float = param(5.0, doc="Obstacle clearances above this are reported as this.",
+                                 unit="m", gt=0.0)
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    """A whole scenario file."""
+
+    world: WorldSpec = param(doc="Map and obstacles.")
+    team: TeamSpec = param(doc="Robots and their start.")
+    leader: LeaderSpec = param(doc="Virtual leader mission.")
+    name: str = param("", doc="Scenario name; default: the file name without .toml.")
+    description: str = param("", doc="Free text.")
+    dt: float = param(0.1, doc="Control and integration step.", unit="s", gt=0.0)
+    t_max: float = param(60.0, doc="Time limit.", unit="s", gt=0.0)
+    seed: int = param(0, doc="Seed of the run's random generator (CLI --seed overrides).", ge=0)
+    stop_on_collision: bool = param(False, doc="End the run at the first collision.")
+    robots: RobotSpec = field(default_factory=RobotSpec, metadata={"doc": "Robot model."})
+    formation: FormationSpec = field(default_factory=FormationSpec,
+                                     metadata={"doc": "Formation shape."})
+    sensors: SensorSpec = field(default_factory=SensorSpec, metadata={"doc": "Sensors."})
+    localization: LocalizationSpec = field(default_factory=LocalizationSpec,
+                                           metadata={"doc": "Localization."})
+    disturbances: tuple[DisturbanceSpec, ...] = param((), doc="Disturbances.")
+    metrics: MetricSpec = field(default_factory=MetricSpec, metadata={"doc": "Metric settings."})
+    controllers: dict[str, dict[str, Any]] = param(
+        default_factory=dict, doc="Per-controller parameter overrides: [controllers.<id>] key = "
+                                  "value.")
+
+    def check(self, src: str, key: str) -> None:
+        """Cross-section rules that need no map."""
+        if self.dt > self.t_max:
+            raise ScenarioError(src, "dt", f"({self.dt} s) must not exceed t_max ({self.t_max} s)")
+        for i, d in enumerate(self.disturbances):
+            if d.robot >= self.team.n:
+                raise ScenarioError(src, f"disturbances[{i}].robot",
+                                    f"is {d.robot}, but team.n = {self.team.n}")
+            if d.kind == "force" and self.robots.model != "double_integrator":
+                raise ScenarioError(src, f"disturbances[{i}].kind", "'force' needs "
+                                    "robots.model = 'double_integrator'")
+        if self.formation.shape == "rectangle" and self.team.n != 4:
+            raise ScenarioError(src, "formation.shape", f"'rectangle' (paper 000 eq 3-5) places "
+                                f"4 robots, team.n = {self.team.n}")
+        if self.formation.shape in ("offsets", "polar") and len(self.formation.offsets) != self.team.n:
+            raise ScenarioError(src, "formation.offsets", f"has {len(self.formation.offsets)} "
+                                f"entries, team.n = {self.team.n}")

@@ -1,0 +1,105 @@
+"""Exact geometric obstacles: polygons, circles and rectangles.
+
+The world keeps these next to the rasterised grid, for methods that need exact
+geometry (paper 001's polygon velocity obstacles). Rasterisation rule, used by
+:meth:`dfcoa_opt.world.grid.OccupancyGrid.from_shapes`: a cell is occupied iff
+its centre lies inside the shape.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dfcoa_opt.geometry import circle_polygon, points_in_polygon, polygon_signed_area
+
+
+@dataclass(frozen=True)
+class Polygon:
+    """A simple polygon.
+
+    Attributes:
+        vertices: ``((x, y), ...)`` in m, counter-clockwise, first vertex not repeated.
+    """
+
+    vertices: tuple[tuple[float, float], ...]
+
+    def __post_init__(self) -> None:
+        if len(self.vertices) < 3:
+            raise ValueError("a polygon needs at least 3 vertices")
+        if polygon_signed_area(self.vertices) <= 0.0:
+            raise ValueError("polygon vertices must be counter-clockwise with non-zero area")
+
+    def as_array(self) -> NDArray[np.float64]:
+        """Vertices as a ``(V, 2)`` array in m."""
+        return np.asarray(self.vertices, dtype=float)
+
+    def contains(self, points: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Which of ``points`` ``(P, 2)`` (m) lie inside."""
+        return points_in_polygon(points, self.vertices)
+
+    def to_polygon(self) -> Polygon:
+        """This polygon."""
+        return self
+
+
+@dataclass(frozen=True)
+class Rectangle:
+    """An axis-aligned rectangle.
+
+    Attributes:
+        min: Lower-left corner ``(x, y)`` in m.
+        max: Upper-right corner ``(x, y)`` in m.
+    """
+
+    min: tuple[float, float]
+    max: tuple[float, float]
+
+    def __post_init__(self) -> None:
+        if not (self.max[0] > self.min[0] and self.max[1] > self.min[1]):
+            raise ValueError("rectangle max must exceed min in x and y")
+
+    def to_polygon(self) -> Polygon:
+        """The rectangle as a counter-clockwise :class:`Polygon`."""
+        (x0, y0), (x1, y1) = self.min, self.max
+        return Polygon(((x0, y0), (x1, y0), (x1, y1), (x0, y1)))
+
+    def contains(self, points: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Which of ``points`` ``(P, 2)`` (m) lie inside (half-open on the max sides)."""
+        p = np.asarray(points, dtype=float).reshape(-1, 2)
+        return (
+            (p[:, 0] >= self.min[0]) & (p[:, 0] < self.max[0])
+            & (p[:, 1] >= self.min[1]) & (p[:, 1] < self.max[1])
+        )
+
+
+@dataclass(frozen=True)
+class Circle:
+    """A disc.
+
+    Attributes:
+        center: ``(x, y)`` in m.
+        radius: Radius in m, > 0.
+    """
+
+    center: tuple[float, float]
+    radius: float
+
+    def __post_init__(self) -> None:
+        if not self.radius > 0.0:
+            raise ValueError("circle radius must be > 0")
+
+    def contains(self, points: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Which of ``points`` ``(P, 2)`` (m) lie inside or on the circle."""
+        p = np.asarray(points, dtype=float).reshape(-1, 2)
+        return ((p - np.asarray(self.center)) ** 2).sum(1) <= self.radius**2
+
+    def to_polygon(self, n: int = 32) -> Polygon:
+        """A circumscribed ``n``-gon (contains the disc), counter-clockwise."""
+        r_out = self.radius / np.cos(np.pi / n)
+        return Polygon(tuple(map(tuple, circle_polygon(self.center, r_out, n))))
+
+
+Shape = Polygon | Rectangle | Circle
