@@ -46,23 +46,28 @@ def param(default: Any = _MISSING, *, doc: str, unit: str = "", ge: float | None
 
 
 def _typename(tp: Any) -> str:
+    """Plain-words name of a type annotation (for messages and the key reference)."""
     origin = get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        inner = [a for a in get_args(tp) if a is not type(None)]
+        return _typename(inner[0]) + " (optional)"
     if tp is float:
-        return "a number"
+        return "number"
     if tp is int:
-        return "an integer"
+        return "integer"
     if tp is bool:
-        return "true or false"
+        return "boolean"
     if tp is str:
-        return "a string"
+        return "string"
     if origin is Literal:
         return "one of " + ", ".join(repr(a) for a in get_args(tp))
-    if dataclasses.is_dataclass(tp):
-        return "a table"
-    if origin in (dict, Mapping):
-        return "a table"
+    if dataclasses.is_dataclass(tp) or origin in (dict, Mapping):
+        return "table"
     if origin is tuple:
-        return "an array"
+        args = get_args(tp)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return f"array of ({_typename(args[0])})"
+        return f"array of {len(args)} {_typename(args[0])}s"
     return str(tp)
 
 

@@ -77,6 +77,33 @@ def twist_from_wheels(phi_r: FloatArray, phi_l: FloatArray, r: float, d: float) 
     return 0.5 * r * (phi_r + phi_l), r / d * (phi_r - phi_l)
 
 
+def integrate_unicycle(pose: FloatArray, v: FloatArray, w: FloatArray, dt: float) -> FloatArray:
+    """Exact motion of unicycles under constant (v, omega) for ``dt`` seconds.
+
+    The robot moves along a circular arc; the chord has length
+    ``2 v / w sin(w dt / 2)`` (``v dt`` as ``w -> 0``) and direction
+    ``theta + w dt / 2``.
+
+    Args:
+        pose: ``(N, 3)`` or ``(3,)`` poses (m, m, rad).
+        v: Forward speeds, m/s (broadcast to N).
+        w: Turn rates, rad/s (broadcast to N).
+        dt: Duration, s.
+
+    Returns:
+        New poses, same shape as ``pose``, heading wrapped to (-pi, pi].
+    """
+    pose = np.asarray(pose, dtype=float)
+    x, y, th = pose[..., 0], pose[..., 1], pose[..., 2]
+    dth = w * dt
+    small = np.abs(dth) < 1e-9
+    safe_w = np.where(small, 1.0, w)
+    chord = np.where(small, v * dt, 2.0 * v / safe_w * np.sin(0.5 * dth))
+    th_mid = th + 0.5 * dth
+    return np.stack((x + chord * np.cos(th_mid), y + chord * np.sin(th_mid),
+                     wrap_angle(th + dth)), axis=-1)
+
+
 class Unicycle:
     """Differential-drive robots, native command ``(v, omega)``.
 
@@ -109,7 +136,7 @@ class Unicycle:
         return np.stack((v, w), axis=1)
 
     def step(self, state: RobotState, command: FloatArray, dt: float,
-             disturbance: FloatArray | None = None) -> RobotState:
+             disturbance: FloatArray | None = None, force: FloatArray | None = None) -> RobotState:
         """Advance ``dt`` seconds with a constant command, exactly along the arc.
 
         Args:
@@ -117,22 +144,15 @@ class Unicycle:
             command: ``(N, 2)`` (v, omega); saturated here.
             dt: Step in s.
             disturbance: ``(N, 2)`` world-frame velocity added to the motion, m/s.
+            force: Unused: kinematic models take no forces (the loader rejects them).
 
         Returns:
             The new state.
         """
         u = self.saturate(command)
         v, w = u[:, 0], u[:, 1]
-        x, y, th = state.pose[:, 0], state.pose[:, 1], state.pose[:, 2]
-        dth = w * dt
-        small = np.abs(dth) < 1e-9
-        th_mid = th + 0.5 * dth
-        # chord length of the arc: 2 v/w sin(w dt / 2); -> v dt as w -> 0
-        safe_w = np.where(small, 1.0, w)
-        chord = np.where(small, v * dt, 2.0 * v / safe_w * np.sin(0.5 * dth))
-        nx = x + chord * np.cos(th_mid)
-        ny = y + chord * np.sin(th_mid)
-        th_new = wrap_angle(th + dth)
+        pose = integrate_unicycle(state.pose, v, w, dt)
+        nx, ny, th_new = pose[:, 0], pose[:, 1], pose[:, 2]
         vel = np.stack((v * np.cos(th_new), v * np.sin(th_new)), axis=1)
         if disturbance is not None:
             nx = nx + disturbance[:, 0] * dt
@@ -175,8 +195,8 @@ class SingleIntegrator(_Holonomic):
         return out
 
     def step(self, state: RobotState, command: FloatArray, dt: float,
-             disturbance: FloatArray | None = None) -> RobotState:
-        """``p+ = p + T (u + disturbance)`` with the saturated velocity ``u``."""
+             disturbance: FloatArray | None = None, force: FloatArray | None = None) -> RobotState:
+        """``p+ = p + T (u + disturbance)`` with the saturated velocity ``u``; ``force`` unused."""
         u = self.saturate(command)
         vel = u[:, :2]
         th, w = self._heading(state, u, vel, dt)

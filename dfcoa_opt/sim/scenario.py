@@ -49,6 +49,7 @@ class Scenario:
         offsets: ``(N, 2)`` formation slot offsets in the leader frame, m.
         initial_pose: ``(N, 3)`` initial robot poses (m, m, rad).
         leader_heading: Initial leader heading, rad.
+        leader_path: ``(P, 2)`` the leader's planned path, m.
     """
 
     spec: ScenarioSpec
@@ -57,6 +58,7 @@ class Scenario:
     offsets: NDArray[np.float64]
     initial_pose: NDArray[np.float64]
     leader_heading: float
+    leader_path: NDArray[np.float64]
 
     @property
     def name(self) -> str:

@@ -1,0 +1,49 @@
+"""``goto_slot``: the smallest useful controller (and the README's example).
+
+Each robot drives towards its own formation slot with proportional control
+plus the leader's velocity as feed-forward. It ignores obstacles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dfcoa_opt.control.base import Observation
+from dfcoa_opt.control.registry import register
+from dfcoa_opt.params import param
+
+
+@register("goto_slot")
+class GotoSlot:
+    """Velocity command ``u_i = kp (slot_i - p_i) + d/dt slot_i``.
+
+    The feed-forward ``d/dt slot_i = v_l (cos th_l, sin th_l) + w_l J (slot_i - p_l)``
+    (``J`` = rotation by +90 deg) is the slot's velocity under the leader's motion.
+    """
+
+    command = "velocity"
+
+    @dataclass(frozen=True)
+    class Params:
+        """Parameters of ``goto_slot``."""
+
+        kp: float = param(1.0, doc="Proportional gain.", unit="1/s", gt=0.0)
+        feedforward: bool = param(True, doc="Add the leader's velocity.")
+
+    def __init__(self, params: Params) -> None:
+        self.p = params
+
+    def reset(self, scenario, rng: np.random.Generator) -> None:
+        """Stateless: nothing to reset."""
+
+    def act(self, obs: Observation) -> np.ndarray:
+        """Row i uses only robot i's pose and slot and the broadcast leader."""
+        u = self.p.kp * (obs.slot - obs.pose[:, :2])
+        if self.p.feedforward:
+            x, y, th, v, w = obs.leader
+            rel = obs.slot - np.array([x, y])
+            u = u + v * np.array([np.cos(th), np.sin(th)]) + w * np.column_stack((-rel[:, 1],
+                                                                                   rel[:, 0]))
+        return u

@@ -1,0 +1,82 @@
+"""Pure-pursuit path tracking (the virtual leader's tracker).
+
+Follows MATLAB ``controllerPurePursuit`` semantics: constant desired speed,
+look-ahead point on the path ``L_d`` ahead of the closest point, turn rate
+``omega = 2 v sin(alpha) / L_d`` clipped to ``omega_max`` (``alpha`` = bearing of
+the look-ahead point in the robot frame). Progress along the path is
+monotonic: the closest-point search never goes back to an earlier segment.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dfcoa_opt.geometry import wrap_angle
+
+FloatArray = NDArray[np.float64]
+
+
+class PurePursuit:
+    """Pure pursuit along a polyline.
+
+    Args:
+        path: ``(P, 2)`` path points in m (P >= 1).
+        speed: Desired speed, m/s.
+        lookahead: Look-ahead distance L_d, m.
+        w_max: Largest turn rate, rad/s.
+    """
+
+    def __init__(self, path: FloatArray, speed: float, lookahead: float, w_max: float) -> None:
+        path = np.asarray(path, dtype=float).reshape(-1, 2)
+        keep = np.concatenate(([True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-12))
+        self.path = path[keep]
+        self.speed, self.lookahead, self.w_max = speed, lookahead, w_max
+        seg = np.diff(self.path, axis=0)
+        self._seg_len = np.linalg.norm(seg, axis=1)
+        self._cum = np.concatenate(([0.0], np.cumsum(self._seg_len)))
+        self._s = 0.0  # arc length of the closest point so far
+
+    @property
+    def length(self) -> float:
+        """Path length in m."""
+        return float(self._cum[-1])
+
+    def point_at(self, s: float) -> FloatArray:
+        """Path point at arc length ``s`` (clamped to the path), m."""
+        if len(self.path) == 1:
+            return self.path[0].copy()
+        s = min(max(s, 0.0), self.length)
+        k = min(int(np.searchsorted(self._cum, s, side="right")) - 1, len(self._seg_len) - 1)
+        frac = (s - self._cum[k]) / self._seg_len[k]
+        return self.path[k] + frac * (self.path[k + 1] - self.path[k])
+
+    def _project(self, p: FloatArray) -> float:
+        """Arc length of the closest path point at or after the current progress."""
+        if len(self.path) == 1:
+            return 0.0
+        a, b = self.path[:-1], self.path[1:]
+        ab = b - a
+        t = np.clip(((p - a) * ab).sum(1) / self._seg_len**2, 0.0, 1.0)
+        s_all = self._cum[:-1] + t * self._seg_len
+        d = np.linalg.norm(a + t[:, None] * ab - p, axis=1)
+        d = np.where(self._cum[1:] >= self._s, d, np.inf)  # no going back
+        k = int(np.argmin(d))
+        return max(float(s_all[k]), self._s)
+
+    def command(self, pose: FloatArray) -> tuple[float, float, FloatArray]:
+        """Speed, turn rate and look-ahead point for the current pose.
+
+        Args:
+            pose: ``(3,)`` (x, y, theta) in m, m, rad.
+
+        Returns:
+            ``(v m/s, omega rad/s, lookahead point (2,) m)``.
+        """
+        self._s = self._project(pose[:2])
+        target = self.point_at(self._s + self.lookahead)
+        dx, dy = target - pose[:2]
+        alpha = float(wrap_angle(np.arctan2(dy, dx) - pose[2]))
+        dist = max(float(np.hypot(dx, dy)), 1e-9)
+        w = 2.0 * self.speed * np.sin(alpha) / max(dist, self.lookahead) if dist > 1e-9 else 0.0
+        return self.speed, float(np.clip(w, -self.w_max, self.w_max)), target

@@ -1,0 +1,182 @@
+"""Load scenario files (TOML, stdlib ``tomllib``) into a :class:`Scenario`.
+
+Every problem raises :class:`~dfcoa_opt.errors.ScenarioError` whose text is one
+line naming the file, the key path and the problem; the CLI prints it and exits
+with code 2. Checks beyond the per-key ones of :mod:`dfcoa_opt.sim.schema`:
+the map must load, polygons must be counter-clockwise, the leader's start and
+goal and explicit robot poses must lie on free cells inside the map, the leader
+planner, the localization mode and every ``[controllers.<id>]`` table must be
+known, and the planner must find a path.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dfcoa_opt.errors import DfcoaError, ScenarioError, did_you_mean
+from dfcoa_opt.formation import formation_offsets, slot_positions
+from dfcoa_opt.params import build
+from dfcoa_opt.sim.scenario import Scenario, World
+from dfcoa_opt.sim.schema import ObstacleSpec, ScenarioSpec, WorldSpec
+from dfcoa_opt.world.dynamic import DynamicObstacles, MovingDisc
+from dfcoa_opt.world.grid import OccupancyGrid
+from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle, Shape
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """Read a TOML file, turning every failure into a one-line :class:`ScenarioError`."""
+    path = Path(path)
+    src = str(path)
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        raise ScenarioError(src, "", "file not found") from None
+    except IsADirectoryError:
+        raise ScenarioError(src, "", "is a directory, expected a .toml file") from None
+    except PermissionError:
+        raise ScenarioError(src, "", "permission denied") from None
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(src, "", f"is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    if not text.strip():
+        raise ScenarioError(src, "", "file is empty")
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(src, "", f"not valid TOML: {exc}") from None
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Load and validate a scenario file.
+
+    Args:
+        path: The ``.toml`` file; relative paths inside it (``map_image``) are
+            resolved against its folder.
+
+    Raises:
+        ScenarioError: On any problem, with a one-line message.
+    """
+    path = Path(path)
+    data = read_toml(path)
+    data.setdefault("name", path.stem)
+    return scenario_from_dict(data, str(path), path.parent)
+
+
+def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
+                       base_dir: str | Path = ".") -> Scenario:
+    """Validate a scenario given as a dict (the parsed TOML).
+
+    Args:
+        data: Scenario contents.
+        source: Name used in error messages.
+        base_dir: Folder against which ``world.map_image`` is resolved.
+    """
+    spec = build(ScenarioSpec, data, source)
+    world = _build_world(spec.world, source, Path(base_dir))
+    _check_free(world.grid, spec.leader.start, source, "leader.start")
+    _check_free(world.grid, spec.leader.goal, source, "leader.goal")
+    _check_names(spec, source)
+
+    from dfcoa_opt.planning.registry import get_planner
+
+    try:
+        path = get_planner(spec.leader.planner)(world.grid, np.asarray(spec.leader.start, float),
+                                                np.asarray(spec.leader.goal, float), spec.leader)
+    except DfcoaError as exc:
+        raise ScenarioError(source, "leader.goal", str(exc)) from None
+    if path is None or len(path) == 0:
+        raise ScenarioError(source, "leader.goal", f"unreachable from leader.start with planner "
+                                                   f"'{spec.leader.planner}'")
+    heading = spec.leader.heading
+    if heading is None:
+        away = [p for p in np.asarray(path, float) if np.hypot(*(p - path[0])) > 1e-9]
+        d = away[0] - path[0] if away else np.zeros(2)
+        heading = math.atan2(d[1], d[0]) if np.any(d) else 0.0
+    offsets = formation_offsets(spec.formation, spec.team.n)
+    if spec.team.placement == "explicit":
+        pose = np.asarray(spec.team.poses, dtype=float)
+        for i, p in enumerate(pose):
+            _check_free(world.grid, p[:2], source, f"team.poses[{i}]")
+    else:
+        leader0 = np.array([*spec.leader.start, heading])
+        xy = slot_positions(leader0, offsets)
+        pose = np.column_stack((xy, np.full(spec.team.n, heading)))
+    return Scenario(spec=spec, source=source, world=world, offsets=offsets, initial_pose=pose,
+                    leader_heading=float(heading), leader_path=np.asarray(path, dtype=float))
+
+
+def _check_names(spec: ScenarioSpec, source: str) -> None:
+    """Registered planner, localization mode and controller override tables."""
+    from dfcoa_opt.control.registry import check_overrides
+    from dfcoa_opt.localization import estimator_names
+    from dfcoa_opt.planning.registry import planner_names
+
+    if spec.leader.planner not in planner_names():
+        raise ScenarioError(source, "leader.planner", f"unknown planner '{spec.leader.planner}'"
+                            f"{did_you_mean(spec.leader.planner, planner_names())}; available: "
+                            f"{', '.join(planner_names())}")
+    if spec.localization.mode not in estimator_names():
+        raise ScenarioError(source, "localization.mode", f"unknown mode '{spec.localization.mode}'"
+                            f"{did_you_mean(spec.localization.mode, estimator_names())}; "
+                            f"available: {', '.join(estimator_names())}")
+    check_overrides(spec.controllers, source)
+
+
+def _check_free(grid: OccupancyGrid, point: Any, source: str, key: str) -> None:
+    p = np.asarray(point, dtype=float)[:2]
+    row, col = grid.world_to_cell(p)
+    if not bool(grid.in_bounds(row, col)):
+        x0, x1, y0, y1 = grid.extent
+        raise ScenarioError(source, key, f"({p[0]:g}, {p[1]:g}) is outside the map "
+                                         f"[{x0:g}, {x1:g}] x [{y0:g}, {y1:g}] m")
+    if grid.occupied[row, col]:
+        raise ScenarioError(source, key, f"({p[0]:g}, {p[1]:g}) is inside an obstacle")
+
+
+def _shape(spec: ObstacleSpec, source: str, key: str) -> Shape:
+    try:
+        if spec.type == "circle":
+            return Circle(spec.center, spec.radius)  # type: ignore[arg-type]
+        if spec.type == "rectangle":
+            return Rectangle(spec.min, spec.max)  # type: ignore[arg-type]
+        return Polygon(spec.vertices)
+    except ValueError as exc:
+        raise ScenarioError(source, key, str(exc)) from None
+
+
+def _build_world(ws: WorldSpec, source: str, base_dir: Path) -> World:
+    if ws.map_ascii is not None:
+        try:
+            grid = OccupancyGrid.from_ascii(ws.map_ascii, ws.resolution, ws.origin)
+        except ValueError as exc:
+            raise ScenarioError(source, "world.map_ascii", str(exc)) from None
+    elif ws.map_image is not None:
+        img = (base_dir / ws.map_image)
+        if not img.is_file():
+            raise ScenarioError(source, "world.map_image", f"image file '{img}' not found")
+        try:
+            grid = OccupancyGrid.from_image(img, ws.resolution, ws.image_threshold, ws.origin)
+        except (OSError, ValueError, SyntaxError) as exc:
+            raise ScenarioError(source, "world.map_image", f"cannot read image '{img}': "
+                                                           f"{exc}") from None
+    else:
+        grid = OccupancyGrid.empty(ws.size, ws.resolution, ws.origin)  # type: ignore[arg-type]
+    if ws.size is not None and (ws.map_ascii is not None or ws.map_image is not None):
+        w, h = grid.size
+        if abs(w - ws.size[0]) > grid.cell_size / 2 or abs(h - ws.size[1]) > grid.cell_size / 2:
+            raise ScenarioError(source, "world.size", f"{list(ws.size)} m does not match the map, "
+                                f"which is {w:g} x {h:g} m at {ws.resolution:g} cells/m")
+    shapes = tuple(_shape(o, source, f"world.obstacles[{i}]") for i, o in enumerate(ws.obstacles))
+    grid = grid.with_shapes(shapes)
+    discs = tuple(MovingDisc(d.radius, d.speed, d.waypoints, d.start_time, d.end)
+                  for d in ws.dynamic_obstacles)
+    return World(grid=grid, shapes=shapes, dynamic=DynamicObstacles(discs))

@@ -1,0 +1,268 @@
+"""Synchronous multi-robot simulator.
+
+One step at ``t_k = k dt``:
+
+1. every robot senses the same snapshot: LiDAR (grid + other robots + moving
+   obstacles), neighbours within communication range, moving obstacles within
+   sensing range, the leader's broadcast state; its pose comes from the
+   estimator (``truth`` or e.g. ``mcl``);
+2. the controller returns one command row per robot;
+3. the command is adapted to the robot model and all robots integrate at once;
+4. contacts are counted (a run goes on after a collision unless
+   ``stop_on_collision``), everything is logged, the leader advances.
+
+The run ends when the leader is within ``goal_radius`` of the goal and every
+robot is within ``settle_tolerance`` of its slot, or at ``t_max``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dfcoa_opt import __version__
+from dfcoa_opt.control.adapters import convert
+from dfcoa_opt.control.base import Controller, MovingObstacles, Neighbours, Observation
+from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.formation import slot_positions
+from dfcoa_opt.localization import make_estimator
+from dfcoa_opt.robots.models import RobotState, make_model
+from dfcoa_opt.sim.leader import VirtualLeader
+from dfcoa_opt.sim.log import RunLog
+from dfcoa_opt.sim.neighbours import proximity
+from dfcoa_opt.sim.scenario import Scenario
+from dfcoa_opt.world.lidar import Lidar
+
+FloatArray = NDArray[np.float64]
+
+
+class ControllerError(DfcoaError):
+    """A controller returned a malformed or non-finite command (the run fails)."""
+
+
+@dataclass
+class _Buffers:
+    """Preallocated log arrays."""
+
+    t: FloatArray
+    pose: FloatArray
+    pose_est: FloatArray
+    velocity: FloatArray
+    twist: FloatArray
+    leader: FloatArray
+    slots: FloatArray
+    clearance: FloatArray
+    min_inter_robot: FloatArray
+    robot_contacts: NDArray[np.int32]
+    obstacle_contacts: NDArray[np.int32]
+    dynamic_contacts: NDArray[np.int32]
+    collision_events: NDArray[np.int32]
+    dyn_pos: FloatArray
+    filter_status: NDArray[np.int8]
+    filter_slack: FloatArray
+    filter_time: FloatArray
+
+    @classmethod
+    def allocate(cls, steps: int, n: int, m: int) -> _Buffers:
+        z = np.zeros
+        return cls(z(steps), z((steps, n, 3)), z((steps, n, 3)), z((steps, n, 2)),
+                   z((steps, n, 2)), z((steps, 5)), z((steps, n, 2)), z((steps, n)),
+                   z(steps), z(steps, np.int32), z(steps, np.int32), z(steps, np.int32),
+                   z(steps, np.int32), z((steps, m, 2)), z((steps, n), np.int8),
+                   z((steps, n)), z((steps, n)))
+
+
+class Simulator:
+    """Runs one scenario with one controller.
+
+    Args:
+        scenario: The loaded scenario.
+        controller: Any object implementing :class:`~dfcoa_opt.control.base.Controller`.
+        seed: Seed of the run's only random generator (default ``scenario.spec.seed``).
+    """
+
+    def __init__(self, scenario: Scenario, controller: Controller, seed: int | None = None) -> None:
+        self.scenario = scenario
+        self.controller = controller
+        self.seed = scenario.spec.seed if seed is None else int(seed)
+        spec = scenario.spec
+        self.model = make_model(spec.robots)
+        self.lidar = Lidar(spec.sensors.lidar, scenario.world.grid) if spec.sensors.lidar.enabled \
+            else None
+        self.n = spec.team.n
+        self.radius = spec.robots.radius
+        r_obs = spec.sensors.obstacle_range
+        self.obstacle_range = spec.sensors.lidar.range_max if r_obs is None else r_obs
+        self._dist_v, self._dist_f = self._disturbance_table()
+
+    def _disturbance_table(self) -> tuple[list, list]:
+        vel, force = [], []
+        for d in self.scenario.spec.disturbances:
+            (vel if d.kind == "velocity" else force).append((d.robot, d.t_start, d.t_end, d.value))
+        return vel, force
+
+    def _disturbance(self, table: list, t: float) -> FloatArray | None:
+        if not table:
+            return None
+        out = np.zeros((self.n, 2))
+        for robot, t0, t1, value in table:
+            if t0 <= t < t1:
+                out[robot] += value
+        return out
+
+    def run(self) -> RunLog:
+        """Simulate until the goal is reached (with the formation settled) or ``t_max``.
+
+        Returns:
+            The run log; ``log.meta`` holds ``reached_goal``, ``time_to_goal``,
+            ``wall_time`` and the run's identity.
+
+        Raises:
+            ControllerError: The controller returned a wrong shape, NaN or inf.
+        """
+        sc, spec = self.scenario, self.scenario.spec
+        dt, n = spec.dt, self.n
+        rng = np.random.default_rng(self.seed)
+        steps = int(math.floor(spec.t_max / dt + 1e-9)) + 1
+        dyn = sc.world.dynamic
+        m = len(dyn)
+        buf = _Buffers.allocate(steps, n, m)
+        commands: FloatArray | None = None
+        leader = VirtualLeader(sc)
+        estimator = make_estimator(spec.localization.mode, sc)
+        estimator.reset(rng)
+        self.controller.reset(sc, rng)
+        state = RobotState.at_rest(sc.initial_pose)
+        grid, cap = sc.world.grid, spec.metrics.clearance_cap
+        sensors = spec.sensors
+        owners = np.concatenate((np.arange(n), np.full(m, -1)))
+        disc_r = np.concatenate((np.full(n, self.radius), dyn.radii))
+        prev_pairs: set[int] = set()
+        prev_static = np.zeros(n, dtype=bool)
+        prev_dyn = np.zeros((n, m), dtype=bool)
+        reached, t_goal = False, math.nan
+        wall0 = time.perf_counter()
+        k = 0
+        for k in range(steps):
+            t = k * dt
+            pos = state.pose[:, :2]
+            dyn_pos, dyn_vel = dyn.state(t)
+            lead = leader.state()
+            # -- sensing, all from the same snapshot
+            scan = None
+            if self.lidar is not None:
+                scan = self.lidar.scan(state.pose, np.vstack((pos, dyn_pos)), disc_r, owners, rng)
+            est = estimator.estimate(state.pose, state.twist, scan, dt)
+            prox = proximity(pos, sensors.comm_radius, sensors.max_neighbors, 2.0 * self.radius)
+            idx = prox.index
+            safe = np.where(idx >= 0, idx, 0)
+            pad = (idx < 0)[..., None]
+            nb = Neighbours(idx, np.where(pad, 0.0, est[safe, :2]),
+                            np.where(pad, 0.0, state.velocity[safe]), prox.distance)
+            moving = self._moving_obstacles(pos, dyn_pos, dyn_vel, dyn.radii)
+            slots = slot_positions(lead[:3], sc.offsets)
+            obs = Observation(t, dt, np.arange(n), est, state.velocity, state.twist, scan, nb,
+                              moving, lead, np.asarray(spec.leader.goal, float), sc.offsets, slots)
+            # -- act
+            cmd = self._checked(self.controller.act(obs), t)
+            if commands is None:
+                commands = np.zeros((steps, n, cmd.shape[1]))
+            native = convert(cmd, self.controller.command, self.model.native, est,
+                             state.velocity, dt, spec.robots.nid_distance)
+            new_state = self.model.step(state, native, dt, self._disturbance(self._dist_v, t),
+                                        self._disturbance(self._dist_f, t))
+            # -- contacts at t_k
+            clearance = grid.clearance(pos, cap)
+            static_hit = clearance < self.radius
+            if m:
+                dd = np.linalg.norm(pos[:, None, :] - dyn_pos[None, :, :], axis=2)
+                dyn_hit = dd < self.radius + dyn.radii[None, :]
+            else:
+                dyn_hit = prev_dyn
+            pairs = set(prox.contact_keys.tolist())
+            events = (len(pairs - prev_pairs) + int((static_hit & ~prev_static).sum())
+                      + int((dyn_hit & ~prev_dyn).sum()))
+            prev_pairs, prev_static, prev_dyn = pairs, static_hit, dyn_hit
+            # -- log
+            buf.t[k] = t
+            buf.pose[k], buf.pose_est[k], buf.velocity[k] = state.pose, est, state.velocity
+            buf.twist[k], buf.leader[k], buf.slots[k] = new_state.twist, lead, slots
+            buf.clearance[k], buf.min_inter_robot[k] = clearance, prox.min_distance
+            buf.robot_contacts[k] = len(pairs)
+            buf.obstacle_contacts[k] = int(static_hit.sum())
+            buf.dynamic_contacts[k] = int(dyn_hit.any(axis=1).sum()) if m else 0
+            buf.collision_events[k] = events
+            buf.dyn_pos[k] = dyn_pos
+            commands[k] = cmd
+            res = getattr(self.controller, "last_result", None)
+            if res is not None:
+                buf.filter_status[k], buf.filter_slack[k] = res.status, res.slack
+                buf.filter_time[k] = res.solve_time
+            # -- stop conditions
+            if leader.at_goal and np.all(np.hypot(*(pos - slots).T) <= spec.leader.settle_tolerance):
+                reached, t_goal = True, t
+                break
+            if spec.stop_on_collision and events:
+                break
+            state = new_state
+            leader.advance(dt)
+        wall = time.perf_counter() - wall0
+        end = k + 1
+        arrays = {name: getattr(buf, name)[:end] for name in buf.__dataclass_fields__}
+        meta = {
+            "scenario": sc.name, "source": sc.source, "controller": self.controller.name,
+            "seed": self.seed, "dt": dt, "n": n, "robot_radius": self.radius,
+            "robot_model": spec.robots.model, "command_kind": self.controller.command,
+            "reached_goal": reached, "time_to_goal": t_goal, "steps": end,
+            "wall_time": wall, "version": __version__,
+            "leader_path": sc.leader_path.tolist(), "goal": list(spec.leader.goal),
+        }
+        return RunLog(command=commands[:end] if commands is not None else np.zeros((end, n, 2)),
+                      offsets=sc.offsets, dyn_radius=dyn.radii.copy(), meta=meta, **arrays)
+
+    def _moving_obstacles(self, pos: FloatArray, dyn_pos: FloatArray, dyn_vel: FloatArray,
+                          radii: FloatArray) -> MovingObstacles:
+        n, m = len(pos), len(dyn_pos)
+        if m == 0:
+            return MovingObstacles(np.zeros((n, 0, 2)), np.zeros((n, 0, 2)), np.zeros((n, 0)),
+                                   np.zeros((n, 0), dtype=bool))
+        d = np.linalg.norm(pos[:, None, :] - dyn_pos[None, :, :], axis=2)
+        mask = d - radii[None, :] <= self.obstacle_range
+        w = mask[..., None]
+        return MovingObstacles(np.where(w, dyn_pos[None], 0.0), np.where(w, dyn_vel[None], 0.0),
+                               np.where(mask, radii[None, :], 0.0), mask)
+
+    def _checked(self, cmd: object, t: float) -> FloatArray:
+        name = getattr(self.controller, "name", type(self.controller).__name__)
+        try:
+            arr = np.asarray(cmd, dtype=float)
+        except (TypeError, ValueError):
+            raise ControllerError(f"controller '{name}' returned a non-numeric command at "
+                                  f"t={t:.3f} s") from None
+        if arr.ndim != 2 or arr.shape[0] != self.n or arr.shape[1] not in (2, 3):
+            raise ControllerError(f"controller '{name}' returned shape {arr.shape} at t={t:.3f} s,"
+                                  f" expected ({self.n}, 2)")
+        if not np.all(np.isfinite(arr)):
+            bad = sorted(set(np.nonzero(~np.isfinite(arr))[0].tolist()))
+            raise ControllerError(f"controller '{name}' returned NaN/inf for robot(s) {bad} at "
+                                  f"t={t:.3f} s")
+        return arr
+
+
+def run_scenario(scenario: Scenario, controller_id: str, seed: int | None = None) -> RunLog:
+    """Build the controller (with the scenario's overrides) and run it.
+
+    Args:
+        scenario: The loaded scenario.
+        controller_id: Registry id.
+        seed: Run seed; default: the scenario's.
+    """
+    from dfcoa_opt.control.registry import make_controller
+
+    ctrl = make_controller(controller_id, scenario.spec.controllers.get(controller_id, {}),
+                           scenario.source)
+    return Simulator(scenario, ctrl, seed).run()

@@ -1,0 +1,55 @@
+"""The bad-scenario corpus: each file fails with one line naming file, key and problem."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.sim.loader import load_scenario
+
+CORPUS = Path(__file__).parent / "data" / "bad_scenarios"
+FILES = sorted(CORPUS.glob("*.toml"))
+
+
+def expected_fragment(path: Path) -> str:
+    side = path.with_suffix(".expect")
+    if side.exists():
+        return side.read_text().strip()
+    first = path.read_text().splitlines()[0]
+    assert first.startswith("# expect: "), f"{path.name} lacks its '# expect:' line"
+    return first[len("# expect: "):].strip()
+
+
+def test_corpus_is_large_enough():
+    assert len(FILES) >= 25
+
+
+@pytest.mark.parametrize("path", FILES, ids=[p.stem for p in FILES])
+def test_bad_scenario_message(path: Path):
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert msg.startswith(str(path)), msg
+    assert expected_fragment(path) in msg, msg
+
+
+@pytest.mark.parametrize("path", FILES[:6], ids=[p.stem for p in FILES[:6]])
+def test_cli_exit_code_2_without_traceback(path: Path):
+    proc = subprocess.run([sys.executable, "-m", "dfcoa_opt", "run", str(path), "--json"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert str(path) in lines[0] and expected_fragment(path) in lines[0]
+
+
+def test_missing_file_is_one_line():
+    with pytest.raises(ScenarioError, match="file not found"):
+        load_scenario(CORPUS / "no_such_file.toml")
