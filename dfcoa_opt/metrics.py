@@ -1,0 +1,417 @@
+"""Run metrics of paper 000 section 3.3 (eq 6-11) and of papers 002 and 004.
+
+Every metric is a pure, vectorised function of a :class:`~dfcoa_opt.sim.log.RunLog`
+(and, where it has settings, a :class:`~dfcoa_opt.sim.schema.MetricSpec`, or a
+``ScenarioSpec`` / ``Scenario`` whose ``metrics`` section is used). Time series
+have one value per logged step ``t[k]``; summaries average over all logged steps.
+:func:`summary` collects the JSON keys; every definition and choice is written
+down in ``docs/metrics.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any, Union
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_MODIFIED, STATUS_SOLVER_FAIL, RunLog
+from dfcoa_opt.sim.schema import MetricSpec
+
+if TYPE_CHECKING:
+    from dfcoa_opt.sim.scenario import Scenario
+    from dfcoa_opt.sim.schema import ScenarioSpec
+
+FloatArray = NDArray[np.float64]
+Settings = Union[MetricSpec, "ScenarioSpec", "Scenario", None]
+
+#: Distances below this (m) are floored in the inverse-square risk terms of eq 11.
+RISK_DISTANCE_FLOOR = 1e-6
+_CHUNK_POINTS = 200_000  # robot positions per KD-tree in the pair search
+_CHUNK_ELEMS = 2_000_000  # (step, robot, moving obstacle) triples per chunk
+
+#: Paper 000 Table 5, (Scenario 1, Scenario 2), under this module's summary keys.
+PAPER_000_TABLE5: dict[str, tuple[float, float]] = {
+    "fce_rms": (0.9516, 1.0008), "fce_mean": (0.9486, 1.0002), "fce_max": (1.1365, 1.1340),
+    "fce_x_rms": (0.7880, 0.6648), "fce_y_rms": (0.5334, 0.7481),
+    "fse_rms": (1.0511, 0.6399), "fse_mean": (1.1047, 0.4094),  # paper prints m^2; it is m
+    "stability_pct": (95.8, 94.6), "vce_rms": (0.2699, 0.1700),
+    "v_rms": (0.3198, 0.3173), "w_rms": (0.0539, 0.0654),
+    "risk_mean": (0.7773, 0.5143), "risk_max": (1.0000, 0.6237),
+    "min_inter_robot_distance": (0.4702, 0.8763),
+}
+
+
+def _cfg(spec: Settings) -> MetricSpec:
+    """Get the metric settings of a MetricSpec, ScenarioSpec or Scenario (None: defaults)."""
+    if spec is None:
+        return MetricSpec()
+    if isinstance(spec, MetricSpec):
+        return spec
+    return getattr(spec, "spec", spec).metrics
+
+
+def _dt(log: RunLog) -> float:
+    """Step in s: ``meta["dt"]``, else the spacing of ``t``, else 1."""
+    if log.meta.get("dt") is not None:
+        return float(log.meta["dt"])
+    return float(log.t[1] - log.t[0]) if len(log.t) > 1 else 1.0
+
+
+def _radius(log: RunLog) -> float:
+    """Robot radius in m from ``meta["robot_radius"]``."""
+    if log.meta.get("robot_radius") is None:
+        raise ValueError("RunLog.meta has no 'robot_radius'")
+    return float(log.meta["robot_radius"])
+
+
+def _rms(x: np.ndarray) -> float:
+    """Root mean square of all entries; NaN when empty."""
+    return float(np.sqrt(np.mean(np.square(x)))) if np.size(x) else math.nan
+
+
+def _mean(x: np.ndarray) -> float:
+    """Mean of all entries; NaN when empty."""
+    return float(np.mean(x)) if np.size(x) else math.nan
+
+
+def _max(x: np.ndarray) -> float:
+    """Largest entry; NaN when empty."""
+    return float(np.max(x)) if np.size(x) else math.nan
+
+
+def _min(x: np.ndarray) -> float:
+    """Smallest entry; NaN when empty."""
+    return float(np.min(x)) if np.size(x) else math.nan
+
+
+# --------------------------------------------------------------- paper 000, eq 6-11
+def centroids(log: RunLog) -> tuple[FloatArray, FloatArray]:
+    """Actual and desired centroids (paper 000 eq 6), ``(T, 2)`` each in m: means of pose, slots."""
+    return log.pose[..., :2].mean(axis=1), log.slots.mean(axis=1)
+
+
+def centroid_offset(log: RunLog) -> FloatArray:
+    """Centroid error vector ``(X_c - X_c*, Y_c - Y_c*)`` (paper 000 eq 6), ``(T, 2)`` in m."""
+    actual, desired = centroids(log)
+    return actual - desired
+
+
+def formation_centroid_error(log: RunLog) -> FloatArray:
+    """Compute the Formation Centroid Error E_c(t), paper 000 eq 6.
+
+    Args:
+        log: The run.
+
+    Returns:
+        ``(T,)`` distance between the actual and the desired centroid, m.
+    """
+    return np.linalg.norm(centroid_offset(log), axis=-1)
+
+
+def formation_shape_error(log: RunLog) -> FloatArray:
+    """Compute the Formation Shape Error E_s(t), paper 000 eq 7.
+
+    ``E_s = mean_i ||(p_i - centroid) - (p_i* - centroid*)||``: the mean distance
+    between each robot's and its slot's position relative to their centroids.
+    The unit is m (Table 5's m^2 is a typo).
+
+    Args:
+        log: The run.
+
+    Returns:
+        ``(T,)`` shape error, m.
+    """
+    rel = (log.pose[..., :2] - log.slots) - centroid_offset(log)[:, None, :]
+    return np.linalg.norm(rel, axis=-1).mean(axis=1)
+
+
+def formation_stability_error(log: RunLog, window_s: float | None = None) -> FloatArray:
+    """Compute the Formation Stability Error E_st(t), paper 000 eq 8.
+
+    Trailing moving average of E_c (eq 6) over the ``n = max(1, round(T / dt))``
+    most recent samples, the current one included (rectangle rule of
+    ``1/T int_{t-T}^t E_c``). While fewer than n samples exist, the mean is over
+    the samples there are.
+
+    Args:
+        log: The run.
+        window_s: Window T in s; default ``MetricSpec.fste_window`` (5 s).
+
+    Returns:
+        ``(T,)`` moving-average centroid error, m.
+    """
+    window = MetricSpec().fste_window if window_s is None else float(window_s)
+    n = max(1, int(round(window / _dt(log))))
+    ec = formation_centroid_error(log)
+    csum = np.concatenate(([0.0], np.cumsum(ec)))
+    k = np.arange(len(ec))
+    start = np.maximum(k + 1 - n, 0)
+    return (csum[k + 1] - csum[start]) / (k + 1 - start)
+
+
+def velocity_centroid_error(log: RunLog) -> FloatArray:
+    """Velocity Centroid Error E_v(t), paper 000 eq 9.
+
+    ``V_c, omega_c`` are the means over robots of the applied twist; the desired
+    values are the virtual leader's ``(v, omega)`` (``leader[:, 3:5]``).
+
+    Args:
+        log: The run.
+
+    Returns:
+        ``(T,)`` error, in the mixed unit of eq 9 (m/s combined with rad/s).
+    """
+    return np.linalg.norm(log.twist.mean(axis=1) - log.leader[:, 3:5], axis=-1)
+
+
+def rms_velocities(log: RunLog) -> tuple[FloatArray, FloatArray]:
+    """RMS linear and angular velocity over the robots, paper 000 eq 10.
+
+    Args:
+        log: The run.
+
+    Returns:
+        ``(v_rms, w_rms)``, each ``(T,)``: ``sqrt(mean_i v_i^2)`` in m/s and
+        ``sqrt(mean_i omega_i^2)`` in rad/s per step.
+    """
+    rms = np.sqrt(np.mean(np.square(log.twist), axis=1))
+    return rms[:, 0], rms[:, 1]
+
+
+def _robot_pair_term(pos: FloatArray, cutoff: float) -> FloatArray:
+    """``sum_{i != j, d_ij <= cutoff} 1 / d_ij^2`` per step (ordered pairs), 1/m^2.
+
+    Chunks of steps are stacked into one 3-D KD-tree, step k at height
+    ``k * (2 cutoff + 1)``, so that only pairs of the same step are found.
+    """
+    n_t, n = pos.shape[:2]
+    out = np.zeros(n_t)
+    if n < 2 or n_t == 0:
+        return out
+    step = max(1, _CHUNK_POINTS // n)
+    gap = 2.0 * cutoff + 1.0
+    for s in range(0, n_t, step):  # loop over chunks of steps, not over steps
+        xy = pos[s:s + step].reshape(-1, 2)
+        tc = len(xy) // n
+        pts = np.column_stack([xy, np.repeat(np.arange(tc) * gap, n)])
+        pairs = cKDTree(pts).query_pairs(cutoff, output_type="ndarray")
+        if len(pairs) == 0:
+            continue
+        d2 = np.sum(np.square(xy[pairs[:, 0]] - xy[pairs[:, 1]]), axis=1)
+        inv = 1.0 / np.maximum(d2, RISK_DISTANCE_FLOOR**2)
+        out[s:s + tc] = 2.0 * np.bincount(pairs[:, 0] // n, weights=inv, minlength=tc)
+    return out
+
+
+def _obstacle_term(log: RunLog, cfg: MetricSpec) -> FloatArray:
+    """``sum_i sum_k 1 / d_ik^2`` per step over detected obstacles, 1/m^2."""
+    rng = cfg.risk_detection_range
+    c = np.maximum(log.clearance, RISK_DISTANCE_FLOOR)
+    near = (log.clearance <= rng) & (log.clearance < cfg.clearance_cap)
+    out = np.where(near, 1.0 / np.square(c), 0.0).sum(axis=1)
+    n_t, n = log.pose.shape[:2]
+    m = len(log.dyn_radius)
+    if m == 0 or n == 0:
+        return out
+    step = max(1, _CHUNK_ELEMS // (n * m))
+    for s in range(0, n_t, step):  # loop over chunks of steps, not over steps
+        diff = log.pose[s:s + step, :, None, :2] - log.dyn_pos[s:s + step, None, :, :]
+        d = np.linalg.norm(diff, axis=-1) - log.dyn_radius
+        d = np.maximum(d, RISK_DISTANCE_FLOOR)
+        out[s:s + step] += np.where(d <= rng, 1.0 / np.square(d), 0.0).sum(axis=(1, 2))
+    return out
+
+
+def collision_risk(log: RunLog, spec: Settings = None) -> FloatArray:
+    """Raw Collision Risk Metric R(t), paper 000 eq 11.
+
+    ``R = lambda1 sum_{i != j} 1/d_ij^2 + lambda2 sum_i sum_k 1/d_ik^2``. The robot
+    sum runs over ordered pairs (each unordered pair counts twice) of robot
+    centres. Obstacles k of robot i: its nearest static obstacle point
+    (distance ``clearance[t, i]``, skipped when capped) and every moving disc
+    (centre distance minus the disc radius). Only distances within
+    ``risk_detection_range`` contribute, for robots and obstacles alike; every
+    distance is floored at :data:`RISK_DISTANCE_FLOOR`.
+
+    Args:
+        log: The run.
+        spec: Metric settings (lambda1, lambda2, detection range, clearance cap).
+
+    Returns:
+        ``(T,)`` risk, 1/m^2.
+    """
+    cfg = _cfg(spec)
+    r = np.zeros(log.n_steps)
+    if cfg.risk_lambda1 > 0.0:
+        r += cfg.risk_lambda1 * _robot_pair_term(log.pose[..., :2], cfg.risk_detection_range)
+    if cfg.risk_lambda2 > 0.0:
+        r += cfg.risk_lambda2 * _obstacle_term(log, cfg)
+    return r
+
+
+def collision_risk_normalised(log: RunLog, spec: Settings = None) -> FloatArray:
+    """Collision risk of eq 11 normalised to [0, 1] (paper 000 Table 5 "Normalized").
+
+    ``clip(R / R_ref, 0, 1)`` with ``R_ref = 2 lambda1 / d_ref^2``: one robot pair
+    at ``risk_reference_distance`` gives exactly 1. With ``lambda1 = 0``,
+    ``R_ref = lambda2 / d_ref^2`` (one obstacle at d_ref gives 1).
+
+    Args:
+        log: The run.
+        spec: Metric settings.
+
+    Returns:
+        ``(T,)`` normalised risk, dimensionless.
+    """
+    cfg = _cfg(spec)
+    weight = 2.0 * cfg.risk_lambda1 if cfg.risk_lambda1 > 0.0 else cfg.risk_lambda2
+    r = collision_risk(log, cfg)
+    if weight == 0.0:
+        return np.zeros_like(r)
+    return np.clip(r * cfg.risk_reference_distance**2 / weight, 0.0, 1.0)
+
+
+def formation_stability_pct(log: RunLog, spec: Settings = None) -> float:
+    """Compute the formation stability (paper 000 Table 5): % of steps with E_s < threshold.
+
+    Args:
+        log: The run.
+        spec: Metric settings (``stability_threshold``, m; default 0.5).
+
+    Returns:
+        Percentage of steps whose shape error (eq 7) is below the threshold; NaN
+        for an empty log.
+    """
+    es = formation_shape_error(log)
+    return 100.0 * _mean(es < _cfg(spec).stability_threshold)
+
+
+# ------------------------------------------------------------------- general metrics
+def min_inter_robot_distance(log: RunLog) -> float:
+    """Smallest centre distance between two robots over the run, m (NaN if N == 1)."""
+    d = _min(log.min_inter_robot)
+    return d if math.isfinite(d) else math.nan
+
+
+def min_obstacle_clearance(log: RunLog) -> float:
+    """Smallest surface gap to a static obstacle, ``min(clearance - radius)``, m.
+
+    Negative values mean penetration; NaN for an empty log.
+    """
+    return _min(log.clearance - _radius(log))
+
+
+def path_length_per_robot(log: RunLog) -> FloatArray:
+    """Length of each robot's polyline through its logged positions, ``(N,)`` in m."""
+    return np.linalg.norm(np.diff(log.pose[..., :2], axis=0), axis=-1).sum(axis=0)
+
+
+def filter_counts(log: RunLog) -> dict[str, int | float]:
+    """Safety-filter statistics over all (step, robot) entries.
+
+    Returns:
+        ``filter_interventions`` (status 1), ``filter_fallbacks`` (status 2 or 3),
+        ``filter_solver_failures`` (status 3), and ``filter_time_median`` in s:
+        median solve time over entries with a filter (time > 0 or status != 0), 0
+        when there is none.
+    """
+    st = log.filter_status
+    used = (log.filter_time > 0.0) | (st != 0)
+    return {
+        "filter_interventions": int(np.count_nonzero(st == STATUS_MODIFIED)),
+        "filter_fallbacks": int(np.count_nonzero((st == STATUS_FALLBACK)
+                                                 | (st == STATUS_SOLVER_FAIL))),
+        "filter_solver_failures": int(np.count_nonzero(st == STATUS_SOLVER_FAIL)),
+        "filter_time_median": float(np.median(log.filter_time[used])) if used.any() else 0.0,
+    }
+
+
+# ------------------------------------------------------------------ papers 002 and 004
+def average_velocities_per_robot(log: RunLog) -> tuple[FloatArray, FloatArray]:
+    """Time means of each robot's v (m/s) and signed omega (rad/s), paper 002 Tables II-IV."""
+    avg = log.twist.mean(axis=0)
+    return avg[:, 0], avg[:, 1]
+
+
+def mean_abs_angular_velocity_per_robot(log: RunLog) -> FloatArray:
+    """Time mean of each robot's |omega|, ``(N,)`` in rad/s (companion of paper 002)."""
+    return np.abs(log.twist[..., 1]).mean(axis=0)
+
+
+def distance_travelled(log: RunLog) -> FloatArray:
+    """Distance travelled per robot (paper 002 Tables II-IV), ``(N,)`` in m."""
+    return path_length_per_robot(log)
+
+
+def leader_follower_position_error(log: RunLog) -> FloatArray:
+    """Position error ``||p_i - slot_i||`` (papers 002 and 004), ``(T, N)`` in m."""
+    return np.linalg.norm(log.pose[..., :2] - log.slots, axis=-1)
+
+
+def formation_position_error_per_robot(log: RunLog) -> FloatArray:
+    """Time mean of ``||p_i - slot_i||`` (paper 002 Tables II-IV), ``(N,)`` in m.
+
+    Robot 0 is included; the caller picks the followers.
+    """
+    return leader_follower_position_error(log).mean(axis=0)
+
+
+def mse_per_robot(log: RunLog) -> FloatArray:
+    """Squared distance to the ideal position (the slot), paper 004 eq 14, ``(T, N)`` m^2."""
+    return np.sum(np.square(log.pose[..., :2] - log.slots), axis=-1)
+
+
+# --------------------------------------------------------------------------- summary
+def summary(log: RunLog, spec: Settings = None) -> dict[str, Any]:
+    """Every scalar metric of a run under its JSON key (docs/metrics.md).
+
+    Args:
+        log: The run.
+        spec: Metric settings; default ``MetricSpec()``.
+
+    Returns:
+        Python floats, ints and bools (NaN where undefined).
+    """
+    cfg = _cfg(spec)
+    off = centroid_offset(log)
+    fce = np.linalg.norm(off, axis=-1)
+    fse = formation_shape_error(log)
+    fste = formation_stability_error(log, cfg.fste_window)
+    v_rms, w_rms = rms_velocities(log)
+    risk = collision_risk_normalised(log, cfg)
+    ttg = log.meta.get("time_to_goal")
+    reached = bool(log.meta.get("reached_goal", False))
+    return {
+        "fce_rms": _rms(fce),
+        "fce_mean": _mean(fce),
+        "fce_max": _max(fce),
+        "fce_x_rms": _rms(off[:, 0]),
+        "fce_y_rms": _rms(off[:, 1]),
+        "fse_rms": _rms(fse),
+        "fse_mean": _mean(fse),
+        "fste_max": _max(fste),
+        "fste_final": float(fste[-1]) if len(fste) else math.nan,
+        "stability_pct": formation_stability_pct(log, cfg),
+        "vce_rms": _rms(velocity_centroid_error(log)),
+        "v_rms": _mean(v_rms),
+        "w_rms": _mean(w_rms),
+        "risk_mean": _mean(risk),
+        "risk_max": _max(risk),
+        "min_inter_robot_distance": min_inter_robot_distance(log),
+        "min_obstacle_clearance": min_obstacle_clearance(log),
+        "collisions": int(np.sum(log.collision_events)),
+        "robot_contact_steps": int(np.count_nonzero(log.robot_contacts > 0)),
+        "obstacle_contact_steps": int(np.count_nonzero(
+            (log.obstacle_contacts > 0) | (log.dynamic_contacts > 0))),
+        "dynamic_contact_steps": int(np.count_nonzero(log.dynamic_contacts > 0)),
+        "path_length_mean": _mean(path_length_per_robot(log)),
+        "time_to_goal": float(ttg) if reached and ttg is not None else math.nan,
+        "success": reached,
+        **filter_counts(log),
+        "mse_mean": _mean(mse_per_robot(log)),
+        "lf_error_mean": _mean(leader_follower_position_error(log)),
+        "steps": int(log.n_steps),
+    }

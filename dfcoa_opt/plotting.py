@@ -1,0 +1,392 @@
+"""Headless figures and animations of one run.
+
+Every figure is a bare :class:`matplotlib.figure.Figure` with an Agg canvas
+attached, so neither :mod:`matplotlib.pyplot` nor a GUI backend is ever
+imported: the functions work under any ``MPLBACKEND`` setting and without a
+display. Files are written atomically (a temporary file in the target
+directory, then a rename), so a reader never sees a half-written image.
+
+All coordinates are world metres, angles radians and times seconds. Typical use
+with a loaded scenario::
+
+    plot_run(log, scenario.world.grid, "run.png",
+             goal=scenario.spec.leader.goal, start=scenario.spec.leader.start)
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import matplotlib as mpl
+import numpy as np
+from matplotlib.animation import FuncAnimation, PillowWriter
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
+from matplotlib.colors import ListedColormap, to_rgb
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle as CirclePatch
+from matplotlib.patches import Polygon as PolygonPatch
+
+from dfcoa_opt.world.shapes import Circle
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from numpy.typing import ArrayLike, NDArray
+
+    from dfcoa_opt.sim.log import RunLog
+    from dfcoa_opt.world.grid import OccupancyGrid
+    from dfcoa_opt.world.shapes import Shape
+
+#: Colours of the map image: free cells, occupied cells.
+FREE_COLOR = "#ffffff"
+OCCUPIED_COLOR = "#404040"
+#: Colour of moving obstacles.
+OBSTACLE_COLOR = "#8c8c8c"
+
+_MAP_CMAP = ListedColormap([FREE_COLOR, OCCUPIED_COLOR])
+
+
+def robot_colors(n: int) -> list[tuple[float, float, float]]:
+    """Distinct RGB colours (components in [0, 1]) for ``n`` robots.
+
+    Grey and black are excluded (they mark the map, moving obstacles and the
+    leader): up to 9 robots get ``tab10`` without its grey, up to 18 ``tab20``
+    without its greys, more are sampled from ``turbo``.
+
+    Args:
+        n: Number of robots, >= 0.
+    """
+    if n <= 9:
+        palette = [c for i, c in enumerate(mpl.colormaps["tab10"].colors) if i != 7]
+    elif n <= 18:
+        palette = [c for i, c in enumerate(mpl.colormaps["tab20"].colors) if i not in (14, 15)]
+    else:
+        palette = [mpl.colormaps["turbo"](x) for x in np.linspace(0.05, 0.95, n)]
+    return [tuple(float(v) for v in to_rgb(c)) for c in palette[:n]]  # type: ignore[misc]
+
+
+def new_figure(figsize: tuple[float, float] = (7.0, 6.0), dpi: float = 100.0,
+               layout: str | None = "constrained") -> Figure:
+    """Create a figure with an Agg canvas attached (no pyplot, no GUI backend).
+
+    Args:
+        figsize: ``(width, height)`` in inches.
+        dpi: Pixels per inch; the saved image is ``figsize * dpi`` pixels.
+        layout: Matplotlib layout engine name, or None.
+    """
+    fig = Figure(figsize=figsize, dpi=dpi, layout=layout)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def draw_world(ax: Axes, grid: OccupancyGrid, goal: ArrayLike | None = None,
+               start: ArrayLike | None = None, *, shapes: Iterable[Shape] = ()) -> None:
+    """Draw the occupancy map (occupied dark grey, free white) on ``ax``.
+
+    The image covers ``grid.extent`` with row 0 at the bottom, the axes get an
+    equal aspect ratio and limits equal to the extent (callers may widen them).
+
+    Args:
+        ax: Target axes.
+        grid: The map.
+        goal: Leader goal ``(x, y)`` in m, drawn as a star.
+        start: Leader start ``(x, y)`` in m, drawn as a square.
+        shapes: Exact static shapes, drawn as outlines over the raster.
+    """
+    xmin, xmax, ymin, ymax = grid.extent
+    ax.imshow(grid.occupied.astype(np.uint8), cmap=_MAP_CMAP, vmin=0, vmax=1,
+              origin="lower", extent=(xmin, xmax, ymin, ymax), interpolation="nearest",
+              zorder=0)
+    for shape in shapes:
+        if isinstance(shape, Circle):
+            patch = CirclePatch(shape.center, shape.radius)
+        else:
+            patch = PolygonPatch(shape.to_polygon().as_array(), closed=True)
+        patch.set(fill=False, edgecolor="black", linewidth=0.8, zorder=1)
+        ax.add_patch(patch)
+    if start is not None:
+        sx, sy = np.asarray(start, dtype=float)[:2]
+        ax.plot([sx], [sy], "s", color="black", markerfacecolor="none", markersize=9,
+                label="start", zorder=5)
+    if goal is not None:
+        gx, gy = np.asarray(goal, dtype=float)[:2]
+        ax.plot([gx], [gy], "*", color="gold", markeredgecolor="black", markersize=15,
+                label="goal", zorder=5)
+    ax.set_xlim(xmin, xmax)
+    ax.set_ylim(ymin, ymax)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+
+
+def plot_run(log: RunLog, grid: OccupancyGrid, path: str | Path, goal: ArrayLike | None = None,
+             start: ArrayLike | None = None, title: str | None = None, *,
+             shapes: Iterable[Shape] = (), figsize: tuple[float, float] = (7.0, 6.0),
+             dpi: float = 100.0) -> Path:
+    """Save a PNG summary of a run.
+
+    Shows the map, each robot's trajectory (legend "robot i"), the virtual
+    leader's path (dashed black), the final robot discs with heading lines, the
+    final formation slots (hollow circles), and the moving obstacles'
+    trajectories (thin grey) with their final discs.
+
+    Args:
+        log: The run.
+        grid: The map the run used.
+        path: Output ``.png`` file; parent directories are created.
+        goal: Leader goal ``(x, y)`` in m.
+        start: Leader start ``(x, y)`` in m.
+        title: Figure title; default ``"{scenario} - {controller} - seed {seed}"``.
+        shapes: Exact static shapes to outline.
+        figsize: ``(width, height)`` in inches.
+        dpi: Pixels per inch (image is ``figsize * dpi`` pixels).
+
+    Returns:
+        The written path.
+
+    Raises:
+        ValueError: On an empty log.
+    """
+    if log.n_steps == 0:
+        raise ValueError("the log has no steps")
+    fig = new_figure(figsize, dpi)
+    ax = fig.add_subplot()
+    draw_world(ax, grid, goal, start, shapes=shapes)
+    colors = robot_colors(log.n_robots)
+    radius = _robot_radius(log, grid)
+    pose = np.asarray(log.pose, dtype=float)
+    for i, color in enumerate(colors):
+        ax.plot(pose[:, i, 0], pose[:, i, 1], "-", color=color, linewidth=2.0,
+                label=f"robot {i}", zorder=3)
+    leader = np.asarray(log.leader, dtype=float)
+    ax.plot(leader[:, 0], leader[:, 1], "--", color="black", linewidth=1.5, label="leader",
+            zorder=4)
+    dyn = np.asarray(log.dyn_pos, dtype=float)
+    for j in range(dyn.shape[1]):
+        ax.plot(dyn[:, j, 0], dyn[:, j, 1], "-", color=OBSTACLE_COLOR, linewidth=0.8,
+                label="moving obstacle" if j == 0 else None, zorder=2)
+    final = _Frame(ax, colors, radius, np.asarray(log.dyn_radius, dtype=float))
+    final.update(pose[-1], np.asarray(log.slots, dtype=float)[-1], dyn[-1])
+    ax.set_title(_default_title(log) if title is None else title)
+    _set_view(ax, grid, log, radius, goal, start)
+    fig.legend(loc="outside right upper", fontsize="small")
+    return _save_atomic(path, lambda tmp: fig.savefig(tmp, format="png"), ".png")
+
+
+def animate_run(log: RunLog, grid: OccupancyGrid, path: str | Path,
+                goal: ArrayLike | None = None, fps: float = 10.0, max_frames: int = 200,
+                start: ArrayLike | None = None, *, shapes: Iterable[Shape] = (),
+                figsize: tuple[float, float] = (7.0, 6.0), dpi: float = 80.0) -> Path:
+    """Save a GIF animation of a run.
+
+    The ``T`` logged steps are subsampled uniformly (first and last included) to
+    ``min(T, max_frames)`` frames. Each frame shows the map, the trails so far,
+    the robots as discs with heading lines, the leader, the formation slots
+    (hollow circles), the moving obstacles and the time in the title. (Pillow
+    merges consecutive identical frames; frames always differ in their time.)
+
+    Args:
+        log: The run.
+        grid: The map the run used.
+        path: Output ``.gif`` file; parent directories are created.
+        goal: Leader goal ``(x, y)`` in m.
+        fps: Frames per second of the GIF, > 0.
+        max_frames: Largest number of frames, >= 1.
+        start: Leader start ``(x, y)`` in m.
+        shapes: Exact static shapes to outline.
+        figsize: ``(width, height)`` in inches.
+        dpi: Pixels per inch (frames are ``figsize * dpi`` pixels).
+
+    Returns:
+        The written path.
+
+    Raises:
+        ValueError: On an empty log, ``max_frames < 1`` or ``fps <= 0``.
+    """
+    if max_frames < 1 or not fps > 0:
+        raise ValueError("need max_frames >= 1 and fps > 0")
+    steps = frame_indices(log.n_steps, max_frames)
+    pose = np.asarray(log.pose, dtype=float)
+    leader = np.asarray(log.leader, dtype=float)
+    slots = np.asarray(log.slots, dtype=float)
+    dyn = np.asarray(log.dyn_pos, dtype=float)
+    t = np.asarray(log.t, dtype=float)
+    colors = robot_colors(log.n_robots)
+    radius = _robot_radius(log, grid)
+
+    fig = new_figure(figsize, dpi)
+    ax = fig.add_subplot()
+    draw_world(ax, grid, goal, start, shapes=shapes)
+    trails = [ax.plot([], [], "-", color=c, linewidth=1.5, label=f"robot {i}", zorder=3)[0]
+              for i, c in enumerate(colors)]
+    lead_trail = ax.plot([], [], "--", color="black", linewidth=1.2, label="leader",
+                         zorder=4)[0]
+    lead_dot = ax.plot([], [], "o", color="black", markersize=5, zorder=6)[0]
+    dyn_trails = [ax.plot([], [], "-", color=OBSTACLE_COLOR, linewidth=0.8, zorder=2,
+                          label="moving obstacle" if j == 0 else None)[0]
+                  for j in range(dyn.shape[1])]
+    frame = _Frame(ax, colors, radius, np.asarray(log.dyn_radius, dtype=float))
+    _set_view(ax, grid, log, radius, goal, start)
+    fig.legend(loc="outside right upper", fontsize="small")
+    head = _default_title(log)
+
+    def draw(k: int) -> list[Any]:
+        for i, line in enumerate(trails):
+            line.set_data(pose[: k + 1, i, 0], pose[: k + 1, i, 1])
+        lead_trail.set_data(leader[: k + 1, 0], leader[: k + 1, 1])
+        lead_dot.set_data(leader[k : k + 1, 0], leader[k : k + 1, 1])
+        for j, line in enumerate(dyn_trails):
+            line.set_data(dyn[: k + 1, j, 0], dyn[: k + 1, j, 1])
+        frame.update(pose[k], slots[k], dyn[k])
+        ax.set_title(f"{head}\nt = {t[k]:.2f} s (step {k})")
+        return []
+
+    draw(int(steps[0]))
+    fig.canvas.draw()  # settle the layout once, then freeze it so frames do not jitter
+    fig.set_layout_engine("none")
+    anim = FuncAnimation(fig, draw, frames=[int(k) for k in steps], blit=False,
+                         repeat=False, cache_frame_data=False)
+    writer = PillowWriter(fps=fps)
+    return _save_atomic(path, lambda tmp: anim.save(tmp, writer=writer, dpi=dpi), ".gif")
+
+
+def plot_timeseries(log: RunLog, series: Mapping[str, ArrayLike], path: str | Path,
+                    ylabel: str = "", *, title: str | None = None,
+                    figsize: tuple[float, float] = (7.0, 3.5), dpi: float = 100.0) -> Path:
+    """Save a PNG of several signals against the run time ``log.t``.
+
+    Args:
+        log: The run (provides the time axis, s).
+        series: Legend label -> ``(T,)`` values, plotted in order.
+        path: Output ``.png`` file; parent directories are created.
+        ylabel: Y-axis label, with units, e.g. ``"v (m/s)"``.
+        title: Optional title.
+        figsize: ``(width, height)`` in inches.
+        dpi: Pixels per inch.
+
+    Returns:
+        The written path.
+
+    Raises:
+        ValueError: If a series does not have shape ``(T,)``.
+    """
+    t = np.asarray(log.t, dtype=float)
+    fig = new_figure(figsize, dpi)
+    ax = fig.add_subplot()
+    for label, values in series.items():
+        y = np.asarray(values, dtype=float)
+        if y.shape != t.shape:
+            raise ValueError(f"series {label!r} has shape {y.shape}, expected {t.shape}")
+        ax.plot(t, y, linewidth=1.5, label=label)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel(ylabel)
+    ax.grid(True, alpha=0.3)
+    if series:
+        ax.legend(fontsize="small")
+    if title is not None:
+        ax.set_title(title)
+    return _save_atomic(path, lambda tmp: fig.savefig(tmp, format="png"), ".png")
+
+
+def frame_indices(n_steps: int, max_frames: int) -> NDArray[np.intp]:
+    """Uniformly spaced step indices, first and last included, at most ``max_frames``.
+
+    Args:
+        n_steps: Number of logged steps T, >= 1.
+        max_frames: Largest number of frames, >= 1.
+
+    Returns:
+        ``min(n_steps, max_frames)`` strictly increasing indices into ``[0, T)``.
+    """
+    if n_steps < 1 or max_frames < 1:
+        raise ValueError("need n_steps >= 1 and max_frames >= 1")
+    n = min(n_steps, max_frames)
+    if n == 1:
+        return np.array([n_steps - 1], dtype=np.intp)
+    # Spacing (T-1)/(n-1) >= 1, so rounding keeps the indices distinct.
+    return np.round(np.linspace(0.0, n_steps - 1, n)).astype(np.intp)
+
+
+# ------------------------------------------------------------------ internals
+class _Frame:
+    """Robot discs, heading lines, slot markers and moving-obstacle discs at one step."""
+
+    def __init__(self, ax: Axes, colors: Sequence[tuple[float, float, float]], radius: float,
+                 dyn_radius: NDArray[np.float64]) -> None:
+        self.radius = radius
+        self.discs = [CirclePatch((0.0, 0.0), radius, facecolor=(*c, 0.35), edgecolor=c,
+                                  linewidth=1.5, zorder=7) for c in colors]
+        self.headings = LineCollection([], colors=colors, linewidths=2.0, zorder=8)
+        self.slots = ax.scatter(np.zeros(len(colors)), np.zeros(len(colors)), s=50,
+                                facecolors="none", edgecolors=colors, linewidths=1.5,
+                                zorder=6, label="slots")
+        self.obstacles = [CirclePatch((0.0, 0.0), float(r), facecolor=OBSTACLE_COLOR,
+                                      edgecolor="black", alpha=0.7, linewidth=0.8, zorder=5)
+                          for r in dyn_radius]
+        for patch in (*self.discs, *self.obstacles):
+            ax.add_patch(patch)
+        ax.add_collection(self.headings, autolim=False)
+
+    def update(self, pose: NDArray[np.float64], slots: NDArray[np.float64],
+               dyn_pos: NDArray[np.float64]) -> None:
+        """Move everything to ``pose (N, 3)``, ``slots (N, 2)``, ``dyn_pos (M, 2)`` (m, rad)."""
+        for disc, p in zip(self.discs, pose, strict=True):
+            disc.set_center((p[0], p[1]))
+        tip = pose[:, :2] + 1.8 * self.radius * np.column_stack(
+            (np.cos(pose[:, 2]), np.sin(pose[:, 2])))
+        self.headings.set_segments(list(np.stack((pose[:, :2], tip), axis=1)))
+        self.slots.set_offsets(slots.reshape(-1, 2))
+        for disc, q in zip(self.obstacles, dyn_pos, strict=True):
+            disc.set_center((q[0], q[1]))
+
+
+def _robot_radius(log: RunLog, grid: OccupancyGrid) -> float:
+    """``meta["robot_radius"]`` in m, or 1 % of the map width when missing or invalid."""
+    r = float(log.meta.get("robot_radius", 0.0) or 0.0)
+    return r if np.isfinite(r) and r > 0 else 0.01 * grid.size[0]
+
+
+def _default_title(log: RunLog) -> str:
+    m = log.meta
+    return f"{m.get('scenario', '?')} - {m.get('controller', '?')} - seed {m.get('seed', '?')}"
+
+
+def _set_view(ax: Axes, grid: OccupancyGrid, log: RunLog, radius: float,
+              goal: ArrayLike | None, start: ArrayLike | None) -> None:
+    """Limits covering the map and everything the run visited, with a small margin."""
+    xmin, xmax, ymin, ymax = grid.extent
+    dyn_r = float(np.max(log.dyn_radius, initial=0.0))
+    lo, hi = np.array([xmin, ymin]), np.array([xmax, ymax])
+    groups = [(np.asarray(log.pose, dtype=float)[..., :2], radius),
+              (np.asarray(log.leader, dtype=float)[:, :2], 0.0),
+              (np.asarray(log.slots, dtype=float), 0.0),
+              (np.asarray(log.dyn_pos, dtype=float), dyn_r)]
+    groups += [(np.asarray(p, dtype=float)[:2], 0.0) for p in (goal, start) if p is not None]
+    for pts, margin in groups:
+        pts = pts.reshape(-1, 2)
+        pts = pts[np.isfinite(pts).all(axis=1)]
+        if len(pts):
+            lo = np.minimum(lo, pts.min(0) - margin)
+            hi = np.maximum(hi, pts.max(0) + margin)
+    if (lo < [xmin, ymin]).any() or (hi > [xmax, ymax]).any():
+        pad = 0.02 * float(np.max(hi - lo))
+        ax.set_xlim(lo[0] - pad, hi[0] + pad)
+        ax.set_ylim(lo[1] - pad, hi[1] + pad)
+
+
+def _save_atomic(path: str | Path, write: Callable[[str], object], suffix: str) -> Path:
+    """Call ``write(tmp)`` on a temporary file next to ``path``, then rename it to ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = str(path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp{suffix}"))
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path

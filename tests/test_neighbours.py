@@ -1,0 +1,38 @@
+import numpy as np
+import pytest
+
+from dfcoa_opt.sim import neighbours
+from dfcoa_opt.sim.neighbours import neighbour_table, proximity
+
+
+def brute(points, radius, k, contact):
+    n = len(points)
+    d = np.hypot(*(points[:, None] - points[None]).transpose(2, 0, 1))
+    np.fill_diagonal(d, np.inf)
+    idx = np.full((n, min(k, n - 1)), -1)
+    for i in range(n):
+        o = [j for j in np.argsort(d[i]) if d[i, j] <= radius][: idx.shape[1]]
+        idx[i, : len(o)] = o
+    pairs = sorted(i * n + j for i in range(n) for j in range(i + 1, n) if d[i, j] < contact)
+    return idx, d.min(), pairs
+
+
+@pytest.mark.parametrize("n", [3, 30, 120])
+def test_dense_and_tree_paths_agree_with_brute_force(n, monkeypatch):
+    rng = np.random.default_rng(n)
+    pts = rng.uniform(0, 10, (n, 2))
+    ref_idx, ref_min, ref_pairs = brute(pts, 2.5, 6, 0.8)
+    for dense_max in (0, 10_000):
+        monkeypatch.setattr(neighbours, "DENSE_MAX", dense_max)
+        p = proximity(pts, 2.5, 6, 0.8)
+        assert np.array_equal(p.index, ref_idx)
+        assert np.isclose(p.min_distance, ref_min)
+        assert sorted(p.contact_keys.tolist()) == ref_pairs
+        idx, dist = neighbour_table(pts, 2.5, 6)
+        assert np.array_equal(idx, ref_idx)
+        assert np.all(np.isinf(dist[idx < 0]))
+
+
+def test_single_robot_has_no_neighbours():
+    p = proximity(np.zeros((1, 2)), 5.0, 4, 0.4)
+    assert p.index.shape == (1, 0) and np.isinf(p.min_distance)

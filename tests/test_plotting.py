@@ -1,0 +1,209 @@
+"""Headless plotting: PNG summary, GIF animation, time series, backend independence."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+from matplotlib.colors import to_rgb
+from PIL import Image
+
+from dfcoa_opt import plotting
+from dfcoa_opt.sim.log import RunLog
+from dfcoa_opt.world.grid import OccupancyGrid
+from dfcoa_opt.world.shapes import Circle, Rectangle
+
+T, N, M = 30, 3, 1
+ROBOT_Y = (3.0, 5.0, 7.0)  # robot i drives along y = ROBOT_Y[i]
+
+
+def make_grid() -> OccupancyGrid:
+    """20 x 20 m, 1 cell/m, one 4 x 4 m block in the upper right (x, y in [12, 16))."""
+    occ = np.zeros((20, 20), dtype=bool)
+    occ[12:16, 12:16] = True
+    return OccupancyGrid(occ, resolution=1.0)
+
+
+def make_log(n_steps: int = T, n_dyn: int = M) -> RunLog:
+    """Three robots on straight lines from x = 2 to x = 14 along y = 3, 5, 7."""
+    t = np.arange(n_steps) * 0.1
+    s = np.linspace(0.0, 1.0, n_steps)
+    x = 2.0 + 12.0 * s
+    pose = np.zeros((n_steps, N, 3))
+    pose[:, :, 0] = x[:, None]
+    pose[:, :, 1] = np.asarray(ROBOT_Y)[None, :]
+    leader = np.zeros((n_steps, 5))
+    leader[:, 0] = x + 0.5
+    leader[:, 1] = 4.0  # between the robots, so its dashes hide no trajectory
+    leader[:, 3] = 12.0 / t[-1] if n_steps > 1 else 0.0
+    slots = pose[:, :, :2] + [0.5, 0.0]
+    dyn_pos = np.zeros((n_steps, n_dyn, 2))
+    if n_dyn:
+        dyn_pos[:, 0, 0] = 10.0
+        dyn_pos[:, 0, 1] = 1.0 + 8.0 * s
+    zf = np.zeros((n_steps, N))
+    zi = np.zeros(n_steps, dtype=np.int32)
+    return RunLog(
+        t=t, pose=pose, pose_est=pose.copy(), velocity=np.zeros((n_steps, N, 2)),
+        twist=np.zeros((n_steps, N, 2)), command=np.zeros((n_steps, N, 2)), leader=leader,
+        slots=slots, offsets=np.zeros((N, 2)), clearance=zf.copy(),
+        min_inter_robot=np.full(n_steps, 2.0), robot_contacts=zi.copy(),
+        obstacle_contacts=zi.copy(), dynamic_contacts=zi.copy(), collision_events=zi.copy(),
+        dyn_pos=dyn_pos, dyn_radius=np.full(n_dyn, 0.4),
+        filter_status=np.zeros((n_steps, N), dtype=np.int8), filter_slack=zf.copy(),
+        filter_time=zf.copy(),
+        meta={"scenario": "unit", "controller": "dfcoa", "seed": 7, "robot_radius": 0.3},
+    )
+
+
+def _color_mask(img: np.ndarray, rgb: tuple[float, float, float], tol: float = 0.03) -> np.ndarray:
+    return (np.abs(img[..., :3] - np.asarray(rgb)) < tol).all(axis=-1)
+
+
+def test_robot_colors_distinct_and_not_grey() -> None:
+    for n in (1, 3, 9, 12, 25):
+        cols = np.array(plotting.robot_colors(n))
+        assert cols.shape == (n, 3)
+        assert len({tuple(c) for c in np.round(cols, 4)}) == n
+        assert (np.ptp(cols, axis=1) > 0.05).all()  # no greys / black
+
+
+def test_draw_world_orientation() -> None:
+    grid = make_grid()
+    fig = plotting.new_figure((4.0, 4.0), 100.0, layout=None)
+    ax = fig.add_subplot()
+    plotting.draw_world(ax, grid, goal=(18.0, 18.0), start=(1.0, 1.0))
+    assert ax.get_xlim() == (0.0, 20.0) and ax.get_ylim() == (0.0, 20.0)
+    assert ax.get_aspect() == 1.0
+    fig.canvas.draw()
+    img = np.asarray(fig.canvas.buffer_rgba())[..., :3] / 255.0
+    height = img.shape[0]
+
+    def pixel(x: float, y: float) -> np.ndarray:
+        px, py = ax.transData.transform((x, y))
+        return img[int(round(height - py)), int(round(px))]
+
+    dark = np.asarray(to_rgb(plotting.OCCUPIED_COLOR))
+    assert np.allclose(pixel(14.0, 14.0), dark, atol=0.02)  # the block, upper right
+    assert np.allclose(pixel(14.0, 6.0), 1.0, atol=0.02)  # mirrored in y: free
+    assert np.allclose(pixel(6.0, 14.0), 1.0, atol=0.02)  # mirrored in x: free
+
+
+def test_plot_run_png(tmp_path: Path) -> None:
+    out = plotting.plot_run(make_log(), make_grid(), tmp_path / "sub" / "run.png",
+                            goal=(15.0, 5.0), start=(2.5, 5.0), figsize=(6.0, 5.0), dpi=100)
+    assert out == tmp_path / "sub" / "run.png" and out.is_file()
+    assert sorted(p.name for p in out.parent.iterdir()) == ["run.png"]  # no temp left over
+    img = mpimg.imread(out)
+    assert img.shape[:2] == (500, 600)
+    assert img[..., :3].var() > 0
+    rows = []
+    for rgb in plotting.robot_colors(N):
+        mask = _color_mask(img, rgb)
+        assert mask.sum() > 200, "trajectory colour missing"  # a legend line alone is << 200 px
+        rows.append(np.median(np.nonzero(mask)[0]))
+    # higher y is higher in the picture (smaller image row): map is not flipped
+    assert rows[0] > rows[1] > rows[2]
+
+
+def test_plot_run_no_moving_obstacles_custom_title_shapes(tmp_path: Path) -> None:
+    log = make_log(n_dyn=0)
+    log.meta.pop("robot_radius")
+    shapes = (Rectangle((12.0, 12.0), (16.0, 16.0)), Circle((4.0, 15.0), 1.0))
+    out = plotting.plot_run(log, make_grid(), tmp_path / "a.png", title="custom", dpi=50,
+                            shapes=shapes)
+    assert mpimg.imread(out).shape[:2] == (300, 350)
+
+
+def test_plot_run_overwrites_atomically(tmp_path: Path) -> None:
+    target = tmp_path / "run.png"
+    target.write_bytes(b"old")
+    plotting.plot_run(make_log(), make_grid(), target, dpi=40)
+    assert target.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["run.png"]
+
+
+def _gif_frames(path: Path) -> list[np.ndarray]:
+    with Image.open(path) as im:
+        frames = []
+        for k in range(im.n_frames):
+            im.seek(k)
+            frames.append(np.asarray(im.convert("RGB"), dtype=np.int16))
+    return frames
+
+
+@pytest.mark.parametrize("max_frames", [200, 10])
+def test_animate_run_gif(tmp_path: Path, max_frames: int) -> None:
+    out = plotting.animate_run(make_log(), make_grid(), tmp_path / "run.gif", goal=(15.0, 5.0),
+                               fps=12, max_frames=max_frames, figsize=(4.0, 3.0), dpi=50)
+    assert out.is_file()
+    assert [p.name for p in tmp_path.iterdir()] == ["run.gif"]
+    with Image.open(out) as im:
+        assert im.format == "GIF"
+        assert im.size == (200, 150)
+        assert im.n_frames == min(T, max_frames)
+    frames = _gif_frames(out)
+    for a, b in zip(frames, frames[1:], strict=False):
+        assert np.abs(a - b).sum() > 0
+    assert np.abs(frames[0] - frames[-1]).sum() > 1000  # robots moved, not just the title
+
+
+def test_frame_indices() -> None:
+    assert plotting.frame_indices(30, 200).tolist() == list(range(30))
+    idx = plotting.frame_indices(1001, 200)
+    assert len(idx) == 200 and idx[0] == 0 and idx[-1] == 1000
+    assert (np.diff(idx) > 0).all() and np.ptp(np.diff(idx)) <= 1
+    for n, m in [(7, 6), (5, 5), (2, 1), (1, 3)]:
+        got = plotting.frame_indices(n, m)
+        assert len(got) == min(n, m) and len(set(got.tolist())) == len(got)
+        assert got[-1] == n - 1
+    with pytest.raises(ValueError):
+        plotting.frame_indices(0, 10)
+    with pytest.raises(ValueError):
+        plotting.animate_run(make_log(), make_grid(), "unused.gif", max_frames=0)
+
+
+def test_plot_timeseries(tmp_path: Path) -> None:
+    log = make_log()
+    series = {f"robot {i}": np.sin(log.t + i) for i in range(N)}
+    out = plotting.plot_timeseries(log, series, tmp_path / "v.png", ylabel="v (m/s)", dpi=50)
+    img = mpimg.imread(out)
+    assert img.shape[:2] == (175, 350) and img[..., :3].var() > 0
+    with pytest.raises(ValueError, match="shape"):
+        plotting.plot_timeseries(log, {"bad": np.zeros(T + 1)}, tmp_path / "bad.png")
+
+
+_SCRIPT = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {tests!r})
+    from test_plotting import make_grid, make_log
+    from dfcoa_opt import plotting
+    log, grid = make_log(n_steps=5), make_grid()
+    plotting.plot_run(log, grid, {png!r}, dpi=30)
+    plotting.animate_run(log, grid, {gif!r}, max_frames=3, dpi=30)
+    plotting.plot_timeseries(log, {{"x": log.pose[:, 0, 0]}}, {ts!r}, dpi=30)
+    assert "matplotlib.pyplot" not in sys.modules, "pyplot was imported"
+""")
+
+
+@pytest.mark.parametrize("backend", [None, "TkAgg"])
+def test_works_without_display_under_any_backend(tmp_path: Path, backend: str | None) -> None:
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("DISPLAY", "WAYLAND_DISPLAY", "MPLBACKEND")}
+    if backend is not None:
+        env["MPLBACKEND"] = backend
+    files = {name: str(tmp_path / f"out.{name}") for name in ("png", "gif")}
+    script = _SCRIPT.format(tests=str(Path(__file__).parent), ts=str(tmp_path / "ts.png"),
+                            **files)
+    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                          text=True, timeout=60, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    with Image.open(files["gif"]) as im:
+        assert im.n_frames == 3
+    assert mpimg.imread(files["png"]).shape[:2] == (180, 210)

@@ -1,0 +1,31 @@
+import numpy as np
+
+from dfcoa_opt.planning.pure_pursuit import PurePursuit
+from dfcoa_opt.robots.models import integrate_unicycle
+
+
+def drive(pp, pose, steps, dt=0.1):
+    traj = [pose]
+    for _ in range(steps):
+        v, w, _ = pp.command(pose)
+        assert abs(w) <= pp.w_max + 1e-12
+        pose = integrate_unicycle(pose, v, w, dt)
+        traj.append(pose)
+    return np.array(traj)
+
+
+def test_converges_onto_a_straight_line():
+    pp = PurePursuit(np.array([[0.0, 0.0], [20.0, 0.0]]), 0.5, 1.0, 1.5)
+    traj = drive(pp, np.array([0.0, 1.0, 0.0]), 200)
+    assert abs(traj[-1, 1]) < 0.02 and traj[-1, 0] > 8.0
+
+
+def test_follows_corner_path_monotonically():
+    path = np.array([[0.0, 0.0], [5.0, 0.0], [5.0, 5.0]])
+    pp = PurePursuit(path, 0.3, 0.5, 3.5)
+    traj = drive(pp, np.array([0.0, 0.0, 0.0]), 330)  # 9.9 m at 0.3 m/s
+    assert np.hypot(*(traj[:, :2] - [5.0, 5.0]).T).min() < 0.3
+    # never farther than the look-ahead from the path
+    d = np.minimum(np.abs(traj[:, 1]) + np.maximum(traj[:, 0] - 5, 0), np.abs(traj[:, 0] - 5))
+    assert d.max() < 0.5
+    assert pp.length == 10.0 and np.allclose(pp.point_at(7.0), [5.0, 2.0])
