@@ -101,7 +101,8 @@ def formation_offsets(spec: FormationSpec, n: int) -> NDArray[np.float64]:
     return grid_offsets(n, spec.spacing, spec.columns)
 
 
-def slot_positions(leader_pose: NDArray[np.float64], offsets: NDArray[np.float64]) -> NDArray[np.float64]:
+def slot_positions(leader_pose: NDArray[np.float64],
+                   offsets: NDArray[np.float64]) -> NDArray[np.float64]:
     """World positions of the slots, paper 000 eq 30.
 
     Args:

@@ -95,13 +95,15 @@ def _convert(value: Any, tp: Any, meta: Mapping[str, Any], src: str, key: str) -
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ScenarioError(src, key, f"must be a number, got {type(value).__name__} {value!r}")
+            raise ScenarioError(src, key,
+                                f"must be a number, got {type(value).__name__} {value!r}")
         value = float(value)
         _check_number(value, meta, src, key)
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ScenarioError(src, key, f"must be an integer, got {type(value).__name__} {value!r}")
+            raise ScenarioError(src, key,
+                                f"must be an integer, got {type(value).__name__} {value!r}")
         _check_number(float(value), meta, src, key)
         return value
     if tp is bool:
@@ -110,7 +112,8 @@ def _convert(value: Any, tp: Any, meta: Mapping[str, Any], src: str, key: str) -
         return value
     if tp is str:
         if not isinstance(value, str):
-            raise ScenarioError(src, key, f"must be a string, got {type(value).__name__} {value!r}")
+            raise ScenarioError(src, key,
+                                f"must be a string, got {type(value).__name__} {value!r}")
         return value
     if origin is Literal:
         choices = get_args(tp)
@@ -131,9 +134,11 @@ def _convert(value: Any, tp: Any, meta: Mapping[str, Any], src: str, key: str) -
     if origin is tuple:
         args = get_args(tp)
         if not isinstance(value, (list, tuple)):
-            raise ScenarioError(src, key, f"must be an array, got {type(value).__name__} {value!r}")
+            raise ScenarioError(src, key,
+                                f"must be an array, got {type(value).__name__} {value!r}")
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(v, args[0], meta, src, f"{key}[{i}]") for i, v in enumerate(value))
+            return tuple(_convert(v, args[0], meta, src, f"{key}[{i}]")
+                         for i, v in enumerate(value))
         if len(value) != len(args):
             raise ScenarioError(src, key, f"must have {len(args)} elements, got {len(value)}")
         return tuple(_convert(v, a, meta, src, f"{key}[{i}]")

@@ -32,7 +32,8 @@ def test_acceleration_to_velocity_integrates_one_step():
 def test_velocity_to_acceleration_is_deadbeat_on_double_integrator():
     vd = np.array([[0.2, 0.1], [0.0, 0.0]])
     acc = convert(vd, "velocity", "acceleration", POSE, VEL, 0.5, 0.1)
-    s2 = DoubleIntegrator(RobotSpec(a_max=100.0)).step(RobotState(POSE, VEL, np.zeros((2, 2))), acc, 0.5)
+    s0 = RobotState(POSE, VEL, np.zeros((2, 2)))
+    s2 = DoubleIntegrator(RobotSpec(a_max=100.0)).step(s0, acc, 0.5)
     assert np.allclose(s2.velocity, vd)
 
 
@@ -43,7 +44,8 @@ def test_unicycle_command_on_single_integrator_moves_like_a_unicycle():
     uni, si = Unicycle(RobotSpec(v_max=5, w_max=5)), SingleIntegrator(RobotSpec(v_max=5, w_max=5))
     for _ in range(200):
         s_uni = uni.step(s_uni, u, dt)
-        s_si = si.step(s_si, convert(u, "unicycle", "velocity", s_si.pose, s_si.velocity, dt, 0.1), dt)
+        cmd = convert(u, "unicycle", "velocity", s_si.pose, s_si.velocity, dt, 0.1)
+        s_si = si.step(s_si, cmd, dt)
     assert np.allclose(s_uni.pose[:, :2], s_si.pose[:, :2], atol=5e-3)
     assert np.allclose(np.cos(s_uni.pose[:, 2]), np.cos(s_si.pose[:, 2]), atol=1e-9)
 

@@ -15,10 +15,10 @@ from dfcoa_opt.sim.schema import FormationSpec
 
 
 def test_rectangle_eq3():
-    w, l = 1.5, 2.0
-    th, d = rectangle_polar(w, l)
-    assert math.isclose(th, math.atan(w / l)) and math.isclose(d, w / (2 * math.sin(th)))
-    off = rectangle_offsets(w, l)
+    w, ln = 1.5, 2.0
+    th, d = rectangle_polar(w, ln)
+    assert math.isclose(th, math.atan(w / ln)) and math.isclose(d, w / (2 * math.sin(th)))
+    off = rectangle_offsets(w, ln)
     assert np.allclose(sorted(map(tuple, np.round(off, 12))),
                        sorted([(1.0, 0.75), (-1.0, 0.75), (-1.0, -0.75), (1.0, -0.75)]))
     assert np.allclose(off[0], [1.0, 0.75])  # front-left first

@@ -37,7 +37,8 @@ def test_rectangle_on_cell_boundaries_is_exact():
     expect = np.zeros((8, 8), dtype=bool)
     expect[2:6, 2:4] = True
     assert np.array_equal(g.occupied, expect)
-    g2 = OccupancyGrid.from_shapes((4.0, 4.0), 2.0, [Rectangle((1.0, 1.0), (2.0, 3.0)).to_polygon()])
+    poly = Rectangle((1.0, 1.0), (2.0, 3.0)).to_polygon()
+    g2 = OccupancyGrid.from_shapes((4.0, 4.0), 2.0, [poly])
     assert np.array_equal(g2.occupied, expect)
 
 
@@ -76,7 +77,7 @@ def test_clearance_matches_shapely_distance():
     rng = np.random.default_rng(7)
     g = OccupancyGrid(rng.random((25, 30)) < 0.04, resolution=3.0, origin=(-1.0, 2.0))
     cells = [shapely.box(g.origin[0] + j / 3, g.origin[1] + i / 3, g.origin[0] + (j + 1) / 3,
-                         g.origin[1] + (i + 1) / 3) for i, j in zip(*np.nonzero(g.occupied))]
+                         g.origin[1] + (i + 1) / 3) for i, j in np.argwhere(g.occupied)]
     union = shapely.unary_union(cells)
     pts = rng.uniform([-3.0, 0.0], [12.0, 12.0], (300, 2))
     ref = np.array([union.distance(shapely.Point(p)) for p in pts])

@@ -1,0 +1,1 @@
+"""Controller and safety-filter interfaces, adapters, registry and built-in controllers."""

@@ -47,6 +47,7 @@ class TruthEstimator:
     def reset(self, rng: np.random.Generator) -> None:
         """Nothing to reset."""
 
-    def estimate(self, true_pose: np.ndarray, twist: np.ndarray, scan: Any, dt: float) -> np.ndarray:
+    def estimate(self, true_pose: np.ndarray, twist: np.ndarray, scan: Any,
+                 dt: float) -> np.ndarray:
         """Return the true pose."""
         return true_pose

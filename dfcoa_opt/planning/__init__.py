@@ -1,0 +1,1 @@
+"""Global planning for the virtual leader and path tracking."""

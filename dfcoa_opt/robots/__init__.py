@@ -1,0 +1,1 @@
+"""Batched kinematic robot models."""

@@ -72,7 +72,8 @@ def wheel_speeds(v: FloatArray, w: FloatArray, r: float, d: float) -> tuple[Floa
     return (v + 0.5 * d * w) / r, (v - 0.5 * d * w) / r
 
 
-def twist_from_wheels(phi_r: FloatArray, phi_l: FloatArray, r: float, d: float) -> tuple[FloatArray, FloatArray]:
+def twist_from_wheels(phi_r: FloatArray, phi_l: FloatArray, r: float,
+                      d: float) -> tuple[FloatArray, FloatArray]:
     """Paper 000 eq 2: ``v = r/2 (phiR + phiL)``, ``omega = r/d (phiR - phiL)``."""
     return 0.5 * r * (phi_r + phi_l), r / d * (phi_r - phi_l)
 
@@ -131,7 +132,8 @@ class Unicycle:
         if np.isfinite(s.wheel_speed_max):
             pr, pl = wheel_speeds(v, w, s.wheel_radius, s.track_width)
             peak = np.maximum(np.abs(pr), np.abs(pl))
-            scale = np.where(peak > s.wheel_speed_max, s.wheel_speed_max / np.maximum(peak, 1e-300), 1.0)
+            scale = np.where(peak > s.wheel_speed_max,
+                             s.wheel_speed_max / np.maximum(peak, 1e-300), 1.0)
             v, w = twist_from_wheels(pr * scale, pl * scale, s.wheel_radius, s.track_width)
         return np.stack((v, w), axis=1)
 

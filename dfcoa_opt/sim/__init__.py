@@ -1,0 +1,1 @@
+"""Scenario schema and loader, simulator loop, virtual leader, run log."""

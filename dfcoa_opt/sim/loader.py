@@ -46,7 +46,8 @@ def read_toml(path: str | Path) -> dict[str, Any]:
     except PermissionError:
         raise ScenarioError(src, "", "permission denied") from None
     except UnicodeDecodeError as exc:
-        raise ScenarioError(src, "", f"is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+        raise ScenarioError(src, "", f"is not UTF-8 text ({exc.reason} at byte {exc.start})"
+                            ) from None
     if not text.strip():
         raise ScenarioError(src, "", "file is empty")
     try:

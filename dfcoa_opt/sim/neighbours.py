@@ -7,11 +7,11 @@ switch-over size was chosen by measurement (``benchmarks/``).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
-
-from dataclasses import dataclass
 
 from dfcoa_opt.geometry import pairwise_distances
 

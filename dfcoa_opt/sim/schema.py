@@ -136,12 +136,14 @@ class TeamSpec:
     def check(self, src: str, key: str) -> None:
         """Poses match n; ids unique."""
         if self.placement == "explicit" and len(self.poses) != self.n:
-            raise ScenarioError(src, f"{key}.poses", f"has {len(self.poses)} poses, team.n = {self.n}")
+            raise ScenarioError(src, f"{key}.poses",
+                                f"has {len(self.poses)} poses, team.n = {self.n}")
         if self.placement == "formation" and self.poses:
             raise ScenarioError(src, f"{key}.poses", "only applies when placement = 'explicit'")
         if self.ids:
             if len(self.ids) != self.n:
-                raise ScenarioError(src, f"{key}.ids", f"has {len(self.ids)} ids, team.n = {self.n}")
+                raise ScenarioError(src, f"{key}.ids",
+                                    f"has {len(self.ids)} ids, team.n = {self.n}")
             if len(set(self.ids)) != len(self.ids):
                 dup = sorted({i for i in self.ids if self.ids.count(i) > 1})
                 raise ScenarioError(src, f"{key}.ids", f"duplicate robot id(s) {dup}")
@@ -297,6 +299,7 @@ class ScenarioSpec:
         if self.formation.shape == "rectangle" and self.team.n != 4:
             raise ScenarioError(src, "formation.shape", f"'rectangle' (paper 000 eq 3-5) places "
                                 f"4 robots, team.n = {self.team.n}")
-        if self.formation.shape in ("offsets", "polar") and len(self.formation.offsets) != self.team.n:
+        n_off = len(self.formation.offsets)
+        if self.formation.shape in ("offsets", "polar") and n_off != self.team.n:
             raise ScenarioError(src, "formation.offsets", f"has {len(self.formation.offsets)} "
                                 f"entries, team.n = {self.team.n}")

@@ -203,7 +203,8 @@ class Simulator:
                 buf.filter_status[k], buf.filter_slack[k] = res.status, res.slack
                 buf.filter_time[k] = res.solve_time
             # -- stop conditions
-            if leader.at_goal and np.all(np.hypot(*(pos - slots).T) <= spec.leader.settle_tolerance):
+            settled = np.all(np.hypot(*(pos - slots).T) <= spec.leader.settle_tolerance)
+            if leader.at_goal and settled:
                 reached, t_goal = True, t
                 break
             if spec.stop_on_collision and events:

@@ -1,0 +1,1 @@
+"""Maps, obstacles and sensors."""

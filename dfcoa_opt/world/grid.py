@@ -95,6 +95,7 @@ class OccupancyGrid:
             path: PNG file; one pixel per cell, top row first.
             resolution: Cells (pixels) per metre.
             threshold: Grey level in [0, 1] below which a pixel is occupied.
+            origin: World (x, y) of the bottom-left corner, m.
         """
         import matplotlib.image as mpimg
 
@@ -149,7 +150,7 @@ class OccupancyGrid:
              self.origin[1] + (rows + 0.5) * self.cell_size), axis=-1)
 
     def world_to_cell(self, points: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-        """``(row, col)`` indices of the cells containing ``points`` ``(..., 2)`` m (may be out of range)."""
+        """``(row, col)`` of the cells containing ``points`` ``(..., 2)`` m (may be outside)."""
         p = np.asarray(points, dtype=float)
         col = np.floor((p[..., 0] - self.origin[0]) * self.resolution).astype(np.intp)
         row = np.floor((p[..., 1] - self.origin[1]) * self.resolution).astype(np.intp)
@@ -184,9 +185,11 @@ class OccupancyGrid:
         return d
 
     def inflate(self, radius: float) -> OccupancyGrid:
-        """Grow obstacles: a cell becomes occupied when its centre is within ``radius`` (m)
-        of an occupied cell centre. (MATLAB's ``inflate`` instead rounds the radius up
-        to whole cells; see docs/reproduction.md.)
+        """Grow obstacles by ``radius`` (m).
+
+        A cell becomes occupied when its centre is within ``radius`` of an occupied
+        cell centre. (MATLAB's ``inflate`` instead rounds the radius up to whole
+        cells; see docs/reproduction.md.)
         """
         if radius < 0 or not np.isfinite(radius):
             raise ValueError("inflation radius must be finite and >= 0")
