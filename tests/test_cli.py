@@ -1,0 +1,63 @@
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from dfcoa_opt.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+REQUIRED = ("fce_rms fce_mean fce_max fce_x_rms fce_y_rms fse_rms fse_mean stability_pct vce_rms "
+            "v_rms w_rms risk_mean risk_max min_inter_robot_distance min_obstacle_clearance "
+            "collisions path_length_mean time_to_goal success filter_fallbacks").split()
+
+
+def test_run_json_prints_exactly_one_object(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "dfcoa_opt", "run",
+                           str(ROOT / "scenarios" / "example_empty.toml"), "--controller",
+                           "goto_slot", "--json", "--seed", "5", "--out", str(tmp_path)],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    obj = json.loads(proc.stdout)  # the whole stdout is one JSON document
+    assert set(obj) == {"scenario", "controller", "seed", "metrics"}
+    assert obj["scenario"] == "example_empty" and obj["seed"] == 5
+    assert all(k in obj["metrics"] for k in REQUIRED)
+    assert obj["metrics"]["success"] is True
+    assert (tmp_path / "example_empty-goto_slot-s5.npz").exists()
+
+
+def test_plot_and_animate(tmp_path, capsys):
+    gif = tmp_path / "a.gif"
+    code = main(["run", str(ROOT / "scenarios" / "example_empty.toml"), "--out", str(tmp_path),
+                 "--plot", "--animate", str(gif)])
+    assert code == 0
+    assert (tmp_path / "example_empty-goto_slot-s1.png").stat().st_size > 10_000
+    assert gif.stat().st_size > 10_000
+    assert "reached goal" in capsys.readouterr().out
+
+
+def test_list(capsys):
+    assert main(["list", "controllers"]) == 0
+    assert "goto_slot" in capsys.readouterr().out
+    assert main(["list", "scenarios", "--dir", str(ROOT / "scenarios")]) == 0
+    assert "example_empty.toml" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv,msg", [
+    (["run", "nope.toml"], "nope.toml: file not found"),
+    (["run", str(ROOT / "scenarios" / "example_empty.toml"), "--controller", "goto_slat"],
+     "did you mean 'goto_slot'"),
+    (["list", "scenarios", "--dir", "/no/such/dir"], "scenario folder not found"),
+])
+def test_errors_exit_2_with_one_line(argv, msg, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and msg in err[0]
+
+
+def test_console_script_installed():
+    exe = Path(sys.executable).parent / "dfcoa"
+    proc = subprocess.run([str(exe), "list", "controllers"], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0 and "goto_slot" in proc.stdout
