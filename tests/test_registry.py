@@ -50,8 +50,10 @@ class FakeEntryPoint:
 def test_entry_point_group_is_discovered(monkeypatch):
     monkeypatch.setattr(registry, "_loaded", False)
     monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
-    monkeypatch.setattr(registry, "entry_points",
-                        lambda group: [FakeEntryPoint()] if group == registry.ENTRY_POINT_GROUP else [])
+    def fake_entry_points(group):
+        return [FakeEntryPoint()] if group == registry.ENTRY_POINT_GROUP else []
+
+    monkeypatch.setattr(registry, "entry_points", fake_entry_points)
     assert "third_party" in registry.available()
     c = registry.make_controller("third_party", {"gain": 3.0})
     assert isinstance(c, ThirdParty) and c.params.gain == 3.0 and c.name == "third_party"
