@@ -1,0 +1,64 @@
+"""``make bench``: print one table of medians and write ``benchmarks/results.md``.
+
+Each row gives the median, min-max, and the ratio against a reference measured
+in the same run (``ref median / our median``: > 1 means we are faster). The
+machine is noisy; compare ratios, not absolute times across runs.
+"""
+
+from __future__ import annotations
+
+import datetime
+import platform
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks import bench_lidar, bench_sim
+
+#: Targets from the issues (what, us). Matched by row-title prefix.
+TARGETS = {
+    "lidar scan 120 beams, 350x350 grid": 20.0,
+    "simulator step, 4 unicycles": 500.0,
+}
+
+
+def _cpu() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def _target(what: str) -> str:
+    for prefix, us in TARGETS.items():
+        if what.startswith(prefix):
+            return f"<= {us:g} us"
+    return ""
+
+
+def main() -> None:
+    """Run every benchmark module, print the table, write results.md."""
+    rows = bench_lidar.run() + bench_sim.run()
+    import numba
+    import scipy
+
+    head = [f"# Benchmarks ({datetime.date.today().isoformat()})", "",
+            f"CPU: {_cpu()}, {__import__('os').cpu_count()} cores; Python "
+            f"{platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, "
+            f"numba {numba.__version__}.", "",
+            "Ratio = reference median / our median, both measured in this run.", "",
+            "| what | median (us) | min-max (us) | target | reference | ref median (us) | ratio |",
+            "|---|---|---|---|---|---|---|"]
+    body = [f"| {r['what']} | {r['median_us']:.1f} | {r['min_us']:.1f}-{r['max_us']:.1f} | "
+            f"{_target(r['what'])} | {r['reference']} | {r['ref_median_us']:.1f} | "
+            f"{r['ratio']:.2f}x |" for r in rows]
+    text = "\n".join(head + body) + "\n"
+    print(text)
+    Path(__file__).with_name("results.md").write_text(text)
+
+
+if __name__ == "__main__":
+    main()
