@@ -227,7 +227,8 @@ class LocalizationSpec:
 class DisturbanceSpec:
     """An additive disturbance on one robot during a time window."""
 
-    robot: int = param(doc="Robot index (0-based).", ge=0)
+    robot: int = param(doc="Robot id: an entry of team.ids, or the 0-based index when there "
+                           "are no ids.", ge=0)
     t_start: float = param(doc="Window start.", unit="s", ge=0.0)
     t_end: float = param(doc="Window end (exclusive).", unit="s", ge=0.0)
     value: Vec2 = param(doc="Disturbance vector, world frame.", unit="m/s or N")
@@ -285,12 +286,19 @@ class ScenarioSpec:
         default_factory=dict, doc="Per-controller parameter overrides: [controllers.<id>] key = "
                                   "value.")
 
+    def robot_index(self, robot_id: int) -> int:
+        """Row index of the robot with this id (``team.ids``), or the id itself."""
+        return self.team.ids.index(robot_id) if self.team.ids else robot_id
+
     def check(self, src: str, key: str) -> None:
         """Cross-section rules that need no map."""
         if self.dt > self.t_max:
             raise ScenarioError(src, "dt", f"({self.dt} s) must not exceed t_max ({self.t_max} s)")
         for i, d in enumerate(self.disturbances):
-            if d.robot >= self.team.n:
+            if self.team.ids and d.robot not in self.team.ids:
+                raise ScenarioError(src, f"disturbances[{i}].robot",
+                                    f"is {d.robot}, not one of team.ids {list(self.team.ids)}")
+            if not self.team.ids and d.robot >= self.team.n:
                 raise ScenarioError(src, f"disturbances[{i}].robot",
                                     f"is {d.robot}, but team.n = {self.team.n}")
             if d.kind == "force" and self.robots.model != "double_integrator":

@@ -101,8 +101,10 @@ class Simulator:
 
     def _disturbance_table(self) -> tuple[list, list]:
         vel, force = [], []
-        for d in self.scenario.spec.disturbances:
-            (vel if d.kind == "velocity" else force).append((d.robot, d.t_start, d.t_end, d.value))
+        spec = self.scenario.spec
+        for d in spec.disturbances:
+            entry = (spec.robot_index(d.robot), d.t_start, d.t_end, d.value)
+            (vel if d.kind == "velocity" else force).append(entry)
         return vel, force
 
     def _disturbance(self, table: list, t: float) -> FloatArray | None:
