@@ -79,6 +79,33 @@ class RunLog:
     filter_time: FloatArray
     meta: dict[str, Any] = field(default_factory=dict)
 
+    @classmethod
+    def allocate(cls, steps: int, n: int, m: int, k: int = 2) -> RunLog:
+        """Zero-filled log to be filled by the simulator and trimmed by :meth:`truncated`.
+
+        Args:
+            steps: Instants to hold.
+            n: Robots.
+            m: Moving obstacles.
+            k: Command columns.
+        """
+        z = np.zeros
+        return cls(t=z(steps), pose=z((steps, n, 3)), pose_est=z((steps, n, 3)),
+                   velocity=z((steps, n, 2)), twist=z((steps, n, 2)),
+                   command=z((steps, n, k)), leader=z((steps, 5)), slots=z((steps, n, 2)),
+                   offsets=z((n, 2)), clearance=z((steps, n)), min_inter_robot=z(steps),
+                   robot_contacts=z(steps, np.int32), obstacle_contacts=z(steps, np.int32),
+                   dynamic_contacts=z(steps, np.int32), collision_events=z(steps, np.int32),
+                   dyn_pos=z((steps, m, 2)), dyn_radius=z(m),
+                   filter_status=z((steps, n), np.int8), filter_slack=z((steps, n)),
+                   filter_time=z((steps, n)))
+
+    def truncated(self, end: int) -> RunLog:
+        """The first ``end`` instants (per-run arrays ``offsets``, ``dyn_radius`` kept)."""
+        keep = {"offsets", "dyn_radius"}
+        arrays = {k: (v if k in keep else v[:end].copy()) for k, v in self.arrays().items()}
+        return RunLog(meta=dict(self.meta), **arrays)
+
     @property
     def n_steps(self) -> int:
         """Number of logged steps T."""

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,38 +41,6 @@ FloatArray = NDArray[np.float64]
 
 class ControllerError(DfcoaError):
     """A controller returned a malformed or non-finite command (the run fails)."""
-
-
-@dataclass
-class _Buffers:
-    """Preallocated log arrays."""
-
-    t: FloatArray
-    pose: FloatArray
-    pose_est: FloatArray
-    velocity: FloatArray
-    twist: FloatArray
-    leader: FloatArray
-    slots: FloatArray
-    clearance: FloatArray
-    min_inter_robot: FloatArray
-    robot_contacts: NDArray[np.int32]
-    obstacle_contacts: NDArray[np.int32]
-    dynamic_contacts: NDArray[np.int32]
-    collision_events: NDArray[np.int32]
-    dyn_pos: FloatArray
-    filter_status: NDArray[np.int8]
-    filter_slack: FloatArray
-    filter_time: FloatArray
-
-    @classmethod
-    def allocate(cls, steps: int, n: int, m: int) -> _Buffers:
-        z = np.zeros
-        return cls(z(steps), z((steps, n, 3)), z((steps, n, 3)), z((steps, n, 2)),
-                   z((steps, n, 2)), z((steps, 5)), z((steps, n, 2)), z((steps, n)),
-                   z(steps), z(steps, np.int32), z(steps, np.int32), z(steps, np.int32),
-                   z(steps, np.int32), z((steps, m, 2)), z((steps, n), np.int8),
-                   z((steps, n)), z((steps, n)))
 
 
 class Simulator:
@@ -132,8 +99,7 @@ class Simulator:
         steps = int(math.floor(spec.t_max / dt + 1e-9)) + 1
         dyn = sc.world.dynamic
         m = len(dyn)
-        buf = _Buffers.allocate(steps, n, m)
-        commands: FloatArray | None = None
+        buf: RunLog | None = None  # allocated once the command width is known
         leader = VirtualLeader(sc)
         estimator = make_estimator(spec.localization.mode, sc)
         estimator.reset(rng)
@@ -171,8 +137,8 @@ class Simulator:
                               moving, lead, np.asarray(spec.leader.goal, float), sc.offsets, slots)
             # -- act
             cmd = self._checked(self.controller.act(obs), t)
-            if commands is None:
-                commands = np.zeros((steps, n, cmd.shape[1]))
+            if buf is None:
+                buf = RunLog.allocate(steps, n, m, cmd.shape[1])
             native = convert(cmd, self.controller.command, self.model.native, est,
                              state.velocity, dt, spec.robots.nid_distance)
             new_state = self.model.step(state, native, dt, self._disturbance(self._dist_v, t),
@@ -198,8 +164,7 @@ class Simulator:
             buf.obstacle_contacts[k] = int(static_hit.sum())
             buf.dynamic_contacts[k] = int(dyn_hit.any(axis=1).sum()) if m else 0
             buf.collision_events[k] = events
-            buf.dyn_pos[k] = dyn_pos
-            commands[k] = cmd
+            buf.dyn_pos[k], buf.command[k] = dyn_pos, cmd
             res = getattr(self.controller, "last_result", None)
             if res is not None:
                 buf.filter_status[k], buf.filter_slack[k] = res.status, res.slack
@@ -215,8 +180,9 @@ class Simulator:
             leader.advance(dt)
         wall = time.perf_counter() - wall0
         end = k + 1
-        arrays = {name: getattr(buf, name)[:end] for name in buf.__dataclass_fields__}
-        meta = {
+        assert buf is not None  # at least one step always runs
+        buf.offsets[:], buf.dyn_radius[:] = sc.offsets, dyn.radii
+        buf.meta = {
             "scenario": sc.name, "source": sc.source, "controller": self.controller.name,
             "seed": self.seed, "dt": dt, "n": n, "robot_radius": self.radius,
             "robot_model": spec.robots.model, "command_kind": self.controller.command,
@@ -224,8 +190,7 @@ class Simulator:
             "wall_time": wall, "version": __version__,
             "leader_path": sc.leader_path.tolist(), "goal": list(spec.leader.goal),
         }
-        return RunLog(command=commands[:end] if commands is not None else np.zeros((end, n, 2)),
-                      offsets=sc.offsets, dyn_radius=dyn.radii.copy(), meta=meta, **arrays)
+        return buf.truncated(end)
 
     def _moving_obstacles(self, pos: FloatArray, dyn_pos: FloatArray, dyn_vel: FloatArray,
                           radii: FloatArray) -> MovingObstacles:
