@@ -87,9 +87,10 @@ def _cmd_run(a: argparse.Namespace) -> int:
         goal, start = scenario.spec.leader.goal, scenario.spec.leader.start
         if a.plot:
             plotting.plot_run(log, scenario.world.grid, stem.with_suffix(".png"), goal=goal,
-                              start=start)
+                              start=start, shapes=scenario.world.shapes)
         if a.animate:
-            plotting.animate_run(log, scenario.world.grid, a.animate, goal=goal, start=start)
+            plotting.animate_run(log, scenario.world.grid, a.animate, goal=goal, start=start,
+                                 shapes=scenario.world.shapes)
     if a.json:
         print(json.dumps(result))
     else:

@@ -159,3 +159,11 @@ def test_stop_on_collision_and_double_integrator():
     log2 = run_scenario(crash, "goto_slot")
     assert not log2.meta["reached_goal"] and log2.collision_events[-1] >= 1
     assert log2.collision_events[:-1].sum() == 0
+
+
+def test_localization_shorthand_and_unknown_mode():
+    from dfcoa_opt.errors import ScenarioError
+
+    assert small(localization="truth").spec.localization.mode == "truth"
+    with pytest.raises(ScenarioError, match="localization.mode: unknown mode 'gps'"):
+        small(localization="gps")

@@ -81,6 +81,8 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
         source: Name used in error messages.
         base_dir: Folder against which ``world.map_image`` is resolved.
     """
+    if isinstance(data.get("localization"), str):  # shorthand: localization = "mcl"
+        data = {**data, "localization": {"mode": data["localization"]}}
     spec = build(ScenarioSpec, data, source)
     world = _build_world(spec.world, source, Path(base_dir))
     _check_free(world.grid, spec.leader.start, source, "leader.start")

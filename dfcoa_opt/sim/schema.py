@@ -220,7 +220,8 @@ class SensorSpec:
 class LocalizationSpec:
     """Where the pose in each observation comes from."""
 
-    mode: str = param("truth", doc="'truth' (ground truth) or a registered estimator, e.g. 'mcl'.")
+    mode: str = param("truth", doc="'truth' (ground truth) or a registered estimator, e.g. "
+                                   "'mcl'. Shorthand: localization = \"mcl\".")
 
 
 @dataclass(frozen=True)
