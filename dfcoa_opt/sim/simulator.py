@@ -112,6 +112,7 @@ class Simulator:
         prev_pairs: set[int] = set()
         prev_static = np.zeros(n, dtype=bool)
         prev_dyn = np.zeros((n, m), dtype=bool)
+        goal = np.asarray(spec.leader.goal, dtype=float)
         reached, t_goal = False, math.nan
         wall0 = time.perf_counter()
         k = 0
@@ -119,6 +120,8 @@ class Simulator:
             t = k * dt
             pos = state.pose[:, :2]
             dyn_pos, dyn_vel = dyn.state(t)
+            # centre distances robot -> moving obstacle, (N, M); used by sensing and contacts
+            dyn_dist = np.linalg.norm(pos[:, None, :] - dyn_pos[None, :, :], axis=2)
             lead = leader.state()
             # -- sensing, all from the same snapshot
             scan = None
@@ -131,10 +134,10 @@ class Simulator:
             pad = (idx < 0)[..., None]
             nb = Neighbours(idx, np.where(pad, 0.0, est[safe, :2]),
                             np.where(pad, 0.0, state.velocity[safe]), prox.distance)
-            moving = self._moving_obstacles(pos, dyn_pos, dyn_vel, dyn.radii)
+            moving = self._moving_obstacles(dyn_dist, dyn_pos, dyn_vel, dyn.radii)
             slots = slot_positions(lead[:3], sc.offsets)
             obs = Observation(t, dt, np.arange(n), est, state.velocity, state.twist, scan, nb,
-                              moving, lead, np.asarray(spec.leader.goal, float), sc.offsets, slots)
+                              moving, lead, goal, sc.offsets, slots)
             # -- act
             cmd = self._checked(self.controller.act(obs), t)
             if buf is None:
@@ -146,11 +149,7 @@ class Simulator:
             # -- contacts at t_k
             clearance = grid.clearance(pos, cap)
             static_hit = clearance < self.radius
-            if m:
-                dd = np.linalg.norm(pos[:, None, :] - dyn_pos[None, :, :], axis=2)
-                dyn_hit = dd < self.radius + dyn.radii[None, :]
-            else:
-                dyn_hit = prev_dyn
+            dyn_hit = dyn_dist < self.radius + dyn.radii[None, :]
             pairs = set(prox.contact_keys.tolist())
             events = (len(pairs - prev_pairs) + int((static_hit & ~prev_static).sum())
                       + int((dyn_hit & ~prev_dyn).sum()))
@@ -192,14 +191,10 @@ class Simulator:
         }
         return buf.truncated(end)
 
-    def _moving_obstacles(self, pos: FloatArray, dyn_pos: FloatArray, dyn_vel: FloatArray,
+    def _moving_obstacles(self, dist: FloatArray, dyn_pos: FloatArray, dyn_vel: FloatArray,
                           radii: FloatArray) -> MovingObstacles:
-        n, m = len(pos), len(dyn_pos)
-        if m == 0:
-            return MovingObstacles(np.zeros((n, 0, 2)), np.zeros((n, 0, 2)), np.zeros((n, 0)),
-                                   np.zeros((n, 0), dtype=bool))
-        d = np.linalg.norm(pos[:, None, :] - dyn_pos[None, :, :], axis=2)
-        mask = d - radii[None, :] <= self.obstacle_range
+        """Moving obstacles within sensing range; ``dist`` = (N, M) centre distances."""
+        mask = dist - radii[None, :] <= self.obstacle_range
         w = mask[..., None]
         return MovingObstacles(np.where(w, dyn_pos[None], 0.0), np.where(w, dyn_vel[None], 0.0),
                                np.where(mask, radii[None, :], 0.0), mask)
