@@ -22,7 +22,8 @@ from dfcoa_opt.errors import DfcoaError, ScenarioError, did_you_mean
 from dfcoa_opt.formation import formation_offsets, slot_positions
 from dfcoa_opt.params import build
 from dfcoa_opt.sim.scenario import Scenario, World
-from dfcoa_opt.sim.schema import ObstacleSpec, ScenarioSpec, WorldSpec
+from dfcoa_opt.sim.schema import ObstacleSpec, ScenarioSpec
+from dfcoa_opt.world.clutter import random_discs
 from dfcoa_opt.world.dynamic import DynamicObstacles, MovingDisc
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle, Shape
@@ -84,7 +85,8 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
     if isinstance(data.get("localization"), str):  # shorthand: localization = "mcl"
         data = {**data, "localization": {"mode": data["localization"]}}
     spec = build(ScenarioSpec, data, source)
-    world = _build_world(spec.world, source, Path(base_dir))
+    offsets = formation_offsets(spec.formation, spec.team.n)
+    world = _build_world(spec, source, Path(base_dir), offsets)
     _check_free(world.grid, spec.leader.start, source, "leader.start")
     _check_free(world.grid, spec.leader.goal, source, "leader.goal")
     _check_names(spec, source)
@@ -104,7 +106,6 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
         away = [p for p in np.asarray(path, float) if np.hypot(*(p - path[0])) > 1e-9]
         d = away[0] - path[0] if away else np.zeros(2)
         heading = math.atan2(d[1], d[0]) if np.any(d) else 0.0
-    offsets = formation_offsets(spec.formation, spec.team.n)
     if spec.team.placement == "explicit":
         pose = np.asarray(spec.team.poses, dtype=float)
         for i, p in enumerate(pose):
@@ -156,7 +157,27 @@ def _shape(spec: ObstacleSpec, source: str, key: str) -> Shape:
         raise ScenarioError(source, key, str(exc)) from None
 
 
-def _build_world(ws: WorldSpec, source: str, base_dir: Path) -> World:
+def _clutter(spec: ScenarioSpec, offsets: np.ndarray, extent: tuple[float, ...]
+             ) -> tuple[Circle, ...]:
+    """The ``[world.clutter]`` discs, kept clear of the start, the goal and explicit poses.
+
+    ``extent`` is the grid's ``(x0, x1, y0, y1)``, the default region.
+    """
+    cl = spec.world.clutter
+    if cl.density == 0.0:
+        return ()
+    region = cl.region if cl.region is not None else (extent[0], extent[2], extent[1], extent[3])
+    reach = float(np.max(np.hypot(*offsets.T))) + spec.robots.radius
+    points = [spec.leader.start, spec.leader.goal, *(p[:2] for p in spec.team.poses)]
+    radius = [cl.keep_clear + reach, cl.keep_clear,
+              *([cl.keep_clear + spec.robots.radius] * len(spec.team.poses))]
+    rng = np.random.default_rng(spec.seed if cl.seed is None else cl.seed)
+    return random_discs(rng, region, cl.density, cl.radius_min, cl.radius_max,
+                        np.asarray(points, float), np.asarray(radius, float), cl.gap)
+
+
+def _build_world(spec: ScenarioSpec, source: str, base_dir: Path, offsets: np.ndarray) -> World:
+    ws = spec.world
     if ws.map_ascii is not None:
         try:
             grid = OccupancyGrid.from_ascii(ws.map_ascii, ws.resolution, ws.origin)
@@ -179,6 +200,7 @@ def _build_world(ws: WorldSpec, source: str, base_dir: Path) -> World:
             raise ScenarioError(source, "world.size", f"{list(ws.size)} m does not match the map, "
                                 f"which is {w:g} x {h:g} m at {ws.resolution:g} cells/m")
     shapes = tuple(_shape(o, source, f"world.obstacles[{i}]") for i, o in enumerate(ws.obstacles))
+    shapes += _clutter(spec, offsets, grid.extent)
     grid = grid.with_shapes(shapes)
     discs = tuple(MovingDisc(d.radius, d.speed, d.waypoints, d.start_time, d.end)
                   for d in ws.dynamic_obstacles)

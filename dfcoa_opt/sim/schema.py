@@ -62,6 +62,34 @@ class DynamicObstacleSpec:
 
 
 @dataclass(frozen=True)
+class ClutterSpec:
+    """Seeded random circular obstacles, added to the map (a cluttered field)."""
+
+    density: float = param(0.0, doc="Fraction of the region's area covered by discs; 0 = no "
+                                    "clutter.", ge=0.0, lt=0.9)
+    radius_min: float = param(0.2, doc="Smallest disc radius.", unit="m", gt=0.0)
+    radius_max: float = param(0.5, doc="Largest disc radius.", unit="m", gt=0.0)
+    region: tuple[float, float, float, float] | None = param(
+        None, doc="(x0, y0, x1, y1) box of the disc centres; default: the whole map.", unit="m")
+    keep_clear: float = param(1.0, doc="Free margin around the leader's start (plus the "
+                                       "formation's extent), its goal and explicit robot poses.",
+                              unit="m", ge=0.0)
+    gap: float = param(0.0, doc="Smallest free distance between two discs.", unit="m", ge=0.0)
+    seed: int | None = param(None, doc="Seed of the field; default: the scenario seed, so every "
+                                       "run seed gives a new field.", ge=0)
+
+    def check(self, src: str, key: str) -> None:
+        """Radius order and a non-empty region."""
+        if self.radius_max < self.radius_min:
+            raise ScenarioError(src, f"{key}.radius_max", f"must be >= radius_min "
+                                                          f"({self.radius_min})")
+        if self.region is not None:
+            x0, y0, x1, y1 = self.region
+            if not (x1 > x0 and y1 > y0):
+                raise ScenarioError(src, f"{key}.region", "needs x1 > x0 and y1 > y0")
+
+
+@dataclass(frozen=True)
 class WorldSpec:
     """The map: occupancy grid plus exact and moving obstacles."""
 
@@ -77,6 +105,8 @@ class WorldSpec:
                                    ge=0.0, le=1.0)
     obstacles: tuple[ObstacleSpec, ...] = param((), doc="Static geometric obstacles.")
     dynamic_obstacles: tuple[DynamicObstacleSpec, ...] = param((), doc="Moving discs.")
+    clutter: ClutterSpec = field(default_factory=ClutterSpec,
+                                 metadata={"doc": "Seeded random disc obstacles."})
 
     def check(self, src: str, key: str) -> None:
         """Exactly one source of the grid extent."""
@@ -132,6 +162,12 @@ class TeamSpec:
     poses: tuple[Pose, ...] = param((), doc="Initial (x, y, theta) per robot when explicit.",
                                     unit="m, m, rad")
     ids: tuple[int, ...] = param((), doc="Optional robot labels (unique); default 0..n-1.")
+    start_noise: float = param(0.0, doc="Standard deviation of a Gaussian offset added to each "
+                                        "start position, drawn from the run's generator (kept "
+                                        "only when the new position is free).", unit="m",
+                               ge=0.0)
+    heading_noise: float = param(0.0, doc="Standard deviation of a Gaussian offset added to "
+                                          "each start heading.", unit="rad", ge=0.0)
 
     def check(self, src: str, key: str) -> None:
         """Poses match n; ids unique."""

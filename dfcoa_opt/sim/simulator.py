@@ -28,6 +28,7 @@ from dfcoa_opt.control.adapters import convert
 from dfcoa_opt.control.base import Controller, MovingObstacles, Neighbours, Observation
 from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.formation import slot_positions
+from dfcoa_opt.geometry import wrap_angle
 from dfcoa_opt.localization import make_estimator
 from dfcoa_opt.robots.models import RobotState, make_model
 from dfcoa_opt.sim.leader import VirtualLeader
@@ -101,10 +102,10 @@ class Simulator:
         m = len(dyn)
         buf: RunLog | None = None  # allocated once the command width is known
         leader = VirtualLeader(sc)
+        state = RobotState.at_rest(self._start_pose(rng))
         estimator = make_estimator(spec.localization.mode, sc)
         estimator.reset(rng)
         self.controller.reset(sc, rng)
-        state = RobotState.at_rest(sc.initial_pose)
         grid, cap = sc.world.grid, spec.metrics.clearance_cap
         sensors = spec.sensors
         owners = np.concatenate((np.arange(n), np.full(m, -1)))
@@ -190,6 +191,26 @@ class Simulator:
             "leader_path": sc.leader_path.tolist(), "goal": list(spec.leader.goal),
         }
         return buf.truncated(end)
+
+    def _start_pose(self, rng: np.random.Generator) -> FloatArray:
+        """Initial poses plus ``team.start_noise`` / ``heading_noise`` (no draw when both are 0).
+
+        A perturbed position that lands on an occupied cell falls back to the
+        nominal one, so the run starts as collision-free as the file.
+        """
+        team = self.scenario.spec.team
+        pose = self.scenario.initial_pose.copy()
+        if team.start_noise == 0.0 and team.heading_noise == 0.0:
+            return pose
+        noise = rng.normal(size=(self.n, 3)) * (team.start_noise, team.start_noise,
+                                                team.heading_noise)
+        grid = self.scenario.world.grid
+        moved = pose[:, :2] + noise[:, :2]
+        free = grid.in_bounds(*grid.world_to_cell(moved)) & ~grid.is_occupied_at(moved)
+        noise[~free, :2] = 0.0
+        pose += noise
+        pose[:, 2] = wrap_angle(pose[:, 2])
+        return pose
 
     def _moving_obstacles(self, dist: FloatArray, dyn_pos: FloatArray, dyn_vel: FloatArray,
                           radii: FloatArray) -> MovingObstacles:
