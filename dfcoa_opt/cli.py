@@ -9,27 +9,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from dfcoa_opt.errors import DfcoaError
 
 EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 1
-
-
-def _jsonable(x: Any) -> Any:
-    """Floats that JSON cannot hold (NaN, inf) become ``null``."""
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    return x
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -48,28 +35,89 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--plot", action="store_true", help="write a PNG of map and trajectories")
     r.add_argument("--animate", metavar="FILE.gif", help="write a GIF animation")
 
-    ls = sub.add_parser("list", help="list controllers or scenarios")
-    ls.add_argument("what", choices=("controllers", "scenarios"))
+    ls = sub.add_parser("list", help="list controllers, scenarios or figure recipes")
+    ls.add_argument("what", choices=("controllers", "scenarios", "recipes"))
     ls.add_argument("--dir", default="scenarios", help="where to look for scenarios")
 
     sub.add_parser("schema", help="print the scenario key reference (Markdown)")
 
-    f = sub.add_parser("figures", help="regenerate tables and figures")
-    f.add_argument("--out", default="paper_figures")
-    f.add_argument("--scenarios", default="scenarios")
+    b = sub.add_parser("bench", help="run a sweep (controllers x scenarios x seeds) into a "
+                       "results folder; resumes, --rerun forces")
+    b.add_argument("sweep", help="sweep .toml file")
+    b.add_argument("--out", help="results folder (default ./results/<sweep name>)")
+    _executor_args(b)
+    b.add_argument("--rerun", action="store_true", help="run again the runs that have a row")
+    b.add_argument("--seeds", type=int, help="override the sweep's number of seeds")
+
+    rp = sub.add_parser("report", help="tables (Markdown, CSV) and figures from a results "
+                        "folder; never re-simulates")
+    rp.add_argument("results", help="results folder written by dfcoa bench")
+    rp.add_argument("--out", help="output folder (default RESULTS/report)")
+
+    f = sub.add_parser("figures", help="regenerate every paper table and figure (make figures)")
+    f.add_argument("--out", default="paper_figures", help="output folder (default paper_figures)")
+    f.add_argument("--scenarios", default="scenarios", help="scenario root holding sweeps/")
+    f.add_argument("--cache", default=".dfcoa-cache", help="result cache (default .dfcoa-cache)")
+    f.add_argument("--only", action="append", help="only this recipe (repeatable)")
+    f.add_argument("--seeds", type=int, help="override every recipe's seed count (quick runs)")
+    _executor_args(f)
     return p
+
+
+def _executor_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--executor", choices=("serial", "process", "dask"), default=None,
+                   help="default: process (dask when --scheduler or --dask-local is given)")
+    p.add_argument("--jobs", type=int, help="worker processes (default: the core count)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler, e.g. tcp://host:8786")
+    g.add_argument("--dask-local", type=int, metavar="N", help="start a local Dask cluster "
+                   "with N workers")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar (default: when stdout is a terminal)")
+
+
+def _executor(a: argparse.Namespace):
+    from dfcoa_opt.bench.executors import ExecutorConfig
+
+    kind = a.executor or ("dask" if a.scheduler or a.dask_local else "process")
+    return ExecutorConfig(kind, a.jobs, a.scheduler, a.dask_local)
+
+
+def _cmd_bench(a: argparse.Namespace) -> int:
+    from dfcoa_opt.bench.harness import run_sweep
+    from dfcoa_opt.bench.sweep import load_sweep
+
+    if a.seeds is not None and a.seeds < 1:
+        raise DfcoaError(f"--seeds: must be >= 1, got {a.seeds}")
+    config = _executor(a)
+    sweep = load_sweep(a.sweep, a.seeds)
+    out = Path(a.out) if a.out else Path("results") / sweep.name
+    result = run_sweep(sweep, out, config, rerun=a.rerun, progress=a.progress)
+    print(result.summary())
+    print(f"report: dfcoa report {out}")
+    return 0
+
+
+def _cmd_report(a: argparse.Namespace) -> int:
+    from dfcoa_opt.bench.report import make_report
+
+    paths = make_report(Path(a.results), Path(a.out) if a.out else None)
+    for p in paths:
+        print(p)
+    return 0
 
 
 def _cmd_run(a: argparse.Namespace) -> int:
     from dfcoa_opt import metrics
+    from dfcoa_opt.bench.runner import jsonable
     from dfcoa_opt.sim.loader import load_scenario
     from dfcoa_opt.sim.simulator import ControllerError, run_scenario
 
-    scenario = load_scenario(a.scenario)
+    scenario = load_scenario(a.scenario, a.seed)
     if a.animate and not a.animate.lower().endswith(".gif"):
         raise DfcoaError(f"--animate: '{a.animate}' must end in .gif")
     try:
-        log = run_scenario(scenario, a.controller, a.seed)
+        log = run_scenario(scenario, a.controller)
     except ControllerError as exc:
         print(f"dfcoa: run failed: {exc}", file=sys.stderr)
         return EXIT_RUN_FAILED
@@ -79,7 +127,7 @@ def _cmd_run(a: argparse.Namespace) -> int:
     stem = out / f"{scenario.name}-{a.controller}-s{seed}"
     log.save(stem.with_suffix(".npz"))
     result = {"scenario": scenario.name, "controller": a.controller, "seed": seed,
-              "metrics": _jsonable(summary)}
+              "metrics": jsonable(summary)}
     stem.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
     if a.plot or a.animate:
         from dfcoa_opt import plotting
@@ -111,11 +159,18 @@ def _cmd_list(a: argparse.Namespace) -> int:
             doc = (controller_class(cid).__doc__ or "").strip().splitlines()
             print(f"{cid:20s} {doc[0] if doc else ''}")
         return 0
+    if a.what == "recipes":
+        from dfcoa_opt.figures import recipes
+
+        for r in recipes():
+            print(f"{r.name:16s} {r.sweep:28s} {r.title}")
+        return 0
     root = Path(a.dir)
     if not root.is_dir():
         raise DfcoaError(f"{root}: scenario folder not found")
     for path in sorted(root.rglob("*.toml")):
-        print(path)
+        if "sweeps" not in path.relative_to(root).parts:  # sweep files are not scenarios
+            print(path)
     return 0
 
 
@@ -129,7 +184,11 @@ def _cmd_schema(_: argparse.Namespace) -> int:
 def _cmd_figures(a: argparse.Namespace) -> int:
     from dfcoa_opt.figures import make_figures
 
-    make_figures(Path(a.scenarios), Path(a.out))
+    if a.seeds is not None and a.seeds < 1:
+        raise DfcoaError(f"--seeds: must be >= 1, got {a.seeds}")
+    index = make_figures(Path(a.scenarios), Path(a.out), Path(a.cache), _executor(a),
+                         only=a.only, seeds=a.seeds, progress=a.progress)
+    print(index)
     return 0
 
 
@@ -137,7 +196,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     args = _parser().parse_args(argv)
     handlers = {"run": _cmd_run, "list": _cmd_list, "schema": _cmd_schema,
-                "figures": _cmd_figures}
+                "bench": _cmd_bench, "report": _cmd_report, "figures": _cmd_figures}
     try:
         return handlers[args.cmd](args)
     except DfcoaError as exc:

@@ -1,83 +1,161 @@
-"""``make figures``: regenerate every table and figure that exists so far.
+"""``make figures``: every paper table and figure, through the benchmark harness.
 
-Right now that is one run per example scenario (``scenarios/*.toml``) and
-registered controller: a trajectory PNG each and a metrics table
-(``paper_figures/examples/summary.md``). The paper tables and figures are
-added here by the benchmark-harness and method issues; figures are drawn from
-saved logs, never by re-simulating.
+Each artefact group is a *figure recipe*: a sweep file (under
+``scenarios/sweeps/``) plus a renderer that turns the sweep's saved results
+into tables and figures. ``make_figures`` runs each recipe's sweep into a
+result cache (``.dfcoa-cache/<recipe>/``; runs already there are reused, so a
+second ``make figures`` only re-renders), renders into ``paper_figures/<recipe>/``
+and writes the index ``paper_figures/README.md``. Renderers read saved rows
+and logs only; they never simulate.
+
+Adding a recipe (what the method issues do)::
+
+    from dfcoa_opt.figures import Artefact, recipe
+
+    @recipe("dfcoa_tables", sweep="sweeps/dfcoa_paper.toml",
+            title="Paper 000: Table 5 and Figs 15, 20")
+    def render(store, dest):
+        ...                                    # read store.rows(), write into dest
+        return [Artefact("table5.md", "paper 000 Table 5", "metrics of S1 and S2")]
+
+and list the module in :data:`RECIPE_MODULES`.
 """
 
 from __future__ import annotations
 
+import importlib
 import json
 import sys
 import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from dfcoa_opt import metrics, plotting
-from dfcoa_opt.control.registry import available
-from dfcoa_opt.sim.loader import load_scenario
-from dfcoa_opt.sim.log import RunLog
-from dfcoa_opt.sim.simulator import ControllerError, run_scenario
+from dfcoa_opt.atomic import atomic_write
+from dfcoa_opt.bench.executors import ExecutorConfig
+from dfcoa_opt.bench.harness import run_sweep
+from dfcoa_opt.bench.store import ResultsStore
+from dfcoa_opt.errors import DfcoaError, did_you_mean
 
-#: Summary columns of the example table.
-COLUMNS = ("success", "time_to_goal", "fce_rms", "fse_rms", "stability_pct", "vce_rms",
-           "risk_mean", "min_inter_robot_distance", "min_obstacle_clearance", "collisions")
-
-
-def _fmt(v: object) -> str:
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    if isinstance(v, float):
-        return f"{v:.3f}"
-    return str(v)
+#: Modules whose import registers recipes, in index order.
+RECIPE_MODULES = ("dfcoa_opt.bench.recipes",)
 
 
-def make_figures(scenarios: Path, out: Path) -> Path:
-    """Run each example scenario with each controller; write PNGs, logs and a table.
+@dataclass(frozen=True)
+class Artefact:
+    """One generated file.
+
+    Attributes:
+        path: Path relative to the recipe's output folder.
+        paper: Its paper counterpart ("paper 000 Table 5"), or "-" if none.
+        what: One-line description.
+    """
+
+    path: str
+    paper: str
+    what: str
+
+
+Renderer = Callable[[ResultsStore, Path], list[Artefact]]
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """A sweep and the renderer of its artefacts.
+
+    Attributes:
+        name: Recipe id, also the output sub-folder.
+        sweep: Sweep file, relative to the scenario root.
+        title: Heading in the index.
+        render: ``render(store, dest) -> artefacts``.
+    """
+
+    name: str
+    sweep: str
+    title: str
+    render: Renderer
+
+
+_RECIPES: dict[str, Recipe] = {}
+
+
+def recipe(name: str, sweep: str, title: str) -> Callable[[Renderer], Renderer]:
+    """Decorator registering a renderer as the recipe ``name``."""
+
+    def deco(fn: Renderer) -> Renderer:
+        if name in _RECIPES and _RECIPES[name].render is not fn:
+            raise ValueError(f"figure recipe {name!r} is already registered")
+        _RECIPES[name] = Recipe(name, sweep, title, fn)
+        return fn
+
+    return deco
+
+
+def recipes() -> list[Recipe]:
+    """Registered recipes, in registration order."""
+    for mod in RECIPE_MODULES:
+        importlib.import_module(mod)
+    return list(_RECIPES.values())
+
+
+def make_figures(scenarios: Path, out: Path, cache: Path,
+                 config: ExecutorConfig | None = None, only: Sequence[str] | None = None,
+                 seeds: int | None = None, progress: bool | None = None) -> Path:
+    """Run every recipe's sweep (reusing cached runs) and render its artefacts.
 
     Args:
-        scenarios: Folder holding the example ``*.toml`` files (not recursive).
+        scenarios: Scenario root; recipe sweeps are relative to it.
         out: Output folder (``paper_figures``).
+        cache: Result cache; one results folder per recipe.
+        config: Executor for the sweeps (default: local processes).
+        only: Run only these recipes (the index still lists every rendered one).
+        seeds: Override every sweep's seed count (quick smoke runs).
+        progress: Progress bars; default when stdout is a terminal.
 
     Returns:
-        Path of the summary table.
+        Path of the index ``README.md``.
+
+    Raises:
+        DfcoaError: Unknown recipe name, bad sweep or scenario file.
     """
-    dest = out / "examples"
-    dest.mkdir(parents=True, exist_ok=True)
-    rows = []
-    files = sorted(scenarios.glob("*.toml"))
-    ctrls = available()
-    total, done = len(files) * len(ctrls), 0
-    for path in files:
-        sc = load_scenario(path)
-        for cid in ctrls:
-            done += 1
-            t0 = time.perf_counter()
-            stem = dest / f"{sc.name}-{cid}"
-            try:
-                log = run_scenario(sc, cid)
-            except ControllerError as exc:
-                rows.append((sc.name, cid, {"error": str(exc)}))
-                continue
-            saved = RunLog.load(log.save(stem.with_suffix(".npz")))
-            summ = metrics.summary(saved, sc.spec.metrics)
-            stem.with_suffix(".json").write_text(json.dumps(summ, indent=2, default=str) + "\n")
-            plotting.plot_run(saved, sc.world.grid, stem.with_suffix(".png"),
-                              goal=sc.spec.leader.goal, start=sc.spec.leader.start,
-                              shapes=sc.world.shapes)
-            rows.append((sc.name, cid, summ))
-            print(f"[{done}/{total}] {sc.name} / {cid}: {time.perf_counter() - t0:.1f} s",
-                  file=sys.stderr, flush=True)
-    lines = ["# Example runs", "", "Generated by `make figures` (one run per scenario and "
-             "controller, the scenario's seed). Metric definitions: docs/metrics.md.", "",
-             "| scenario | controller | " + " | ".join(COLUMNS) + " |",
-             "|---|---|" + "---|" * len(COLUMNS)]
-    for name, cid, summ in rows:
-        if "error" in summ:
-            lines.append(f"| {name} | {cid} | failed: {summ['error']} |")
+    todo = recipes()
+    names = [r.name for r in todo]
+    for name in only or ():
+        if name not in names:
+            raise DfcoaError(f"--only: unknown recipe '{name}'{did_you_mean(name, names)}; "
+                             f"available: {', '.join(names)}")
+    for r in todo:
+        if only and r.name not in only:
             continue
-        lines.append(f"| {name} | {cid} | " + " | ".join(_fmt(summ[c]) for c in COLUMNS) + " |")
-    table = dest / "summary.md"
-    table.write_text("\n".join(lines) + "\n")
-    return table
+        t0 = time.perf_counter()
+        result = run_sweep(scenarios / r.sweep, cache / r.name, config, seeds=seeds,
+                           progress=progress)
+        dest = out / r.name
+        dest.mkdir(parents=True, exist_ok=True)
+        arts = r.render(result.store, dest)
+        atomic_write(dest / "artefacts.json", json.dumps(
+            {"recipe": r.name, "title": r.title, "sweep": r.sweep,
+             "artefacts": [asdict(a) for a in arts]}, indent=1) + "\n")
+        print(f"{r.name}: {result.ran} runs ({result.failed} failed), {result.skipped} cached; "
+              f"{len(arts)} artefacts in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    return write_index(out, names)
+
+
+def write_index(out: Path, order: Sequence[str]) -> Path:
+    """``README.md`` listing every rendered recipe's artefacts and paper counterparts."""
+    lines = ["# Generated tables and figures", "",
+             "Everything in this folder is written by `make figures` (`dfcoa figures`); "
+             "nothing here is edited by hand. Paper tables list the paper's value beside ours. "
+             "Each folder is one figure recipe (`dfcoa_opt/figures.py`): a sweep file under "
+             "`scenarios/sweeps/` and a renderer that reads only the saved results.", ""]
+    for name in order:
+        meta = out / name / "artefacts.json"
+        if not meta.is_file():
+            continue
+        info = json.loads(meta.read_text(encoding="utf-8"))
+        lines += [f"## {info['title']}", "", f"Recipe `{name}`, sweep `scenarios/{info['sweep']}`.",
+                  "", "| file | paper counterpart | what |", "|---|---|---|"]
+        lines += [f"| [`{name}/{a['path']}`]({name}/{a['path']}) | {a['paper']} | {a['what']} |"
+                  for a in info["artefacts"]]
+        lines.append("")
+    return atomic_write(out / "README.md", "\n".join(lines))

@@ -12,6 +12,7 @@ known, and the planner must find a path.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,8 @@ from dfcoa_opt.world.clutter import random_discs
 from dfcoa_opt.world.dynamic import DynamicObstacles, MovingDisc
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle, Shape
+
+_INDEX = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)\[(\d+)\]$")
 
 try:
     import tomllib
@@ -57,12 +60,16 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise ScenarioError(src, "", f"not valid TOML: {exc}") from None
 
 
-def load_scenario(path: str | Path) -> Scenario:
+def load_scenario(path: str | Path, seed: int | None = None,
+                  overrides: Mapping[str, Any] | None = None) -> Scenario:
     """Load and validate a scenario file.
 
     Args:
         path: The ``.toml`` file; relative paths inside it (``map_image``) are
             resolved against its folder.
+        seed: Replaces the file's ``seed`` (seeded parts such as random clutter
+            follow it).
+        overrides: Dotted keys set before validation (:func:`apply_overrides`).
 
     Raises:
         ScenarioError: On any problem, with a one-line message.
@@ -70,7 +77,50 @@ def load_scenario(path: str | Path) -> Scenario:
     path = Path(path)
     data = read_toml(path)
     data.setdefault("name", path.stem)
+    if seed is not None:
+        data["seed"] = seed
+    apply_overrides(data, overrides or {}, str(path))
     return scenario_from_dict(data, str(path), path.parent)
+
+
+def apply_overrides(data: dict[str, Any], overrides: Mapping[str, Any],
+                    source: str = "<overrides>") -> dict[str, Any]:
+    """Set dotted keys in a scenario dict (in place); returns ``data``.
+
+    Args:
+        data: Parsed scenario file.
+        overrides: ``{"world.clutter.density": 0.1, "world.obstacles[0].radius": 1.0}``.
+        source: Name used in error messages.
+
+    Raises:
+        ScenarioError: A path runs through a value that is not a table or an
+            array of tables, or an index is out of range.
+    """
+    for dotted, value in overrides.items():
+        node: Any = data
+        parts = dotted.split(".")
+        for i, part in enumerate(parts):
+            last = i == len(parts) - 1
+            m = _INDEX.match(part)
+            name, idx = (m.group(1), int(m.group(2))) if m else (part, None)
+            if not isinstance(node, dict):
+                raise ScenarioError(source, dotted, f"'{'.'.join(parts[:i])}' is not a table")
+            if idx is None:
+                if last:
+                    node[name] = value
+                else:
+                    node = node.setdefault(name, {})
+                continue
+            seq = node.get(name)
+            if not isinstance(seq, list) or idx >= len(seq):
+                size = len(seq) if isinstance(seq, list) else 0
+                raise ScenarioError(source, dotted, f"index {idx} out of range ({name} has "
+                                                    f"{size} entries)")
+            if last:
+                seq[idx] = value
+            else:
+                node = seq[idx]
+    return data
 
 
 def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",

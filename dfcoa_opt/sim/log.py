@@ -7,6 +7,7 @@ robots sensed, and the command they then applied during ``[t[k], t[k] + dt)``.
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -14,6 +15,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+from dfcoa_opt.atomic import atomic_write
 
 FloatArray = NDArray[np.float64]
 
@@ -130,14 +133,16 @@ class RunLog:
             h.update(a.tobytes())
         return h.hexdigest()
 
+    def to_bytes(self) -> bytes:
+        """The compressed ``.npz`` file contents (meta as JSON)."""
+        buf = io.BytesIO()
+        np.savez_compressed(buf, meta=np.array(json.dumps(self.meta, default=str)),
+                            **self.arrays())
+        return buf.getvalue()
+
     def save(self, path: str | Path) -> Path:
-        """Write a compressed ``.npz`` (meta as JSON) atomically; returns the path."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(tmp, meta=np.array(json.dumps(self.meta, default=str)), **self.arrays())
-        tmp.replace(path)
-        return path
+        """Write :meth:`to_bytes` to ``path`` atomically; returns the path."""
+        return atomic_write(path, self.to_bytes())
 
     @classmethod
     def load(cls, path: str | Path) -> RunLog:

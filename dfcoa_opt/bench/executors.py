@@ -1,0 +1,105 @@
+"""Executors: run :func:`~dfcoa_opt.bench.runner.execute` over many runs.
+
+Three kinds, all yielding :class:`~dfcoa_opt.bench.runner.Outcome` objects as
+runs finish (in completion order; the store does not care about order):
+
+- ``serial``: in this process, in order;
+- ``process``: a local process pool (``concurrent.futures``), the default;
+- ``dask``: a Dask distributed cluster, given by its scheduler address or
+  started locally (``LocalCluster``) -- needs the ``dask`` extra.
+
+Workers only compute; the caller's process writes every file, so no two
+processes ever write the same file and a remote cluster needs no shared disk
+(the log comes back as bytes).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+
+from dfcoa_opt.bench.runner import Outcome, execute
+from dfcoa_opt.bench.sweep import RunSpec
+from dfcoa_opt.errors import DfcoaError
+
+EXECUTORS = ("serial", "process", "dask")
+
+
+@dataclass(frozen=True)
+class ExecutorConfig:
+    """How to run a sweep.
+
+    Attributes:
+        kind: ``serial``, ``process`` or ``dask``.
+        jobs: Worker processes for ``process`` (default: the core count).
+        scheduler: Dask scheduler address, e.g. ``tcp://host:8786``.
+        dask_local: Start a local Dask cluster with this many worker processes.
+    """
+
+    kind: str = "process"
+    jobs: int | None = None
+    scheduler: str | None = None
+    dask_local: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in EXECUTORS:
+            raise DfcoaError(f"executor '{self.kind}' unknown; choose {', '.join(EXECUTORS)}")
+        if self.jobs is not None and self.jobs < 1:
+            raise DfcoaError(f"--jobs: must be >= 1, got {self.jobs}")
+        if self.kind == "dask" and (self.scheduler is None) == (self.dask_local is None):
+            raise DfcoaError("the dask executor needs exactly one of --scheduler ADDR and "
+                             "--dask-local N")
+        if self.dask_local is not None and self.dask_local < 1:
+            raise DfcoaError(f"--dask-local: must be >= 1, got {self.dask_local}")
+
+
+def run_all(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome]:
+    """Execute ``runs``; yields each outcome as it finishes."""
+    if not runs:
+        return
+    if config.kind == "serial" or (config.kind == "process" and config.jobs == 1):
+        for run in runs:
+            yield execute(run)
+    elif config.kind == "process":
+        yield from _processes(runs, config.jobs or os.cpu_count() or 1)
+    else:
+        yield from _dask(runs, config)
+
+
+def _processes(runs: Sequence[RunSpec], jobs: int) -> Iterator[Outcome]:
+    with ProcessPoolExecutor(max_workers=min(jobs, len(runs))) as pool:
+        futures = [pool.submit(execute, r) for r in runs]
+        try:
+            for fut in as_completed(futures):
+                yield fut.result()
+        finally:
+            for fut in futures:
+                fut.cancel()
+
+
+def _dask(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome]:
+    try:
+        from distributed import Client, LocalCluster
+        from distributed import as_completed as dask_completed
+    except ImportError:
+        raise DfcoaError("the dask executor needs the 'dask' extra: "
+                         "pip install 'dfcoa-opt[dask]'") from None
+    cluster = None
+    if config.dask_local is not None:
+        cluster = LocalCluster(n_workers=config.dask_local, threads_per_worker=1,
+                               processes=True, dashboard_address=None)
+    try:
+        try:
+            client = Client(cluster if cluster is not None else config.scheduler, timeout="20s")
+        except (OSError, TimeoutError) as exc:
+            raise DfcoaError(f"--scheduler: cannot reach Dask scheduler "
+                             f"'{config.scheduler}': {exc}") from None
+        with client:
+            futures = [client.submit(execute, r, key=f"run-{r.key}", pure=False) for r in runs]
+            for fut in dask_completed(futures):
+                yield fut.result()
+    finally:
+        if cluster is not None:
+            cluster.close()

@@ -1,0 +1,164 @@
+"""The results store: one folder per sweep, one row file per run.
+
+Layout::
+
+    RESULTS/
+      manifest.json     sweep name, file, SHA-256, code fingerprint, the run keys
+      sweep.toml        copy of the sweep file
+      rows/<key>.json   one row per run (see dfcoa_opt.bench.runner)
+      logs/<key>.npz    the run's log
+      results.csv       the rows of the current sweep, flattened
+
+Every file is written atomically (:mod:`dfcoa_opt.atomic`), the log before its
+row, so a row file exists only for a run whose log is complete. A sweep killed
+at any moment (even by SIGKILL) therefore resumes without losing or
+duplicating a row: the rerun skips every run that has a row.
+
+A row counts as done only if it was produced by the same code and the same
+scenario file: each row records ``code`` (a fingerprint of the installed
+``dfcoa_opt`` and ``comparisons`` sources) and ``scenario_sha256``; rows from
+other code are run again. Controllers from other packages (entry points) are
+not part of the fingerprint; use ``--rerun`` after changing one.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as _dt
+import functools
+import hashlib
+import io
+import json
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+from dfcoa_opt.atomic import atomic_write, remove_partials
+from dfcoa_opt.bench.runner import Outcome
+from dfcoa_opt.bench.sweep import RunSpec, Sweep
+from dfcoa_opt.errors import DfcoaError
+
+#: Row fields written as CSV columns before the metrics.
+CSV_FIELDS = ("key", "scenario", "controller", "seed", "overrides_hash", "overrides", "status",
+              "error", "digest")
+
+
+@functools.lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """SHA-256 (16 hex digits) over the source files of ``dfcoa_opt`` and ``comparisons``."""
+    import comparisons
+    import dfcoa_opt
+
+    h = hashlib.sha256()
+    for pkg in (dfcoa_opt, comparisons):
+        root = Path(pkg.__file__).parent
+        for path in sorted(root.rglob("*.py")):
+            h.update(str(path.relative_to(root.parent)).encode())
+            h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+@functools.lru_cache(maxsize=256)
+def _file_sha(path: str) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+
+
+def _display_path(path: str) -> str:
+    """``path`` relative to the working folder when inside it (no machine paths in reports)."""
+    p = Path(path).resolve()
+    try:
+        return p.relative_to(Path.cwd().resolve()).as_posix()
+    except ValueError:
+        return p.as_posix()
+
+
+class ResultsStore:
+    """A results folder.
+
+    Args:
+        root: The folder (created if missing). Temporary files left by a
+            killed writer are removed on opening.
+    """
+
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root)
+        self.rows_dir = self.root / "rows"
+        self.logs_dir = self.root / "logs"
+        for d in (self.root, self.rows_dir, self.logs_dir):
+            if d.exists() and not d.is_dir():
+                raise DfcoaError(f"{d}: exists and is not a folder")
+            d.mkdir(parents=True, exist_ok=True)
+            remove_partials(d)
+
+    def row_path(self, key: str) -> Path:
+        """Path of a run's row file."""
+        return self.rows_dir / f"{key}.json"
+
+    def read_row(self, key: str) -> dict[str, Any] | None:
+        """The stored row of ``key``; None if absent or unreadable (it is then rerun)."""
+        try:
+            return json.loads(self.row_path(key).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return None
+
+    def is_done(self, run: RunSpec) -> bool:
+        """A row exists for ``run`` from this code and this scenario file."""
+        row = self.read_row(run.key)
+        return (row is not None and row.get("code") == code_fingerprint()
+                and row.get("scenario_sha256") == _file_sha(run.scenario_file))
+
+    def pending(self, runs: Iterable[RunSpec], rerun: bool = False) -> list[RunSpec]:
+        """The runs to execute: all with ``rerun``, else those not done."""
+        runs = list(runs)
+        return runs if rerun else [r for r in runs if not self.is_done(r)]
+
+    def write(self, outcome: Outcome) -> Path:
+        """Store one finished run: its log first, then its row (both atomic)."""
+        row = dict(outcome.row)
+        row["code"] = code_fingerprint()
+        row["scenario_sha256"] = _file_sha(row["scenario_file"])
+        if outcome.npz is not None:
+            atomic_write(self.root / row["log"], outcome.npz)
+        return atomic_write(self.row_path(row["key"]),
+                            json.dumps(row, indent=1, sort_keys=True, allow_nan=False) + "\n")
+
+    def write_manifest(self, sweep: Sweep) -> None:
+        """Record the sweep (file copy, hash, run keys)."""
+        atomic_write(self.root / "sweep.toml", sweep.text)
+        manifest = {
+            "name": sweep.name, "sweep_file": _display_path(sweep.source),
+            "sweep_sha256": sweep.sha256, "code": code_fingerprint(),
+            "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "keys": [r.key for r in sweep.runs],
+        }
+        atomic_write(self.root / "manifest.json", json.dumps(manifest, indent=1) + "\n")
+
+    def manifest(self) -> dict[str, Any]:
+        """The manifest (empty dict if there is none)."""
+        try:
+            return json.loads((self.root / "manifest.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return {}
+
+    def rows(self, keys: Sequence[str] | None = None) -> list[dict[str, Any]]:
+        """Rows of ``keys`` (default: the manifest's), in that order; missing ones skipped."""
+        keys = self.manifest().get("keys", []) if keys is None else keys
+        return [r for r in (self.read_row(k) for k in keys) if r is not None]
+
+    def write_csv(self) -> Path:
+        """Write ``results.csv``: the current sweep's rows, metrics flattened."""
+        rows = self.rows()
+        metric_keys: list[str] = []
+        for r in rows:
+            metric_keys += [k for k in (r.get("metrics") or {}) if k not in metric_keys]
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow([*CSV_FIELDS, "wall_time", *metric_keys])
+        for r in rows:
+            m = r.get("metrics") or {}
+            base = [json.dumps(r["overrides"], sort_keys=True) if f == "overrides"
+                    else r.get(f) for f in CSV_FIELDS]
+            w.writerow(["" if v is None else v for v in
+                        [*base, r.get("provenance", {}).get("wall_time"),
+                         *(m.get(k) for k in metric_keys)]])
+        return atomic_write(self.root / "results.csv", buf.getvalue())

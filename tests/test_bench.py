@@ -1,0 +1,269 @@
+"""Benchmark harness: sweep expansion, executors, results store, resume, failures."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dfcoa_opt.bench.executors import ExecutorConfig
+from dfcoa_opt.bench.harness import run_sweep
+from dfcoa_opt.bench.runner import DETERMINISTIC_KEYS, execute
+from dfcoa_opt.bench.sweep import RunSpec, canonical, load_sweep
+from dfcoa_opt.cli import main
+from dfcoa_opt.control import registry
+from dfcoa_opt.errors import DfcoaError, ScenarioError
+from dfcoa_opt.params import param
+from dfcoa_opt.sim.loader import apply_overrides
+
+DATA = Path(__file__).parent / "data" / "bench"
+TINY = DATA / "tiny.toml"
+
+
+def _sweep(tmp_path: Path, text: str, name: str = "sweep.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(f'scenarios = ["{TINY}"]\n' + text)
+    return path
+
+
+def _deterministic(rows):
+    return sorted(tuple(json.dumps(r[k], sort_keys=True) for k in DETERMINISTIC_KEYS)
+                   for r in rows)
+
+
+# -- sweep files -----------------------------------------------------------------------------
+
+def test_expansion_counts_keys_and_controller_specific_overrides(tmp_path):
+    path = _sweep(tmp_path, 'controllers = ["goto_slot"]\nseeds = 3\nfirst_seed = 5\n'
+                  '[grid]\n"controllers.goto_slot.kp" = [0.5, 2.0]\n"team.n" = [2, 3]\n')
+    sw = load_sweep(path)
+    assert len(sw.runs) == 3 * 2 * 2
+    assert {r.seed for r in sw.runs} == {5, 6, 7}
+    assert len({r.key for r in sw.runs}) == len(sw.runs)
+    assert all(r.key.startswith("tiny__goto_slot__") for r in sw.runs)
+    # an override for another controller does not multiply the runs of this one
+    other = _sweep(tmp_path, 'controllers = ["goto_slot"]\nseeds = 2\n'
+                   '[grid]\n"controllers.nonexistent.kp" = [1.0, 2.0]\n', "other.toml")
+    with pytest.raises(ScenarioError, match="controllers.nonexistent"):
+        load_sweep(other)
+
+
+def test_dedupe_when_override_targets_another_controller(tmp_path, extra_controllers):
+    path = _sweep(tmp_path, 'controllers = ["goto_slot", "test_raiser"]\nseeds = 2\n'
+                  '[grid]\n"controllers.goto_slot.kp" = [0.5, 2.0]\n')
+    runs = load_sweep(path).runs
+    per = {c: [r for r in runs if r.controller == c] for c in ("goto_slot", "test_raiser")}
+    assert len(per["goto_slot"]) == 4 and len(per["test_raiser"]) == 2
+    assert all(r.overrides_hash == "base" for r in per["test_raiser"])
+
+
+def test_variants_and_nested_grid_tables(tmp_path):
+    path = _sweep(tmp_path, 'controllers = ["goto_slot"]\nseeds = 1\n'
+                  '[grid.controllers.goto_slot]\nkp = [0.5, 2.0]\n'
+                  '[[variants]]\nt_max = 2.0\n[[variants]]\nt_max = 3.0\n')
+    sw = load_sweep(path)
+    assert sorted(json.dumps(r.overrides_dict, sort_keys=True) for r in sw.runs) == sorted(
+        json.dumps({"controllers.goto_slot.kp": kp, "t_max": t}, sort_keys=True)
+        for kp in (0.5, 2.0) for t in (2.0, 3.0))
+
+
+@pytest.mark.parametrize("text, key, fragment", [
+    ('controllers = ["goto_slott"]\n', "controllers[0]", "did you mean 'goto_slot'"),
+    ('seeds = 0\n', "seeds", ">= 1"),
+    ('[grid]\n"t_max" = 5.0\n', "grid.t_max", "non-empty array"),
+    ('[grid]\n"team.nn" = [3]\n', "scenarios", "team.nn"),
+    ('[grid]\n"world.obstacles[4].radius" = [1.0]\n', "scenarios", "out of range"),
+    ('colour = 1\n', "colour", "unknown key"),
+])
+def test_bad_sweeps_give_one_line_errors(tmp_path, text, key, fragment):
+    path = _sweep(tmp_path, text)
+    with pytest.raises(ScenarioError) as err:
+        load_sweep(path)
+    msg = str(err.value)
+    assert msg.startswith(f"{path}: {key}") and fragment in msg and "\n" not in msg
+
+
+def test_glob_without_match_and_duplicate_names(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text('scenarios = ["nothing_*.toml"]\n')
+    with pytest.raises(ScenarioError, match="matches no file"):
+        load_sweep(path)
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "tiny.toml").write_text(TINY.read_text())
+    path.write_text(f'scenarios = ["{TINY}", "a/tiny.toml"]\n')
+    with pytest.raises(ScenarioError, match="two scenarios are named 'tiny'"):
+        load_sweep(path)
+
+
+def test_apply_overrides_sets_nested_and_indexed_keys():
+    data = {"world": {"obstacles": [{"radius": 1.0}, {"radius": 2.0}]}}
+    apply_overrides(data, {"world.obstacles[1].radius": 5.0, "team.n": 3, "dt": 0.2})
+    assert data == {"world": {"obstacles": [{"radius": 1.0}, {"radius": 5.0}]},
+                    "team": {"n": 3}, "dt": 0.2}
+    with pytest.raises(ScenarioError, match="'dt' is not a table"):
+        apply_overrides(data, {"dt.x": 1})
+
+
+# -- executors ---------------------------------------------------------------------------------
+
+def test_serial_process_and_dask_give_identical_rows(tmp_path):
+    sweep = load_sweep(DATA / "tiny_sweep.toml")
+    outs = {}
+    configs = {"serial": ExecutorConfig("serial"), "process": ExecutorConfig("process", 2),
+               "dask": ExecutorConfig("dask", dask_local=2)}
+    for name, cfg in configs.items():
+        res = run_sweep(sweep, tmp_path / name, cfg, progress=False)
+        assert res.ran == len(sweep.runs) == 8 and res.failed == 0
+        outs[name] = res.store.rows()
+    ref = _deterministic(outs["serial"])
+    assert len({r["digest"] for r in outs["serial"]}) == 8  # seeds and gains really differ
+    assert _deterministic(outs["process"]) == ref
+    assert _deterministic(outs["dask"]) == ref
+
+
+def test_executor_config_errors():
+    with pytest.raises(DfcoaError, match="exactly one"):
+        ExecutorConfig("dask")
+    with pytest.raises(DfcoaError, match="--jobs"):
+        ExecutorConfig("process", jobs=0)
+
+
+# -- store: resume, rerun, stale rows ------------------------------------------------------------
+
+def test_resume_skips_done_rows_and_rerun_forces(tmp_path):
+    sweep = load_sweep(DATA / "tiny_sweep.toml")
+    first = run_sweep(sweep, tmp_path, ExecutorConfig("serial"), progress=False)
+    assert (first.ran, first.skipped) == (8, 0)
+    again = run_sweep(sweep, tmp_path, ExecutorConfig("serial"), progress=False)
+    assert (again.ran, again.skipped) == (0, 8)
+    # a row from other code (or an unreadable one) is run again
+    key = sweep.runs[0].key
+    row = json.loads(first.store.row_path(key).read_text())
+    first.store.row_path(key).write_text(json.dumps({**row, "code": "0" * 16}))
+    first.store.row_path(sweep.runs[1].key).write_text("{ truncated")
+    third = run_sweep(sweep, tmp_path, ExecutorConfig("serial"), progress=False)
+    assert (third.ran, third.skipped) == (2, 6)
+    forced = run_sweep(sweep, tmp_path, ExecutorConfig("serial"), rerun=True, progress=False)
+    assert forced.ran == 8
+    lines = (tmp_path / "results.csv").read_text().splitlines()
+    assert len(lines) == 9 and len({ln.split(",")[0] for ln in lines[1:]}) == 8
+
+
+def test_sigkill_midway_then_resume_loses_and_duplicates_nothing(tmp_path):
+    sweep = tmp_path / "slow.toml"
+    sweep.write_text(f'scenarios = ["{TINY}"]\ncontrollers = ["goto_slot"]\nseeds = 10\n'
+                     '[[variants]]\nt_max = 12.0\n"sensors.lidar.beams" = 720\n')
+    out = tmp_path / "res"
+    cmd = [sys.executable, "-m", "dfcoa_opt", "bench", str(sweep), "--out", str(out),
+           "--executor", "serial", "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    rows = out / "rows"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and len(list(rows.glob("*.json"))) < 3:
+        time.sleep(0.02)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    before = {p.name: p.read_bytes() for p in rows.glob("*.json")}
+    assert 3 <= len(before) < 10, "the kill must land mid-sweep"
+    for data in before.values():  # every row present is whole
+        json.loads(data)
+    res = run_sweep(sweep, out, ExecutorConfig("serial"), progress=False)
+    assert res.skipped == len(before) and res.ran == 10 - len(before)
+    after = sorted(p.name for p in rows.glob("*"))
+    assert len(after) == 10 and len(set(after)) == 10           # no loss, no duplicate
+    assert all((rows / n).read_bytes() == b for n, b in before.items())  # not re-run
+    assert not [p for p in out.rglob(".*") if p.is_file()]       # no partial files left
+    assert sorted(p.stem for p in (out / "logs").glob("*.npz")) == [Path(n).stem for n in after]
+
+
+# -- failures ------------------------------------------------------------------------------------
+
+@pytest.fixture
+def extra_controllers():
+    """Two broken controllers, registered for the duration of one test."""
+
+    @dataclass(frozen=True)
+    class Params:
+        fail_at: float = param(0.5, doc="Time of the failure.", unit="s")
+
+    class Raiser:
+        command = "velocity"
+        Params_ = Params
+
+        def __init__(self, p):
+            self.p = p
+
+        def reset(self, scenario, rng):
+            self.n = scenario.n
+
+        def act(self, obs):
+            if obs.t >= self.p.fail_at:
+                raise ZeroDivisionError("boom in act")
+            return np.zeros((self.n, 2))
+
+    class NaNer(Raiser):
+        def act(self, obs):
+            return np.full((self.n, 2), np.nan if obs.t >= self.p.fail_at else 0.0)
+
+    for cls in (Raiser, NaNer):
+        cls.Params = Params
+    registry.register("test_raiser")(Raiser)
+    registry.register("test_nan")(NaNer)
+    yield
+    for cid in ("test_raiser", "test_nan"):
+        registry._REGISTRY.pop(cid, None)
+
+
+def test_failed_runs_are_rows_and_the_sweep_goes_on(tmp_path, extra_controllers):
+    path = _sweep(tmp_path, 'controllers = ["test_raiser", "goto_slot", "test_nan"]\nseeds = 2\n')
+    res = run_sweep(path, tmp_path / "out", ExecutorConfig("serial"), progress=False)
+    rows = {r["controller"]: r for r in res.store.rows()}
+    assert res.ran == 6 and res.failed == 4
+    assert rows["goto_slot"]["status"] == "ok" and rows["goto_slot"]["metrics"]["steps"] > 0
+    r = rows["test_raiser"]
+    assert r["status"] == "failed" and r["error"] == "ZeroDivisionError: boom in act"
+    assert r["metrics"] is None and r["log"] is None and "act" in r["provenance"]["traceback"]
+    assert "NaN/inf" in rows["test_nan"]["error"] and "t=0.500" in rows["test_nan"]["error"]
+    csv = (tmp_path / "out" / "results.csv").read_text()
+    assert csv.count(",failed,") == 4
+
+
+def test_bad_scenario_is_caught_before_runs_and_is_a_row_inside_a_worker(tmp_path):
+    path = _sweep(tmp_path, 'controllers = ["goto_slot"]\nseeds = 2\n'
+                  '[[variants]]\n"world.obstacles[0].center" = [2.0, 3.0]\n')
+    with pytest.raises(ScenarioError, match="leader.start.*inside an obstacle"):
+        load_sweep(path)  # validation, before any run
+    # a run whose scenario fails only for its own seed (e.g. a clutter field) is a failed row
+    out = execute(RunSpec(str(TINY), "tiny", "goto_slot", 3, canonical({"team.n": 0})))
+    assert out.row["status"] == "failed" and out.npz is None
+    assert out.row["error"].startswith(f"{TINY}: team.n: must be >= 1")
+
+
+# -- CLI ---------------------------------------------------------------------------------------
+
+def test_cli_bench_and_report(tmp_path, capsys):
+    out = tmp_path / "res"
+    code = main(["bench", str(DATA / "tiny_sweep.toml"), "--out", str(out), "--jobs", "1",
+                 "--seeds", "2"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "ran 4 (0 failed)" in text and f"dfcoa report {out}" in text
+    assert main(["report", str(out)]) == 0
+    assert (out / "report" / "report.md").is_file()
+
+
+def test_cli_bench_bad_sweep_exits_2_with_one_line(tmp_path, capsys):
+    path = _sweep(tmp_path, 'controllers = ["orca"]\n')
+    assert main(["bench", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"dfcoa: error: {path}: controllers[0]: unknown controller 'orca'")
+    assert "\n" not in err

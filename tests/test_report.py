@@ -1,0 +1,264 @@
+"""Benchmark report: statistics, tables, environment header, figures, end to end."""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dfcoa_opt import metrics as run_metrics
+from dfcoa_opt.bench import plots, report
+from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.sim.loader import read_toml, scenario_from_dict
+from dfcoa_opt.sim.simulator import run_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIO = ROOT / "scenarios" / "example_empty.toml"
+#: t_{0.975, dof} for dof 1, 2, 3, from statistical tables (not computed with scipy).
+T975 = {1: 12.706204736174707, 2: 4.302652729911275, 3: 3.182446305284263}
+SHA = "0123456789abcdef" * 4
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def row(key, controller="ctl_a", status="ok", scenario="sc", seed=0, overrides_hash="base",
+        finished="2024-05-01T10:00:00Z", error=None, **mets):
+    return {"key": key, "scenario": scenario, "scenario_file": "/nonexistent.toml",
+            "controller": controller, "seed": seed, "overrides": {},
+            "overrides_hash": overrides_hash, "status": status, "error": error,
+            "metrics": mets if status == "ok" else None, "digest": None, "log": None,
+            "provenance": {"wall_time": 1.0, "finished": finished, "host": "h1", "pid": 1}}
+
+
+def synthetic_rows():
+    """ctl_a: 3 ok runs (2 reach the goal, 1 collides) + 1 failed; ctl_b: 1 ok run."""
+    return [
+        row("a0", seed=0, success=True, collisions=0, time_to_goal=10.0, fce_rms=1.0),
+        row("a1", seed=1, success=True, collisions=2, time_to_goal=12.0, fce_rms=2.0),
+        row("a2", seed=2, success=False, collisions=0, time_to_goal=None, fce_rms=3.0),
+        row("a3", seed=3, status="failed", error="controller 'ctl_a' returned NaN at t=1.0 s",
+            finished="2024-05-01T11:00:00-02:00"),  # 13:00 UTC: the newest instant
+        row("b0", controller="ctl_b", success=False, collisions=0, time_to_goal=None,
+            fce_rms=0.5, finished="2024-05-01T12:00:00+00:00"),
+    ]
+
+
+def write_results(folder: Path, rows, manifest=None) -> Path:
+    (folder / "rows").mkdir(parents=True)
+    for r in rows:
+        (folder / "rows" / f"{r['key']}.json").write_text(json.dumps(r))
+    man = {"name": "demo", "sweep_file": "sweep.toml", "sweep_sha256": SHA,
+           "created": "2024-05-01T09:00:00Z"} if manifest is None else manifest
+    (folder / "manifest.json").write_text(json.dumps(man))
+    return folder
+
+
+# ------------------------------------------------------------------------ statistics
+def test_ci_half_width_matches_hand_computation():
+    mean, half, n = report.mean_ci95([1, 2, 3, 4])
+    std = math.sqrt(((1.5**2 + 0.5**2) * 2) / 3)  # sample std, ddof 1
+    assert (mean, n) == (2.5, 4)
+    assert half == pytest.approx(T975[3] * std / 2.0, rel=1e-12)
+
+
+def test_ci_skips_null_nan_and_needs_two_values():
+    assert report.mean_ci95([None, float("nan"), 5.0, float("inf")])[::2] == (5.0, 1)
+    assert math.isnan(report.mean_ci95([5.0])[1])
+    mean, half, n = report.mean_ci95([])
+    assert n == 0 and math.isnan(mean) and math.isnan(half)
+
+
+def test_aggregate_rates_counts_and_groups():
+    groups = report.aggregate(synthetic_rows(), metrics=("time_to_goal", "fce_rms"))
+    assert [(g["scenario"], g["controller"], g["overrides_hash"]) for g in groups] == [
+        ("sc", "ctl_a", "base"), ("sc", "ctl_b", "base")]
+    a = groups[0]
+    assert (a["runs"], a["failed"], a["ok"]) == (4, 1, 3)
+    assert a["success_rate"] == 2 / 4  # the failed run counts as unsuccessful
+    assert a["collision_rate"] == 1 / 3  # among the ok runs only
+    ttg = a["stats"]["time_to_goal"]
+    assert (ttg["mean"], ttg["n"]) == (11.0, 2)  # the null of a2 is skipped
+    assert ttg["ci95"] == pytest.approx(T975[1] * math.sqrt(2.0) / math.sqrt(2.0))
+    assert a["stats"]["fce_rms"]["n"] == 3 and a["stats"]["fce_rms"]["mean"] == 2.0
+    assert a["errors"] == ["controller 'ctl_a' returned NaN at t=1.0 s"]
+    b = groups[1]
+    assert b["stats"]["time_to_goal"]["n"] == 0
+    assert math.isnan(b["stats"]["fce_rms"]["ci95"])
+
+
+def test_aggregate_by_controller_only_merges_scenarios():
+    rows = synthetic_rows() + [row("c0", scenario="other", fce_rms=5.0, success=True,
+                                   collisions=1)]
+    groups = report.aggregate(rows, metrics=("fce_rms",), by=("controller",))
+    assert [g["controller"] for g in groups] == ["ctl_a", "ctl_b"]
+    assert groups[0]["runs"] == 5 and groups[0]["stats"]["fce_rms"]["mean"] == 2.75
+
+
+# ---------------------------------------------------------------------------- tables
+def test_markdown_cells():
+    groups = report.aggregate(synthetic_rows(), metrics=("time_to_goal", "fce_rms"))
+    md = report.markdown_table(groups, ("time_to_goal", "fce_rms"))
+    lines = md.splitlines()
+    assert lines[0] == ("| scenario | controller | overrides | runs | failed | success | "
+                        "collisions | Time to goal (s) | FCE RMS (m) |")
+    assert lines[2] == ("| sc | ctl_a | `base` | 4 | 1 | 50% (2/4) | 33% (1/3) | "
+                        "11.000 ± 12.706 (n=2) | 2.000 ± 2.484 |")
+    assert lines[3] == "| sc | ctl_b | `base` | 1 | 0 | 0% (0/1) | 0% (0/1) | — (n=0) | 0.500 |"
+    assert "- sc / ctl_a / base: controller 'ctl_a' returned NaN at t=1.0 s" in lines
+    hidden = report.markdown_table(groups, ("fce_rms",), hide=("scenario",))
+    assert hidden.splitlines()[0].startswith("| controller | overrides | runs |")
+
+
+def test_csv_parses_with_numbers():
+    groups = report.aggregate(synthetic_rows(), metrics=("time_to_goal", "fce_rms"))
+    table = list(csv.DictReader(io.StringIO(report.csv_table(groups, ("time_to_goal",
+                                                                      "fce_rms")))))
+    assert [r["controller"] for r in table] == ["ctl_a", "ctl_b"]
+    a, b = table
+    assert (int(a["runs"]), int(a["failed"]), int(a["ok"])) == (4, 1, 3)
+    assert float(a["success_rate"]) == 0.5 and float(a["collision_rate"]) == 1 / 3
+    assert float(a["time_to_goal_mean"]) == 11.0 and int(a["time_to_goal_n"]) == 2
+    assert float(a["time_to_goal_ci95"]) == pytest.approx(T975[1])
+    assert float(a["fce_rms_ci95"]) == pytest.approx(T975[2] * 1.0 / math.sqrt(3))
+    assert b["time_to_goal_mean"] == "" and b["fce_rms_ci95"] == ""  # NaN -> empty cell
+    assert float(b["fce_rms_mean"]) == 0.5
+
+
+# ----------------------------------------------------------------------- environment
+def test_environment_header(tmp_path, monkeypatch):
+    folder = write_results(tmp_path / "res", synthetic_rows())
+    monkeypatch.setattr(report, "PACKAGES", (*report.PACKAGES, "no-such-package-xyz"))
+    head = report.environment_header(folder)
+    assert "Date (newest finished run): 2024-05-01T11:00:00-02:00" in head
+    assert SHA in head and f"`{SHA[:12]}`" in head and "**demo**" in head
+    assert f"numpy {np.__version__}" in head and "no-such-package-xyz not installed" in head
+    assert f"{os.cpu_count()} cores" in head and "hosts: h1" in head
+
+
+# --------------------------------------------------------------------------- loading
+def test_load_rows_sorted_and_errors(tmp_path):
+    folder = write_results(tmp_path / "res", synthetic_rows()[::-1])
+    assert [r["key"] for r in report.load_rows(folder)] == ["a0", "a1", "a2", "a3", "b0"]
+    (folder / "rows" / "zz.json").write_text('{"key": "zz", "scenario": ')
+    with pytest.raises(DfcoaError, match=r"zz\.json: not valid JSON") as err:
+        report.load_rows(folder)
+    assert "\n" not in str(err.value) and "Traceback" not in str(err.value)
+    (folder / "rows" / "zz.json").write_text('[1, 2]')
+    with pytest.raises(DfcoaError, match=r"zz\.json: expected a JSON object"):
+        report.load_rows(folder)
+    (folder / "rows" / "zz.json").write_text('{"key": "zz"}')
+    with pytest.raises(DfcoaError, match=r"zz\.json: missing field\(s\) scenario"):
+        report.load_rows(folder)
+    with pytest.raises(DfcoaError, match="folder not found"):
+        report.load_rows(tmp_path / "missing")
+
+
+def test_load_rows_keeps_only_the_manifest_keys(tmp_path):
+    man = {"name": "demo", "sweep_file": "s.toml", "sweep_sha256": SHA, "created": "x",
+           "keys": ["a0", "a1", "zz_not_run_yet"]}
+    folder = write_results(tmp_path / "res", synthetic_rows(), manifest=man)
+    (folder / "rows" / "stale.json").write_text("{broken")  # not in the manifest: not read
+    assert [r["key"] for r in report.load_rows(folder)] == ["a0", "a1"]
+    assert "Runs: 2 of 3 in the manifest (0 failed)" in report.environment_header(folder)
+    with pytest.raises(DfcoaError, match="stale.json"):
+        report.load_rows(folder, all_rows=True)
+
+
+# ------------------------------------------------------------------------ end to end
+@pytest.fixture(scope="module")
+def results(tmp_path_factory) -> Path:
+    """A real results folder: example_empty x goto_slot x seeds 0, 1 (2 s runs) + 1 failure."""
+    folder = tmp_path_factory.mktemp("results")
+    overrides = {"t_max": 2.0}
+    rows = []
+    for seed in (0, 1):
+        data = read_toml(SCENARIO)
+        data.setdefault("name", SCENARIO.stem)
+        data["seed"] = seed
+        data.update(overrides)
+        scenario = scenario_from_dict(data, str(SCENARIO), SCENARIO.parent)
+        log = run_scenario(scenario, "goto_slot", seed)
+        key = f"example_empty__goto_slot__t2__s{seed}"
+        log.save(folder / "logs" / f"{key}.npz")
+        mets = {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                for k, v in run_metrics.summary(log, scenario).items()}
+        rows.append({
+            "key": key, "scenario": "example_empty", "scenario_file": str(SCENARIO),
+            "controller": "goto_slot", "seed": seed, "overrides": overrides,
+            "overrides_hash": "t2", "status": "ok", "error": None, "metrics": mets,
+            "digest": log.digest(), "log": f"logs/{key}.npz",
+            "provenance": {"wall_time": 0.3, "finished": f"2024-06-0{seed + 1}T08:00:00Z",
+                           "host": "testhost", "pid": 42}})
+    rows.append({**rows[0], "key": "example_empty__broken__t2__s0", "controller": "broken",
+                 "status": "failed", "error": "unknown controller 'broken'", "metrics": None,
+                 "digest": None, "log": None})
+    folder = write_results(folder, [])
+    for r in rows:
+        (folder / "rows" / f"{r['key']}.json").write_text(json.dumps(r, allow_nan=False))
+    return folder
+
+
+def test_make_report_end_to_end(results, tmp_path):
+    out = tmp_path / "rep"
+    paths = report.make_report(results, out, metrics=("fce_rms", "time_to_goal"))
+    names = [p.name for p in paths]
+    assert names == ["report.md", "report.csv", "box_fce_rms.png", "box_time_to_goal.png",
+                     "traj_example_empty_s0.png"]
+    for p in paths[2:]:
+        assert p.stat().st_size > 1000 and p.read_bytes()[:8] == PNG_MAGIC
+    md = (out / "report.md").read_text()
+    assert "## Scenario `example_empty`" in md and "sha256 `0123456789ab`" in md
+    assert "Date (newest finished run): 2024-06-02T08:00:00Z" in md
+    assert "| goto_slot | `t2` | 2 | 0 | 0% (0/2) | 0% (0/2) |" in md
+    assert "| broken | `t2` | 1 | 1 | 0% (0/1) | — | — | — |" in md
+    assert "- broken / t2: unknown controller 'broken'" in md
+    assert '- `t2`: `{"t_max": 2.0}`' in md and "![trajectories example_empty]" in md
+    rows = report.load_rows(results)
+    table = {r["controller"]: r for r in csv.DictReader(io.StringIO((out / "report.csv")
+                                                                   .read_text()))}
+    fce = [r["metrics"]["fce_rms"] for r in rows if r["status"] == "ok"]
+    assert float(table["goto_slot"]["fce_rms_mean"]) == pytest.approx(np.mean(fce))
+    assert int(table["goto_slot"]["fce_rms_n"]) == 2 and table["goto_slot"]["failed"] == "0"
+    first = (out / "report.md").read_bytes()
+    report.make_report(results, out, metrics=("fce_rms", "time_to_goal"))
+    assert (out / "report.md").read_bytes() == first  # cached results -> identical file
+
+
+def test_default_out_dir_and_explicit_overlay_seed(results):
+    paths = report.make_report(results, metrics=("fce_rms",), overlay_seed=1)
+    assert paths[0] == results / "report" / "report.md"
+    assert paths[-1].name == "traj_example_empty_s1.png"
+
+
+def test_overlay_rejects_mixed_seeds_and_notes_missing_scenario(results, tmp_path):
+    rows = [r for r in report.load_rows(results) if r["log"]]
+    with pytest.raises(ValueError, match="mix"):
+        plots.trajectory_overlay(rows, results, tmp_path / "x.png")
+    moved = [{**r, "scenario_file": str(tmp_path / "gone.toml")} for r in rows]
+    written, notes = plots.overlay_figures(moved, results, tmp_path)
+    assert written == {} and len(notes) == 1 and "gone.toml: file not found" in notes[0]
+
+
+def test_overlay_notes_a_scenario_file_changed_since_the_run(results, tmp_path):
+    rows = [{**r, "scenario_sha256": "0" * 16} for r in report.load_rows(results)
+            if r["log"] and r["seed"] == 0]
+    written, notes = plots.overlay_figures(rows, results, tmp_path)
+    assert len(written["example_empty"]) == 1
+    assert len(notes) == 1 and "changed since the run" in notes[0]
+    real = hashlib.sha256(SCENARIO.read_bytes()).hexdigest()[:16]
+    assert plots.overlay_figures([{**rows[0], "scenario_sha256": real}], results,
+                                 tmp_path)[1] == []
+
+
+def test_boxplot_without_finite_values_still_writes(tmp_path):
+    path = plots.metric_boxplots(synthetic_rows(), "time_to_goal", tmp_path / "b.png",
+                                 label="Time to goal (s)")
+    assert path.read_bytes()[:8] == PNG_MAGIC
+    path = plots.metric_boxplots([], "fce_rms", tmp_path / "empty.png")
+    assert path.read_bytes()[:8] == PNG_MAGIC
