@@ -267,3 +267,16 @@ def test_cli_bench_bad_sweep_exits_2_with_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"dfcoa: error: {path}: controllers[0]: unknown controller 'orca'")
     assert "\n" not in err
+
+
+def test_dask_scheduler_address_of_a_running_cluster(tmp_path):
+    from distributed import LocalCluster
+
+    sweep = load_sweep(DATA / "tiny_sweep.toml", seeds=1)
+    ref = run_sweep(sweep, tmp_path / "serial", ExecutorConfig("serial"), progress=False)
+    with LocalCluster(n_workers=1, threads_per_worker=1, dashboard_address=None) as cluster:
+        res = run_sweep(sweep, tmp_path / "remote",
+                        ExecutorConfig("dask", scheduler=cluster.scheduler_address),
+                        progress=False)
+    assert res.ran == 2
+    assert _deterministic(res.store.rows()) == _deterministic(ref.store.rows())

@@ -15,9 +15,10 @@ processes ever write the same file and a remote cluster needs no shared disk
 
 from __future__ import annotations
 
+import itertools
 import os
 from collections.abc import Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 
 from dfcoa_opt.bench.runner import Outcome, execute
@@ -69,13 +70,18 @@ def run_all(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome
 
 
 def _processes(runs: Sequence[RunSpec], jobs: int) -> Iterator[Outcome]:
+    """At most ``2 * jobs`` runs in flight, so finished logs never pile up in memory."""
+    queue = iter(runs)
     with ProcessPoolExecutor(max_workers=min(jobs, len(runs))) as pool:
-        futures = [pool.submit(execute, r) for r in runs]
+        active = {pool.submit(execute, r) for r in itertools.islice(queue, 2 * jobs)}
         try:
-            for fut in as_completed(futures):
-                yield fut.result()
+            while active:
+                done, active = wait(active, return_when=FIRST_COMPLETED)
+                active |= {pool.submit(execute, r) for r in itertools.islice(queue, len(done))}
+                for fut in done:
+                    yield fut.result()
         finally:
-            for fut in futures:
+            for fut in active:
                 fut.cancel()
 
 
@@ -92,14 +98,17 @@ def _dask(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome]:
                                processes=True, dashboard_address=None)
     try:
         try:
-            client = Client(cluster if cluster is not None else config.scheduler, timeout="20s")
+            client = Client(cluster if cluster is not None else config.scheduler, timeout="10s")
         except (OSError, TimeoutError) as exc:
             raise DfcoaError(f"--scheduler: cannot reach Dask scheduler "
                              f"'{config.scheduler}': {exc}") from None
         with client:
-            futures = [client.submit(execute, r, key=f"run-{r.key}", pure=False) for r in runs]
-            for fut in dask_completed(futures):
-                yield fut.result()
+            done = dask_completed([client.submit(execute, r, key=f"run-{r.key}", pure=False)
+                                   for r in runs])
+            for fut in done:
+                outcome = fut.result()
+                fut.release()  # the cluster may forget the finished log
+                yield outcome
     finally:
         if cluster is not None:
             cluster.close()
