@@ -8,28 +8,16 @@ machine is noisy; compare ratios, not absolute times across runs.
 from __future__ import annotations
 
 import datetime
-import platform
 from pathlib import Path
 
-import numpy as np
-
 from benchmarks import bench_lidar, bench_sim
+from dfcoa_opt.environment import machine, versions
 
 #: Targets from the issues (what, us). Matched by row-title prefix.
 TARGETS = {
     "lidar scan 120 beams, 350x350 grid": 20.0,
     "simulator step, 4 unicycles": 500.0,
 }
-
-
-def _cpu() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def _target(what: str) -> str:
@@ -42,13 +30,8 @@ def _target(what: str) -> str:
 def main() -> None:
     """Run every benchmark module, print the table, write results.md."""
     rows = bench_lidar.run() + bench_sim.run()
-    import numba
-    import scipy
-
     head = [f"# Benchmarks ({datetime.date.today().isoformat()})", "",
-            f"CPU: {_cpu()}, {__import__('os').cpu_count()} cores; Python "
-            f"{platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, "
-            f"numba {numba.__version__}.", "",
+            f"CPU: {machine()}; {versions()}.", "",
             "Ratio = reference median / our median, both measured in this run.", "",
             "| what | median (us) | min-max (us) | target | reference | ref median (us) | ratio |",
             "|---|---|---|---|---|---|---|"]

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from dfcoa_opt import environment
 from dfcoa_opt import metrics as run_metrics
 from dfcoa_opt.bench import plots, report
 from dfcoa_opt.errors import DfcoaError
@@ -133,7 +134,7 @@ def test_csv_parses_with_numbers():
 # ----------------------------------------------------------------------- environment
 def test_environment_header(tmp_path, monkeypatch):
     folder = write_results(tmp_path / "res", synthetic_rows())
-    monkeypatch.setattr(report, "PACKAGES", (*report.PACKAGES, "no-such-package-xyz"))
+    monkeypatch.setattr(environment, "PACKAGES", (*environment.PACKAGES, "no-such-package-xyz"))
     head = report.environment_header(folder)
     assert "Date (newest finished run): 2024-05-01T11:00:00-02:00" in head
     assert SHA in head and f"`{SHA[:12]}`" in head and "**demo**" in head

@@ -9,10 +9,8 @@ row's seed and overrides, because maps may depend on both.
 
 from __future__ import annotations
 
-import hashlib
 import io
 import math
-import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -20,6 +18,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from dfcoa_opt.atomic import atomic_write
+from dfcoa_opt.bench.store import file_sha256
+from dfcoa_opt.bench.sweep import safe_name
 from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.plotting import draw_world, new_figure, robot_colors
 from dfcoa_opt.sim.loader import load_scenario
@@ -222,15 +222,9 @@ def _changed(row: Row) -> bool:
     if not want:
         return False
     try:
-        have = hashlib.sha256(Path(str(row["scenario_file"])).read_bytes()).hexdigest()
+        return file_sha256(str(row["scenario_file"])) != want
     except OSError:
         return True
-    return not have.startswith(str(want).lower())
-
-
-def safe_name(name: Any) -> str:
-    """A file-name-safe version of a scenario name, metric or hash."""
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name)) or "_"
 
 
 def overlay_figures(rows: Sequence[Row], results_dir: str | Path, out_dir: str | Path,

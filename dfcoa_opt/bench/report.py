@@ -13,17 +13,15 @@ import csv
 import io
 import json
 import math
-import os
-import platform
 from collections.abc import Iterable, Mapping, Sequence
 from datetime import datetime, timezone
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from scipy import stats
 
+from dfcoa_opt import environment
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench import plots
 from dfcoa_opt.errors import DfcoaError
@@ -34,9 +32,6 @@ DEFAULT_METRICS: tuple[str, ...] = (
     "min_inter_robot_distance", "min_obstacle_clearance", "path_length_mean",
 )
 
-#: Packages listed in the environment header (distribution names).
-PACKAGES: tuple[str, ...] = ("dfcoa-opt", "numpy", "scipy", "matplotlib", "osqp", "qpsolvers",
-                             "casadi", "numba")
 DEFAULT_BY: tuple[str, ...] = ("scenario", "controller", "overrides_hash")
 _REQUIRED = ("key", "scenario", "controller", "seed", "status")
 _MAX_ERRORS = 5  # distinct error messages listed under a table
@@ -295,25 +290,6 @@ def csv_table(groups: Sequence[Mapping[str, Any]],
 
 
 # ------------------------------------------------------------------------ environment
-def _version(dist: str) -> str:
-    """Installed version of a distribution, or ``"not installed"``."""
-    try:
-        return metadata.version(dist)
-    except metadata.PackageNotFoundError:
-        return "not installed"
-
-
-def _cpu_model() -> str:
-    """CPU model from ``/proc/cpuinfo``, else ``platform.processor()``, else ``"unknown"``."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text(errors="replace").splitlines():
-            if line.startswith("model name") and ":" in line:
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
 def _parse_time(text: Any) -> datetime | None:
     """An ISO-8601 time (``Z`` allowed; naive means UTC), or None when unparsable."""
     try:
@@ -353,8 +329,6 @@ def environment_header(results_dir: str | Path) -> str:
                     if (r.get("provenance") or {}).get("host")})
     keys = manifest.get("keys")
     planned = f" of {len(keys)} in the manifest" if isinstance(keys, list) else ""
-    versions = [f"python {platform.python_version()}"]
-    versions += [f"{p} {_version(p)}" for p in PACKAGES]
     lines = [
         f"- Sweep: **{manifest.get('name', 'unknown')}** (`{manifest.get('sweep_file', '?')}`, "
         f"sha256 `{digest[:12]}`)",
@@ -362,8 +336,8 @@ def environment_header(results_dir: str | Path) -> str:
         f"- Date (newest finished run): {newest_finished(rows) or 'unknown'}",
         f"- Runs: {len(rows)}{planned} ({sum(r['status'] == 'failed' for r in rows)} failed); "
         f"hosts: {', '.join(hosts) or 'unknown'}",
-        f"- CPU: {_cpu_model()}, {os.cpu_count() or '?'} cores",
-        f"- Packages: {', '.join(versions)}",
+        f"- CPU: {environment.machine()}",
+        f"- Packages: {environment.versions()}",
     ]
     return "\n".join(lines) + "\n"
 

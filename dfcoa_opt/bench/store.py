@@ -58,8 +58,8 @@ def code_fingerprint() -> str:
     return h.hexdigest()[:16]
 
 
-@functools.lru_cache(maxsize=256)
-def _file_sha(path: str) -> str:
+def file_sha256(path: str) -> str:
+    """First 16 hex digits of the SHA-256 of a file's bytes (rows record scenario files so)."""
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 
 
@@ -105,7 +105,7 @@ class ResultsStore:
         """A row exists for ``run`` from this code and this scenario file."""
         row = self.read_row(run.key)
         return (row is not None and row.get("code") == code_fingerprint()
-                and row.get("scenario_sha256") == _file_sha(run.scenario_file))
+                and row.get("scenario_sha256") == file_sha256(run.scenario_file))
 
     def pending(self, runs: Iterable[RunSpec], rerun: bool = False) -> list[RunSpec]:
         """The runs to execute: all with ``rerun``, else those not done."""
@@ -116,7 +116,7 @@ class ResultsStore:
         """Store one finished run: its log first, then its row (both atomic)."""
         row = dict(outcome.row)
         row["code"] = code_fingerprint()
-        row["scenario_sha256"] = _file_sha(row["scenario_file"])
+        row["scenario_sha256"] = file_sha256(row["scenario_file"])
         if outcome.npz is not None:
             atomic_write(self.root / row["log"], outcome.npz)
         return atomic_write(self.row_path(row["key"]),

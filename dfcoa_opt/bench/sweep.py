@@ -41,7 +41,12 @@ from dfcoa_opt.params import build, param
 from dfcoa_opt.sim.loader import load_scenario, read_toml
 from dfcoa_opt.sim.scenario import Scenario
 
-_UNSAFE = re.compile(r"[^A-Za-z0-9_.+-]")
+_UNSAFE = re.compile(r"[^A-Za-z0-9_.+-]+")
+
+
+def safe_name(name: Any) -> str:
+    """A file-name-safe form of a name: runs of other characters become ``_``."""
+    return _UNSAFE.sub("_", str(name)) or "_"
 
 
 @dataclass(frozen=True)
@@ -94,8 +99,8 @@ class RunSpec:
     @property
     def key(self) -> str:
         """File-name-safe unique id of the run."""
-        name = _UNSAFE.sub("-", self.scenario)
-        return f"{name}__{self.controller}__{self.overrides_hash}__s{self.seed}"
+        return (f"{safe_name(self.scenario)}__{safe_name(self.controller)}__"
+                f"{self.overrides_hash}__s{self.seed}")
 
 
 @dataclass(frozen=True)
