@@ -1,20 +1,35 @@
 """Pose estimation: where the pose in each observation comes from.
 
-An estimator has ``reset(scenario, rng)`` and
+An estimator is built as ``cls(scenario)``, has ``reset(rng)`` and
 ``estimate(true_pose, twist, scan, dt) -> (N, 3)``: it receives the true pose
 only to simulate its own sensors (odometry noise); it must not pass it through
 unless it is the ``truth`` estimator. Estimators are registered by name; the
-scenario picks one with ``[localization] mode``.
+scenario picks one with ``[localization] mode``. An estimator with options
+has a ``Params`` dataclass; the scenario's ``[localization.options]`` table is
+validated against it at load time (:func:`estimator_options`) and the
+estimator reads it the same way. Modules that register estimators are listed
+in :data:`ESTIMATOR_MODULES`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import importlib
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
+from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.params import build
+
+#: Modules of this distribution that register estimators when imported.
+ESTIMATOR_MODULES: tuple[str, ...] = ()
 _ESTIMATORS: dict[str, Callable[..., Any]] = {}
+
+
+def _load() -> None:
+    for mod in ESTIMATOR_MODULES:
+        importlib.import_module(mod)
 
 
 def register_estimator(name: str) -> Callable[[type], type]:
@@ -29,11 +44,29 @@ def register_estimator(name: str) -> Callable[[type], type]:
 
 def estimator_names() -> list[str]:
     """Sorted names of the registered estimators."""
+    _load()
     return sorted(_ESTIMATORS)
+
+
+def estimator_options(name: str, options: Mapping[str, Any], source: str) -> Any:
+    """``[localization.options]`` validated against estimator ``name``'s ``Params``.
+
+    Raises:
+        ScenarioError: Unknown or bad key (names ``localization.options.<key>``).
+    """
+    _load()
+    params = getattr(_ESTIMATORS[name], "Params", None)
+    if params is None:
+        if options:
+            raise ScenarioError(source, "localization.options",
+                                f"estimator '{name}' takes no options")
+        return None
+    return build(params, dict(options), source, "localization.options")
 
 
 def make_estimator(name: str, scenario: Any) -> Any:
     """Instantiate the estimator ``name`` for ``scenario``."""
+    _load()
     return _ESTIMATORS[name](scenario)
 
 

@@ -141,11 +141,13 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
     _check_free(world.grid, spec.leader.goal, source, "leader.goal")
     _check_names(spec, source)
 
-    from dfcoa_opt.planning.registry import get_planner
+    from dfcoa_opt.planning.registry import get_planner, planner_options
 
+    options = planner_options(spec.leader.planner, spec.leader.planner_options, source)
     try:
         path = get_planner(spec.leader.planner)(world.grid, np.asarray(spec.leader.start, float),
-                                                np.asarray(spec.leader.goal, float), spec.leader)
+                                                np.asarray(spec.leader.goal, float), spec.leader,
+                                                options)
     except DfcoaError as exc:
         raise ScenarioError(source, "leader.goal", str(exc)) from None
     if path is None or len(path) == 0:
@@ -171,7 +173,7 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
 def _check_names(spec: ScenarioSpec, source: str) -> None:
     """Registered planner, localization mode and controller override tables."""
     from dfcoa_opt.control.registry import check_overrides
-    from dfcoa_opt.localization import estimator_names
+    from dfcoa_opt.localization import estimator_names, estimator_options
     from dfcoa_opt.planning.registry import planner_names
 
     if spec.leader.planner not in planner_names():
@@ -182,6 +184,7 @@ def _check_names(spec: ScenarioSpec, source: str) -> None:
         raise ScenarioError(source, "localization.mode", f"unknown mode '{spec.localization.mode}'"
                             f"{did_you_mean(spec.localization.mode, estimator_names())}; "
                             f"available: {', '.join(estimator_names())}")
+    estimator_options(spec.localization.mode, spec.localization.options, source)
     check_overrides(spec.controllers, source)
 
 

@@ -219,6 +219,9 @@ class LeaderSpec:
     settle_tolerance: float = param(0.5, doc="Formation is settled when every robot is this "
                                              "close to its slot.", unit="m", gt=0.0)
     planner: str = param("straight", doc="Global planner of the leader path (registered name).")
+    planner_options: dict[str, Any] = param(
+        default_factory=dict, doc="Options of the planner, checked against its Params "
+                                  "(see docs/methods/).")
     waypoints: tuple[Vec2, ...] = param((), doc="Via points for the 'straight' planner.", unit="m")
 
 
@@ -258,6 +261,8 @@ class LocalizationSpec:
 
     mode: str = param("truth", doc="'truth' (ground truth) or a registered estimator, e.g. "
                                    "'mcl'. Shorthand: localization = \"mcl\".")
+    options: dict[str, Any] = param(default_factory=dict, doc="Options of the estimator, "
+                                                              "checked against its Params.")
 
 
 @dataclass(frozen=True)
