@@ -365,6 +365,11 @@ def mse_per_robot(log: RunLog) -> FloatArray:
 
 
 # --------------------------------------------------------------------------- summary
+def localization_error(log: RunLog) -> FloatArray:
+    """``(T, N)`` distance between estimated and true position, m (0 with ``truth``)."""
+    return np.hypot(*(log.pose_est[..., :2] - log.pose[..., :2]).transpose(2, 0, 1))
+
+
 def summary(log: RunLog, spec: Settings = None) -> dict[str, Any]:
     """Every scalar metric of a run under its JSON key (docs/metrics.md).
 
@@ -413,5 +418,6 @@ def summary(log: RunLog, spec: Settings = None) -> dict[str, Any]:
         **filter_counts(log),
         "mse_mean": _mean(mse_per_robot(log)),
         "lf_error_mean": _mean(leader_follower_position_error(log)),
+        "loc_rmse": _rms(localization_error(log)),
         "steps": int(log.n_steps),
     }

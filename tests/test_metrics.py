@@ -318,3 +318,13 @@ def test_shape_error_invariant_under_common_rigid_motion(pose, slots, shift, the
     np.testing.assert_allclose(m.formation_shape_error(moved), base, atol=1e-9)
     ec = m.formation_centroid_error(make_log(pose=pose, slots=slots))
     np.testing.assert_allclose(m.formation_centroid_error(moved), ec, atol=1e-9)
+
+
+def test_loc_rmse_is_the_rms_position_estimate_error():
+    log = make_log()
+    assert m.summary(log)["loc_rmse"] == 0.0
+    est = log.pose.copy()
+    est[:, 0, :2] += [0.3, 0.4]          # one of four robots off by 0.5 m at every step
+    est[:, 1, 2] += 1.0                  # heading errors do not count
+    log = make_log(pose_est=est)
+    assert m.summary(log)["loc_rmse"] == pytest.approx(math.sqrt(0.25 / 4))
