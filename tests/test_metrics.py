@@ -41,6 +41,7 @@ def make_log(pose=None, slots=None, leader=None, twist=None, dt=0.1, radius=0.2,
         robot_contacts=zi.copy(), obstacle_contacts=zi.copy(), dynamic_contacts=zi.copy(),
         collision_events=zi.copy(), dyn_pos=np.zeros((n_t, 0, 2)), dyn_radius=np.zeros(0),
         filter_status=z.astype(np.int8), filter_slack=z.copy(), filter_time=z.copy(),
+        steering=np.full_like(z, np.nan),
         meta={"dt": dt, "robot_radius": radius, "reached_goal": False, "time_to_goal": None,
               **(meta or {})},
     )

@@ -57,7 +57,7 @@ def make_log(n_steps: int = T, n_dyn: int = M) -> RunLog:
         obstacle_contacts=zi.copy(), dynamic_contacts=zi.copy(), collision_events=zi.copy(),
         dyn_pos=dyn_pos, dyn_radius=np.full(n_dyn, 0.4),
         filter_status=np.zeros((n_steps, N), dtype=np.int8), filter_slack=zf.copy(),
-        filter_time=zf.copy(),
+        filter_time=zf.copy(), steering=np.full_like(zf, np.nan),
         meta={"scenario": "unit", "controller": "dfcoa", "seed": 7, "robot_radius": 0.3},
     )
 

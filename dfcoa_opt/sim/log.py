@@ -56,6 +56,9 @@ class RunLog:
             there is no filter).
         filter_slack: ``(T, N)`` constraint violation left by the filter.
         filter_time: ``(T, N)`` filter solve time per robot, s.
+        steering: ``(T, N)`` steering direction chosen by the controller's local
+            planner, robot frame, rad (NaN when the controller reports none;
+            controllers report it as ``last_steering``).
         meta: JSON-serialisable run facts: scenario, controller, seed, dt, n,
             robot_radius, reached_goal, time_to_goal, steps, ...
     """
@@ -80,6 +83,7 @@ class RunLog:
     filter_status: NDArray[np.int8]
     filter_slack: FloatArray
     filter_time: FloatArray
+    steering: FloatArray
     meta: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
@@ -101,7 +105,7 @@ class RunLog:
                    dynamic_contacts=z(steps, np.int32), collision_events=z(steps, np.int32),
                    dyn_pos=z((steps, m, 2)), dyn_radius=z(m),
                    filter_status=z((steps, n), np.int8), filter_slack=z((steps, n)),
-                   filter_time=z((steps, n)))
+                   filter_time=z((steps, n)), steering=np.full((steps, n), np.nan))
 
     def truncated(self, end: int) -> RunLog:
         """The first ``end`` instants (per-run arrays ``offsets``, ``dyn_radius`` kept)."""

@@ -165,6 +165,9 @@ class Simulator:
             buf.dynamic_contacts[k] = int(dyn_hit.any(axis=1).sum()) if m else 0
             buf.collision_events[k] = events
             buf.dyn_pos[k], buf.command[k] = dyn_pos, cmd
+            steer = getattr(self.controller, "last_steering", None)
+            if steer is not None:
+                buf.steering[k] = steer
             res = getattr(self.controller, "last_result", None)
             if res is not None:
                 buf.filter_status[k], buf.filter_slack[k] = res.status, res.slack
