@@ -75,6 +75,26 @@ def _executor_args(p: argparse.ArgumentParser) -> None:
                    "with N workers")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="progress bar (default: when stdout is a terminal)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="dotted scenario key set in every run, VALUE in TOML syntax "
+                        "(e.g. --set t_max=5.0); repeatable")
+
+
+def _overrides(items: Sequence[str]) -> dict | None:
+    """``--set KEY=VALUE`` options as a dict (VALUE parsed as TOML)."""
+    import tomllib
+
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise DfcoaError(f"--set: '{item}' is not KEY=VALUE")
+        try:
+            out[key.strip()] = tomllib.loads(f"v = {value}")["v"]
+        except tomllib.TOMLDecodeError:
+            raise DfcoaError(f"--set: {key.strip()}: '{value}' is not a TOML value (strings "
+                             "need quotes)") from None
+    return out or None
 
 
 def _executor(a: argparse.Namespace):
@@ -91,7 +111,7 @@ def _cmd_bench(a: argparse.Namespace) -> int:
     if a.seeds is not None and a.seeds < 1:
         raise DfcoaError(f"--seeds: must be >= 1, got {a.seeds}")
     config = _executor(a)
-    sweep = load_sweep(a.sweep, a.seeds)
+    sweep = load_sweep(a.sweep, a.seeds, _overrides(a.set))
     out = Path(a.out) if a.out else Path("results") / sweep.name
     result = run_sweep(sweep, out, config, rerun=a.rerun, progress=a.progress)
     print(result.summary())
@@ -188,7 +208,8 @@ def _cmd_figures(a: argparse.Namespace) -> int:
     if a.seeds is not None and a.seeds < 1:
         raise DfcoaError(f"--seeds: must be >= 1, got {a.seeds}")
     index = make_figures(Path(a.scenarios), Path(a.out), Path(a.cache), _executor(a),
-                         only=a.only, seeds=a.seeds, progress=a.progress)
+                         only=a.only, seeds=a.seeds, progress=a.progress,
+                         overrides=_overrides(a.set))
     print(index)
     return 0
 

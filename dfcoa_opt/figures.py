@@ -30,6 +30,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.executors import ExecutorConfig
@@ -100,7 +101,8 @@ def recipes() -> list[Recipe]:
 
 def make_figures(scenarios: Path, out: Path, cache: Path,
                  config: ExecutorConfig | None = None, only: Sequence[str] | None = None,
-                 seeds: int | None = None, progress: bool | None = None) -> Path:
+                 seeds: int | None = None, progress: bool | None = None,
+                 overrides: dict[str, Any] | None = None) -> Path:
     """Run every recipe's sweep (reusing cached runs) and render its artefacts.
 
     Args:
@@ -110,6 +112,8 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
         config: Executor for the sweeps (default: local processes).
         only: Run only these recipes (the index still lists every rendered one).
         seeds: Override every sweep's seed count (quick smoke runs).
+        overrides: Dotted scenario keys set in every run (e.g. ``{"t_max": 5.0}``);
+            with ``seeds``, a reduced configuration for smoke tests.
         progress: Progress bars; default when stdout is a terminal.
 
     Returns:
@@ -129,7 +133,7 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
             continue
         t0 = time.perf_counter()
         result = run_sweep(scenarios / r.sweep, cache / r.name, config, seeds=seeds,
-                           progress=progress)
+                           progress=progress, overrides=overrides)
         dest = out / r.name
         dest.mkdir(parents=True, exist_ok=True)
         arts = r.render(result.store, dest)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from dfcoa_opt.bench.executors import ExecutorConfig, run_all
 from dfcoa_opt.bench.store import ResultsStore
@@ -50,7 +51,8 @@ def _progress(total: int, desc: str, enabled: bool | None):
 
 def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig | None = None,
               rerun: bool = False, seeds: int | None = None,
-              progress: bool | None = None) -> SweepResult:
+              progress: bool | None = None,
+              overrides: dict[str, Any] | None = None) -> SweepResult:
     """Run every pending run of a sweep and store the rows.
 
     Args:
@@ -59,6 +61,7 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
         config: Executor (default: local processes, one per core).
         rerun: Run everything again, even runs that have a row.
         seeds: Replace the sweep's seed count (only when ``sweep`` is a path).
+        overrides: Dotted scenario keys set in every run (only when ``sweep`` is a path).
         progress: Show a progress bar; default: only when stdout is a terminal.
 
     Returns:
@@ -67,7 +70,7 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
     Raises:
         ScenarioError: Bad sweep file (before any run starts).
     """
-    sw = sweep if isinstance(sweep, Sweep) else load_sweep(sweep, seeds)
+    sw = sweep if isinstance(sweep, Sweep) else load_sweep(sweep, seeds, overrides)
     store = ResultsStore(out)
     store.write_manifest(sw)
     todo = store.pending(sw.runs, rerun)

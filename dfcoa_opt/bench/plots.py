@@ -71,7 +71,7 @@ def scenario_for_row(row: Row) -> Scenario:
                          row.get("overrides") or {})
 
 
-def _save_png(fig: Figure, path: str | Path) -> Path:
+def save_png(fig: Figure, path: str | Path) -> Path:
     """Render ``fig`` to PNG and write it atomically to ``path``."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
@@ -137,7 +137,7 @@ def metric_boxplots(rows: Sequence[Row], metric: str, path: str | Path,
     if not scenarios:
         axes[0].text(0.5, 0.5, "no runs", transform=axes[0].transAxes, ha="center")
     axes[0].set_ylabel(label or metric_header(metric))
-    return _save_png(fig, path)
+    return save_png(fig, path)
 
 
 def _load_log(results_dir: Path, row: Row) -> RunLog:
@@ -213,7 +213,7 @@ def trajectory_overlay(rows: Sequence[Row], results_dir: str | Path, path: str |
     suffix = "" if var == "base" else f" - overrides {var}"
     ax.set_title(f"{scen} - seed {seed}{suffix}")
     fig.legend(loc="outside right upper", fontsize="small")
-    return _save_png(fig, path)
+    return save_png(fig, path)
 
 
 def _changed(row: Row) -> bool:

@@ -192,7 +192,8 @@ def _for_controller(overrides: Mapping[str, Any], cid: str) -> str:
                       if not k.startswith("controllers.") or k.split(".")[1] == cid})
 
 
-def load_sweep(path: str | Path, seeds: int | None = None) -> Sweep:
+def load_sweep(path: str | Path, seeds: int | None = None,
+               overrides: Mapping[str, Any] | None = None) -> Sweep:
     """Read, validate and expand a sweep file.
 
     Every scenario is loaded once per override set (with the first seed), so a
@@ -201,6 +202,8 @@ def load_sweep(path: str | Path, seeds: int | None = None) -> Sweep:
     Args:
         path: The sweep ``.toml``.
         seeds: Replace the file's seed count (e.g. a quick smoke run).
+        overrides: Dotted keys set in every run on top of the file's own
+            (e.g. ``{"t_max": 5.0}`` for a reduced configuration).
 
     Raises:
         ScenarioError: One line naming the file, the key and the problem.
@@ -215,7 +218,7 @@ def load_sweep(path: str | Path, seeds: int | None = None) -> Sweep:
     raw = path.read_bytes()
     files = _scenario_files(spec, src, path.parent)
     ctrls = _controllers(spec, src)
-    combos = _combinations(spec, src)
+    combos = [{**c, **(overrides or {})} for c in _combinations(spec, src)]
     names: dict[str, Path] = {}
     runs: list[RunSpec] = []
     n_seeds = spec.seeds if seeds is None else seeds

@@ -218,6 +218,10 @@ class LeaderSpec:
                                unit="m", gt=0.0)
     settle_tolerance: float = param(0.5, doc="Formation is settled when every robot is this "
                                              "close to its slot.", unit="m", gt=0.0)
+    wait_for_formation: bool = param(True, doc="The run ends when the leader is at the goal "
+                                               "and, if true, the formation has settled "
+                                               "(paper 000 Algorithm 2 stops at the leader's "
+                                               "goal: false).")
     planner: str = param("straight", doc="Global planner of the leader path (registered name).")
     planner_options: dict[str, Any] = param(
         default_factory=dict, doc="Options of the planner, checked against its Params "

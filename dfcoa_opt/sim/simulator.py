@@ -11,8 +11,9 @@ One step at ``t_k = k dt``:
 4. contacts are counted (a run goes on after a collision unless
    ``stop_on_collision``), everything is logged, the leader advances.
 
-The run ends when the leader is within ``goal_radius`` of the goal and every
-robot is within ``settle_tolerance`` of its slot, or at ``t_max``.
+The run ends when the leader is within ``goal_radius`` of the goal and (unless
+``leader.wait_for_formation`` is false) every robot is within
+``settle_tolerance`` of its slot, or at ``t_max``.
 """
 
 from __future__ import annotations
@@ -173,7 +174,8 @@ class Simulator:
                 buf.filter_status[k], buf.filter_slack[k] = res.status, res.slack
                 buf.filter_time[k] = res.solve_time
             # -- stop conditions
-            settled = np.all(np.hypot(*(pos - slots).T) <= spec.leader.settle_tolerance)
+            settled = (not spec.leader.wait_for_formation
+                       or np.all(np.hypot(*(pos - slots).T) <= spec.leader.settle_tolerance))
             if leader.at_goal and settled:
                 reached, t_goal = True, t
                 break

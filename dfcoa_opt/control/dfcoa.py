@@ -1,0 +1,82 @@
+"""``dfcoa``: the DFCOA controller of paper 000 (the parts composed).
+
+Per robot, from its own observation only (distributed, §4.5.4):
+
+1. the formation tracking law (eq 15-28, :mod:`dfcoa_opt.control.formation_law`)
+   drives the robot's tracking point to its slot behind the broadcast virtual
+   leader;
+2. the improved VFH* with inter-robot repulsion (Algorithm 1,
+   :mod:`dfcoa_opt.control.vfh`) turns the robot's LiDAR scan and the
+   neighbours it perceives into a safe steering direction;
+3. the safety layer of §4.5.3 blends the two: the formation command passes
+   unchanged far from obstacles and the VFH* steering overrides it when they
+   are close (:func:`dfcoa_opt.control.vfh.blend`).
+
+The pose comes from the scenario's estimator (``truth`` or ``mcl``, Algorithm
+3). The virtual leader follows the improved A* path by pure pursuit in the
+simulator (``leader.planner = "improved_astar"``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dfcoa_opt.control.base import Observation
+from dfcoa_opt.control.formation_law import formation_tracking_law
+from dfcoa_opt.control.registry import register
+from dfcoa_opt.control.vfh import VFHParams, VFHStar, blend
+from dfcoa_opt.geometry import wrap_angle
+from dfcoa_opt.params import param
+
+
+@register("dfcoa")
+class DFCOA:
+    """Formation tracking law (eq 26-28, re-derived) + improved VFH* safety layer."""
+
+    command = "unicycle"
+
+    @dataclass(frozen=True)
+    class Params:
+        """Parameters of ``dfcoa`` (Tables 3 and 4 for k1, k2, d)."""
+
+        k1: float = param(2.8, doc="Longitudinal gain k1 of eq 24.", unit="1/s", gt=0.0)
+        k2: float = param(0.7, doc="Lateral gain k2 of eq 24.", unit="1/s", gt=0.0)
+        d: float = param(0.98, doc="Distance from the robot centre to its tracking point "
+                                   "(eq 15).", unit="m", gt=0.0)
+        compensate_tracking_offset: bool = param(
+            False, doc="Aim the tracking point d ahead of the slot so that the robot centre, "
+                       "not the tracking point, sits on the slot (the paper does not).")
+        avoidance: bool = param(True, doc="Use the improved VFH* safety layer (needs a LiDAR).")
+        vfh: VFHParams = field(default_factory=VFHParams,
+                               metadata={"doc": "Improved VFH* and blending (Algorithm 1)."})
+
+    def __init__(self, params: Params) -> None:
+        self.p = params
+        self.vfh: VFHStar | None = None
+        self.last_steering: np.ndarray | None = None
+
+    def reset(self, scenario, rng: np.random.Generator) -> None:
+        """New VFH* state (hysteresis); its robot radius is the scenario's ``robots.radius``."""
+        vfh = dataclasses.replace(self.p.vfh, robot_radius=scenario.spec.robots.radius)
+        self.vfh = VFHStar(vfh, scenario.n)
+        self.last_steering = np.full(scenario.n, np.nan)
+
+    def act(self, obs: Observation) -> np.ndarray:
+        """Row i uses robot i's pose, scan, neighbours and the broadcast leader."""
+        offsets = obs.slot_offset
+        if self.p.compensate_tracking_offset:
+            offsets = offsets + np.array([self.p.d, 0.0])
+        cmd = formation_tracking_law(offsets, obs.pose, obs.leader, self.p.k1, self.p.k2,
+                                     self.p.d)
+        if not self.p.avoidance or obs.scan is None or self.vfh is None:
+            return cmd
+        # target direction: towards the slot's tracking target, in the robot frame
+        target = obs.slot - obs.pose[:, :2]
+        heading = np.arctan2(target[:, 1], target[:, 0])
+        target_dir = wrap_angle(heading - obs.pose[:, 2])
+        res = self.vfh.step(obs.scan, obs.neighbours, obs.pose, target_dir)
+        self.last_steering = res.direction
+        return blend(cmd, res.direction, res.danger, self.p.vfh)
