@@ -77,6 +77,6 @@ class DFCOA:
         target = obs.slot - obs.pose[:, :2]
         heading = np.arctan2(target[:, 1], target[:, 0])
         target_dir = wrap_angle(heading - obs.pose[:, 2])
-        res = self.vfh.step(obs.scan, obs.neighbours, obs.pose, target_dir)
+        res = self.vfh.step(obs.scan, obs.neighbours, obs.pose, target_dir, obs.robot_ids)
         self.last_steering = res.direction
         return blend(cmd, res.direction, res.danger, self.p.vfh)

@@ -419,19 +419,22 @@ class VFHStar:
         self.previous_world = np.full(self.n_robots, np.nan)
 
     def step(self, scan: LaserScan | None, neighbours: Neighbours | None, pose: ArrayLike,
-             target_dir: ArrayLike) -> VFHResult:
+             target_dir: ArrayLike, rows: ArrayLike | None = None) -> VFHResult:
         """Run :func:`vfh_step` and update the state.
 
         Args:
-            scan: Own scans, ``(n_robots, B)`` ranges, or None.
+            scan: Own scans, ``(R, B)`` ranges, or None.
             neighbours: Neighbour table, or None.
-            pose: ``(n_robots, 3)`` own poses, m, m, rad.
-            target_dir: ``(n_robots,)`` target direction in the robot frame, rad.
+            pose: ``(R, 3)`` own poses, m, m, rad.
+            target_dir: ``(R,)`` target direction in the robot frame, rad.
+            rows: ``(R,)`` state rows (robot indices, ``Observation.robot_ids``) of the
+                inputs; default all ``n_robots`` rows in order.
         """
-        p = np.asarray(pose, dtype=float).reshape(self.n_robots, 3)
-        prev = wrap_angle(self.previous_world - p[:, 2])
-        res = vfh_step(scan, neighbours, p, target_dir, self.params, self.binary, prev)
-        self.binary = res.binary
-        self.previous_world = np.where(res.found, wrap_angle(res.direction + p[:, 2]),
-                                       self.previous_world)
+        idx = np.arange(self.n_robots) if rows is None else np.asarray(rows, dtype=np.intp)
+        p = np.asarray(pose, dtype=float).reshape(len(idx), 3)
+        prev = wrap_angle(self.previous_world[idx] - p[:, 2])
+        res = vfh_step(scan, neighbours, p, target_dir, self.params, self.binary[idx], prev)
+        self.binary[idx] = res.binary
+        self.previous_world[idx] = np.where(res.found, wrap_angle(res.direction + p[:, 2]),
+                                            self.previous_world[idx])
         return res
