@@ -23,7 +23,7 @@ from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.params import build
 
 #: Modules of this distribution that register estimators when imported.
-ESTIMATOR_MODULES: tuple[str, ...] = ()
+ESTIMATOR_MODULES: tuple[str, ...] = ("dfcoa_opt.localization.mcl",)
 _ESTIMATORS: dict[str, Callable[..., Any]] = {}
 
 

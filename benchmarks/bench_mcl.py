@@ -1,0 +1,143 @@
+"""Benchmark: Monte Carlo localization (dfcoa_opt.localization.mcl) on the DFCOA S1 map.
+
+Run ``python -m benchmarks.bench_mcl``. The true poses of a whole S1 run
+(``scenarios/dfcoa_s1.toml``, 4 robots, 120-beam LiDAR, ``goto_slot``) are
+recorded once with ground-truth localization, and their scans (grid plus the
+other robots' bodies) are cast in advance. Each row then times
+``estimate()`` for the 4 robots at every step of that run, with
+``time.perf_counter``, after one warm-up pass (numba compilation excluded). The
+reference is the same estimator with its numba sensor-update kernel replaced by
+the vectorised-numpy one below (:func:`numpy_sensor_update`). Two more rows
+time the whole simulator step with MCL (reference: the same step with
+``truth``), and the whole S1 run.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.bench_lidar import row
+from dfcoa_opt.control.registry import make_controller
+from dfcoa_opt.localization import mcl_models
+from dfcoa_opt.localization.mcl import MonteCarloLocalization
+from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.sim.simulator import Simulator
+from dfcoa_opt.world.lidar import Lidar
+
+ROOT = Path(__file__).resolve().parents[1] / "scenarios"
+RUNS = 3
+
+
+def s1_path() -> Path:
+    """The S1 scenario file (``scenarios/`` or, in older trees, ``scenarios/bench/``)."""
+    for p in (ROOT / "dfcoa_s1.toml", ROOT / "bench" / "dfcoa_s1.toml"):
+        if p.exists():
+            return p
+    raise FileNotFoundError("dfcoa_s1.toml not found under scenarios/")
+
+
+def numpy_sensor_update(parts, w, ptr, upd, ex, ey, nvalid, table, outside, ox, oy, inv_h, amcl,
+                        est):
+    """Reference: :func:`dfcoa_opt.localization.mcl_models.sensor_update` in vectorised numpy.
+
+    Same arguments and in-place results (weights and estimates of robots ``upd``).
+    """
+    counts = np.diff(ptr)
+    rid = np.repeat(np.arange(counts.size), counts)
+    sel = upd[rid]
+    if not sel.any():
+        return
+    p, r = parts[sel], rid[sel]
+    c, s = np.cos(p[:, 2])[:, None], np.sin(p[:, 2])[:, None]
+    bx, by = ex[r], ey[r]
+    fx = (p[:, :1] + c * bx - s * by - ox) * inv_h
+    fy = (p[:, 1:2] + s * bx + c * by - oy) * inv_h
+    rows, cols = table.shape
+    inside = (fx >= 0.0) & (fx < cols) & (fy >= 0.0) & (fy < rows)
+    v = np.where(inside, table[np.clip(fy, 0, rows - 1).astype(np.intp),
+                               np.clip(fx, 0, cols - 1).astype(np.intp)], outside)
+    v = np.where(np.arange(bx.shape[1])[None, :] < nvalid[r][:, None], v, 0.0)
+    ll = v.sum(axis=1)
+    if amcl:
+        ll = np.log1p(ll)
+    with np.errstate(divide="ignore"):
+        lw = np.log(w[sel]) + ll
+    starts = np.flatnonzero(np.r_[True, r[1:] != r[:-1]])
+    robots = r[starts]
+    e = np.exp(lw - np.repeat(np.maximum.reduceat(lw, starts), np.diff(np.r_[starts, r.size])))
+    e /= np.repeat(np.add.reduceat(e, starts), np.diff(np.r_[starts, r.size]))
+    w[sel] = e
+    est[robots, 0] = np.add.reduceat(e * p[:, 0], starts)
+    est[robots, 1] = np.add.reduceat(e * p[:, 1], starts)
+    est[robots, 2] = np.arctan2(np.add.reduceat(e * np.sin(p[:, 2]), starts),
+                                np.add.reduceat(e * np.cos(p[:, 2]), starts))
+
+
+def recorded_run() -> tuple:
+    """``(scenario, true poses (T, 4, 3), scans)`` of one S1 run under ``goto_slot``."""
+    sc = load_scenario(s1_path(), overrides={"localization.mode": "mcl"})
+    truth = load_scenario(s1_path())
+    log = Simulator(truth, make_controller("goto_slot")).run()
+    lidar = Lidar(sc.spec.sensors.lidar, sc.world.grid)
+    n = sc.spec.team.n
+    radii, owner = np.full(n, sc.spec.robots.radius), np.arange(n)
+    scans = [lidar.scan(p, p[:, :2], radii, owner) for p in log.pose]
+    return sc, log.pose, scans
+
+
+def time_estimates(sc, poses: np.ndarray, scans: list) -> np.ndarray:
+    """Per-step times (us) of ``estimate()`` over the recorded run (after a warm-up pass)."""
+    est = MonteCarloLocalization(sc)
+    twist = np.zeros((poses.shape[1], 2))
+    out = np.empty(len(poses))
+    for warm in (True, False):
+        est.reset(np.random.default_rng(0))
+        for k, (p, scan) in enumerate(zip(poses, scans, strict=True)):
+            t0 = time.perf_counter()
+            est.estimate(p, twist, scan, sc.spec.dt)
+            if not warm:
+                out[k] = time.perf_counter() - t0
+    return out * 1e6
+
+
+def _per_step_and_run(sc) -> tuple[np.ndarray, np.ndarray]:
+    sim = Simulator(sc, make_controller("goto_slot"))
+    sim.run()  # warm-up
+    step, whole = np.empty(RUNS), np.empty(RUNS)
+    for k in range(RUNS):
+        t0 = time.perf_counter()
+        log = sim.run()
+        whole[k] = time.perf_counter() - t0
+        step[k] = log.meta["wall_time"] / log.meta["steps"]
+    return step * 1e6, whole * 1e6
+
+
+def run() -> list[dict]:
+    """Time MCL on S1; one dict per row."""
+    sc, poses, scans = recorded_run()
+    ours = time_estimates(sc, poses, scans)
+    saved = mcl_models.sensor_update
+    try:
+        mcl_models.sensor_update = numpy_sensor_update
+        ref = time_estimates(sc, poses, scans)
+    finally:
+        mcl_models.sensor_update = saved
+    rows = [row(f"mcl estimate, 4 robots, 120 beams, S1 map ({len(poses)} steps)", ours,
+                "same with vectorised-numpy sensor update", ref)]
+    mcl_step, mcl_run = _per_step_and_run(sc)
+    truth_step, truth_run = _per_step_and_run(load_scenario(s1_path()))
+    rows.append(row("simulator step with mcl, 4 unicycles, 120-beam LiDAR, S1 map", mcl_step,
+                    "same step with truth localization", truth_step))
+    rows.append(row("whole S1 run with mcl (goto_slot)", mcl_run,
+                    "same run with truth localization", truth_run))
+    return rows
+
+
+if __name__ == "__main__":
+    for r in run():
+        print(f"{r['what']}: median {r['median_us']:.1f} us (min {r['min_us']:.1f}, "
+              f"max {r['max_us']:.1f}, n={r['samples']}); {r['reference']}: "
+              f"{r['ref_median_us']:.1f} us; ratio {r['ratio']:.2f}x")
