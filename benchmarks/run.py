@@ -10,7 +10,7 @@ from __future__ import annotations
 import datetime
 from pathlib import Path
 
-from benchmarks import bench_lidar, bench_mcl, bench_sim
+from benchmarks import bench_astar, bench_lidar, bench_mcl, bench_sim
 from dfcoa_opt.environment import machine, versions
 
 #: Targets from the issues (what, us). Matched by row-title prefix.
@@ -19,6 +19,8 @@ TARGETS = {
     "simulator step, 4 unicycles": 500.0,
     "simulator step with mcl": 3000.0,
     "whole S1 run with mcl": 10_000_000.0,
+    "A* search 35x35": 100.0,
+    "A* search 1024x1024": 30000.0,
 }
 
 
@@ -31,7 +33,7 @@ def _target(what: str) -> str:
 
 def main() -> None:
     """Run every benchmark module, print the table, write results.md."""
-    rows = bench_lidar.run() + bench_sim.run() + bench_mcl.run()
+    rows = bench_lidar.run() + bench_sim.run() + bench_mcl.run() + bench_astar.run()
     head = [f"# Benchmarks ({datetime.date.today().isoformat()})", "",
             f"CPU: {machine()}; {versions()}.", "",
             "Ratio = reference median / our median, both measured in this run.", "",

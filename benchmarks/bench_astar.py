@@ -1,0 +1,152 @@
+"""Benchmark: grid A* (dfcoa_opt.planning.astar) against a plain-Python heapq A*.
+
+Run ``python -m benchmarks.bench_astar``. Each row times one call with
+``time.perf_counter`` after a warm-up call (numba compilation excluded). The
+reference is the textbook A* below (heapq, dict g-values, same moves, same
+octile heuristic, no corner cutting), measured in the same run on the same
+problem; both must return the same (optimal) cost, which is checked.
+
+Problems:
+- the paper-000 Scenario 1 map (``scenarios/**/dfcoa_s1.toml``) rasterised at
+  1 cell/m (35 x 35 cells), start (7, 7) m -> goal (12, 29) m;
+- a 1024 x 1024 grid, each cell blocked with probability 0.2 (seed 0), from the
+  bottom-left to the top-right corner (the 2 x 2 corner blocks are cleared).
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from dfcoa_opt.planning.astar import AStarParams, plan, search
+from dfcoa_opt.planning.astar_improved import ImprovedAStarParams
+from dfcoa_opt.world.grid import OccupancyGrid
+
+SQRT2 = math.sqrt(2.0)
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def heapq_astar(occ: list[list[bool]], start: tuple[int, int],
+                goal: tuple[int, int]) -> tuple[float, int]:
+    """Reference: plain-Python A* (heapq); returns (cost in cells, nodes expanded)."""
+    n_rows, n_cols = len(occ), len(occ[0])
+    gr, gc = goal
+
+    def h(r: int, c: int) -> float:
+        dr, dc = abs(r - gr), abs(c - gc)
+        return max(dr, dc) + (SQRT2 - 1.0) * min(dr, dc)
+
+    moves = [(1, 0, 1.0), (-1, 0, 1.0), (0, 1, 1.0), (0, -1, 1.0),
+             (1, 1, SQRT2), (1, -1, SQRT2), (-1, 1, SQRT2), (-1, -1, SQRT2)]
+    g = {start: 0.0}
+    closed: set[tuple[int, int]] = set()
+    heap = [(h(*start), 0.0, start)]
+    while heap:
+        _, _, u = heapq.heappop(heap)
+        if u in closed:
+            continue
+        closed.add(u)
+        if u == goal:
+            return g[u], len(closed)
+        r, c = u
+        for dr, dc, w in moves:
+            vr, vc = r + dr, c + dc
+            if not (0 <= vr < n_rows and 0 <= vc < n_cols) or occ[vr][vc]:
+                continue
+            if dr and dc and (occ[r][vc] or occ[vr][c]):
+                continue
+            v = (vr, vc)
+            ng = g[u] + w
+            if v not in closed and ng < g.get(v, math.inf):
+                g[v] = ng
+                heapq.heappush(heap, (ng + h(vr, vc), -ng, v))
+    return math.inf, len(closed)
+
+
+def s1_grid() -> OccupancyGrid:
+    """The dfcoa_s1 scenario's obstacles at 1 cell/m (35 x 35 cells)."""
+    from dfcoa_opt.sim.loader import read_toml, scenario_from_dict
+
+    path = sorted((ROOT / "scenarios").rglob("dfcoa_s1.toml"))[0]
+    data = read_toml(path)
+    data["world"]["resolution"] = 1
+    data["leader"] = {**data["leader"], "planner": "straight"}
+    return scenario_from_dict(data, str(path), path.parent).world.grid
+
+
+def random_grid(n: int = 1024, density: float = 0.2, seed: int = 0) -> np.ndarray:
+    """``(n, n)`` cells blocked with probability ``density``; corner 2 x 2 blocks cleared."""
+    occ = np.random.default_rng(seed).random((n, n)) < density
+    occ[:2, :2] = occ[-2:, -2:] = False
+    return occ
+
+
+def time_calls(fn: Callable[[], object], samples: int) -> np.ndarray:
+    """Per-call times in us of ``fn()`` (after one warm-up)."""
+    fn()
+    out = np.empty(samples)
+    for k in range(samples):
+        t0 = time.perf_counter()
+        fn()
+        out[k] = time.perf_counter() - t0
+    return out * 1e6
+
+
+def row(what: str, ours: np.ndarray, reference: str, ref: np.ndarray) -> dict:
+    """One result row (medians, extremes and the speed-up ``ref / ours``)."""
+    med, ref_med = float(np.median(ours)), float(np.median(ref))
+    return {"what": what, "median_us": med, "min_us": float(ours.min()),
+            "max_us": float(ours.max()), "samples": len(ours), "reference": reference,
+            "ref_median_us": ref_med, "ratio": ref_med / med}
+
+
+def _check(ours: float, ref: float, what: str) -> None:
+    if abs(ours - ref) > 1e-6:
+        raise AssertionError(f"{what}: cost {ours} differs from the reference {ref}")
+
+
+def run() -> list[dict]:
+    """Time the searches; returns one dict per configuration."""
+    rows = []
+    ref_name = "plain-Python heapq A* (same moves and heuristic)"
+
+    grid = s1_grid()
+    occ = grid.occupied
+    s_rc = tuple(int(v) for v in grid.world_to_cell(np.array([7.0, 7.0])))
+    g_rc = tuple(int(v) for v in grid.world_to_cell(np.array([12.0, 29.0])))
+    occ_list = occ.tolist()
+    _check(search(occ, s_rc, g_rc).cost, heapq_astar(occ_list, s_rc, g_rc)[0], "35x35")
+    ref = time_calls(lambda: heapq_astar(occ_list, s_rc, g_rc), 200)
+    fast = time_calls(lambda: search(occ, s_rc, g_rc), 1000)
+    rows.append(row("A* search 35x35 (dfcoa_s1 at 1 cell/m)", fast, ref_name, ref))
+    full = time_calls(lambda: plan(grid, (7.0, 7.0), (12.0, 29.0), AStarParams()), 1000)
+    rows.append(row("A* plan 35x35 (inflate 0.5 m, search, shortening, metres)", full,
+                    ref_name, ref))
+    improved = time_calls(lambda: plan(grid, (7.0, 7.0), (12.0, 29.0), ImprovedAStarParams()),
+                          1000)
+    rows.append(row("improved A* plan 35x35 (eq 13 defaults)", improved,
+                    "traditional A* plan, same map", full))
+
+    big = random_grid()
+    corner = (big.shape[0] - 1, big.shape[1] - 1)
+    ours = search(big, (0, 0), corner)
+    ref_cost, ref_nodes = heapq_astar(big.tolist(), (0, 0), corner)
+    _check(ours.cost, ref_cost, "1024x1024")
+    big_list = big.tolist()
+    ref = time_calls(lambda: heapq_astar(big_list, (0, 0), corner), 3)
+    fast = time_calls(lambda: search(big, (0, 0), corner), 15)
+    rows.append(row(f"A* search 1024x1024, 20% random cells, corner to corner "
+                    f"({ours.expanded} nodes; reference {ref_nodes})", fast, ref_name, ref))
+    return rows
+
+
+if __name__ == "__main__":
+    for r in run():
+        print(f"{r['what']}: median {r['median_us']:.1f} us (min {r['min_us']:.1f}, "
+              f"max {r['max_us']:.1f}, n={r['samples']}); {r['reference']}: "
+              f"{r['ref_median_us']:.1f} us; ratio {r['ratio']:.1f}x")

@@ -1,0 +1,436 @@
+"""Traditional A* on an 8-connected occupancy grid (paper 000, eq 12 with o(n) = 0).
+
+The search is one numba kernel with an array-based, indexed 4-ary min-heap
+(decrease-key; each node is in the heap at most once). The same kernel runs
+the improved A* of eq 13 (:mod:`dfcoa_opt.planning.astar_improved`) when its
+extra terms are non-zero, so both planners share every line of the search.
+
+Moves: 4 straight moves cost 1 cell, 4 diagonal moves cost sqrt(2) cells. Without
+corner cutting (default; the MovingAI benchmark rule) a diagonal move needs both
+orthogonal side cells free; with ``corner_cutting`` one free side cell is enough
+(it never squeezes between two blocked cells). Heuristics (in cells): octile
+``max + (sqrt(2) - 1) min`` of ``|d row|, |d col|`` (the exact cost on an empty
+grid) or Euclidean. Both are consistent, so the first time the goal is popped
+its g is optimal and closed nodes are never reopened. Among equal f, deeper
+nodes (larger g) go first: successors whose f equals the current minimum are
+expanded from a LIFO stack without touching the heap, and heap keys are
+``f - 1e-9 g``. This changes neither optimality nor the cost, only the number
+of nodes expanded (fewer on open maps) and the speed.
+
+:func:`plan` wraps the search for world coordinates: obstacle inflation, the
+search, line-of-sight shortening, optional smoothing, conversion to metres.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numba
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from dfcoa_opt.params import param
+from dfcoa_opt.planning import postprocess
+from dfcoa_opt.planning.postprocess import los_flat as _los_flat
+from dfcoa_opt.planning.registry import register_planner
+from dfcoa_opt.world.grid import OccupancyGrid
+
+SQRT2 = math.sqrt(2.0)
+_NO_OFFSETS = np.zeros((0, 2), dtype=np.int64)
+_NO_WEIGHTS = np.zeros(0, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class AStarParams:
+    """Options of the ``astar`` planner (``[leader.planner_options]``)."""
+
+    heuristic: Literal["octile", "euclidean"] = param(
+        "octile", doc="Heuristic h(n): octile (exact on an empty 8-connected grid) or "
+                      "Euclidean; both are admissible and give optimal paths.")
+    corner_cutting: bool = param(False, doc="Allow a diagonal move when one of its two side "
+                                            "cells is blocked (default: both must be free).")
+    inflate: float = param(0.5, doc="Grow obstacles by this radius before planning (room for "
+                                    "the virtual leader's formation); cells near the start and "
+                                    "goal that only inflation blocks are released.", unit="m",
+                           ge=0.0)
+    shorten: bool = param(True, doc="Remove redundant nodes by exact line-of-sight checks.")
+    smooth: bool = param(False, doc="Round the shortened path's corners where free (Chaikin).")
+    smooth_iterations: int = param(3, doc="Chaikin rounds when smooth is true.", ge=1, le=8)
+
+    def search_options(self, resolution: float) -> dict[str, Any]:
+        """Keyword arguments of :func:`search` for this planner (no eq 13 terms)."""
+        return {"heuristic": self.heuristic, "corner_cutting": self.corner_cutting}
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    """Outcome of one grid search (cell units).
+
+    Attributes:
+        cells: ``(P, 2)`` path cells ``(row, col)`` from start to goal; empty when
+            not found. Consecutive cells are 8-neighbours unless the improved
+            search's goal shortcut joined the last one by line of sight.
+        cost: g(goal) in cells (straight 1, diagonal sqrt 2); ``inf`` when not found.
+        expanded: Nodes expanded (closed).
+        time: Wall time of the search in s.
+    """
+
+    cells: NDArray[np.int64]
+    cost: float
+    expanded: int
+    time: float
+
+    @property
+    def found(self) -> bool:
+        """Whether a path was found."""
+        return len(self.cells) > 0
+
+
+@dataclass(frozen=True)
+class AStarResult:
+    """Outcome of :func:`plan` (world units).
+
+    Attributes:
+        search: The grid search (cells, cost in cells, nodes expanded, search time).
+        raw_path: ``(P, 2)`` m, the search's cell centres, preceded by the exact
+            start and followed by the exact goal (when they are not the centres).
+        path: ``(Q, 2)`` m, after shortening / smoothing (what the leader follows).
+        time: Wall time of the whole plan (inflation, search, post-processing) in s.
+        occupied: The grid actually searched (after inflation and release).
+    """
+
+    search: SearchResult
+    raw_path: NDArray[np.float64]
+    path: NDArray[np.float64]
+    time: float
+    occupied: NDArray[np.bool_] = field(repr=False)
+
+    @property
+    def found(self) -> bool:
+        """Whether a path was found."""
+        return self.search.found
+
+    @property
+    def cells(self) -> NDArray[np.int64]:
+        """Search path cells ``(P, 2)`` (row, col)."""
+        return self.search.cells
+
+    @property
+    def expanded(self) -> int:
+        """Nodes expanded by the search."""
+        return self.search.expanded
+
+    @property
+    def length(self) -> float:
+        """Length of :attr:`path` in m (``inf`` when not found)."""
+        return postprocess.path_length(self.path) if self.found else math.inf
+
+
+# ------------------------------------------------------------------ numba kernel
+# Cell states in the kernel's padded flat array (a one-cell blocked border spares
+# the bounds checks): FREE unseen, BLOCKED, CLOSED, OPEN (in the heap), STACKED.
+_FREE, _BLOCKED, _CLOSED, _OPEN, _STACKED = 0, 1, 2, 3, 4
+#: f values within this many cells of the current minimum are ties (float noise);
+#: distinct path costs a + b sqrt(2) differ by far more on any practical grid.
+_TIE = 1e-7
+#: Heap key = f - _DEPTH g: among equal f, deeper nodes first.
+_DEPTH = 1e-9
+
+
+@numba.njit(cache=True)
+def _heuristic(r, c, gr, gc, kind):  # pragma: no cover - numba
+    """h(n) in cells: octile (kind 0) or Euclidean (kind 1)."""
+    dr = abs(r - gr)
+    dc = abs(c - gc)
+    if kind == 0:
+        return max(dr, dc) + (SQRT2 - 1.0) * min(dr, dc)
+    return math.sqrt(dr * dr + dc * dc)
+
+
+@numba.njit(cache=True)
+def _kernel(st, wp, occ, s, t, kind, corner_cutting, h_gain, big_r, o_gain, offsets, inv_dist,
+            shortcut):  # pragma: no cover - numba
+    """A* on the padded flat state array ``st`` (row stride ``wp``), s -> t.
+
+    Returns ``(path cells (P, 2) (row, col) unpadded, g(goal), expanded)``.
+    Priority (eq 12-13, cells): f = g + h - h_gain h (R - r) / R + o_gain o_sum,
+    ``o_sum`` = sum of ``inv_dist`` over the occupied ``offsets`` around the node
+    in ``occ``; the traditional search has h_gain = o_gain = 0 and then pushes
+    successors whose f equals the current minimum on a LIFO stack instead of the
+    heap (valid for a consistent h: nothing open has a smaller f). The heap is
+    an indexed 4-ary min-heap (decrease-key), so each node is in it at most once.
+    """
+    n = st.size
+    n_rows, n_cols = occ.shape
+    g = np.empty(n)
+    parent = np.empty(n, np.int32)
+    pos = np.empty(n, np.int32)
+    hk = np.empty(n)
+    hn = np.empty(n, np.int32)
+    stack = np.empty(n, np.int32)
+    obst = np.empty(n if o_gain > 0.0 else 1)
+    use_stack = h_gain == 0.0 and o_gain == 0.0 and not shortcut
+    offs = (wp, -wp, 1, -1, wp + 1, wp - 1, -wp + 1, -wp - 1)
+    drs = (1, -1, 0, 0, 1, 1, -1, -1)
+    dcs = (0, 0, 1, -1, 1, -1, 1, -1)
+    side_r = (wp, wp, -wp, -wp)
+    side_c = (1, -1, 1, -1)
+    gr = t // wp
+    gc = t - gr * wp
+    sr = s // wp
+    g[s] = 0.0
+    parent[s] = s
+    f_cur = _heuristic(sr, s - sr * wp, gr, gc, kind)
+    stack[0] = s
+    sp = 1
+    st[s] = _STACKED
+    size = 0
+    expanded = 0
+    found = False
+    best_r = np.inf
+    while sp > 0 or size > 0:
+        if sp > 0:
+            sp -= 1
+            u = stack[sp]
+        else:  # pop the heap minimum
+            u = hn[0]
+            f_cur = hk[0] + _DEPTH * g[u]
+            size -= 1
+            if size > 0:
+                lk = hk[size]
+                ln = hn[size]
+                i = 0
+                while True:
+                    ch = 4 * i + 1
+                    if ch >= size:
+                        break
+                    best = ch
+                    bk = hk[ch]
+                    for j in range(ch + 1, min(ch + 4, size)):
+                        if hk[j] < bk:
+                            bk = hk[j]
+                            best = j
+                    if bk < lk:
+                        hk[i] = bk
+                        m = hn[best]
+                        hn[i] = m
+                        pos[m] = i
+                        i = best
+                    else:
+                        break
+                hk[i] = lk
+                hn[i] = ln
+                pos[ln] = i
+        st[u] = _CLOSED
+        expanded += 1
+        if u == t:
+            found = True
+            break
+        ur = u // wp
+        uc = u - ur * wp
+        gu = g[u]
+        if shortcut:
+            ru = math.sqrt((ur - gr) ** 2 + (uc - gc) ** 2)
+            if ru < best_r:
+                best_r = ru
+                if _los_flat(st, wp, ur, uc, gr, gc, corner_cutting):
+                    parent[t] = u
+                    g[t] = gu + ru
+                    found = True
+                    break
+        for k in range(8):
+            v = u + offs[k]
+            sv = st[v]
+            if sv == _BLOCKED or sv == _CLOSED or sv == _STACKED:
+                continue
+            step = 1.0
+            if k >= 4:
+                a = st[u + side_r[k - 4]] == _BLOCKED
+                b = st[u + side_c[k - 4]] == _BLOCKED
+                if corner_cutting:
+                    if a and b:
+                        continue
+                elif a or b:
+                    continue
+                step = SQRT2
+            ng = gu + step
+            if sv == _OPEN and ng >= g[v]:
+                continue
+            vr = ur + drs[k]
+            vc = uc + dcs[k]
+            if o_gain > 0.0 and sv == _FREE:  # first visit: eq 13 obstacle sum
+                acc = 0.0
+                for m in range(offsets.shape[0]):
+                    wr = vr - 1 + offsets[m, 0]
+                    wc = vc - 1 + offsets[m, 1]
+                    if 0 <= wr < n_rows and 0 <= wc < n_cols and occ[wr, wc]:
+                        acc += inv_dist[m]
+                obst[v] = acc
+            g[v] = ng
+            parent[v] = u
+            h = _heuristic(vr, vc, gr, gc, kind)
+            fv = ng + h
+            if h_gain != 0.0 and big_r > 0.0:
+                fv -= h_gain * h * (big_r - math.sqrt((vr - gr) ** 2 + (vc - gc) ** 2)) / big_r
+            if o_gain > 0.0:
+                fv += o_gain * obst[v]
+            if use_stack and sv == _FREE and fv <= f_cur + _TIE * (1.0 + f_cur):
+                st[v] = _STACKED
+                stack[sp] = v
+                sp += 1
+                continue
+            key = fv - _DEPTH * ng
+            if sv == _OPEN:
+                i = pos[v]
+            else:
+                st[v] = _OPEN
+                i = size
+                size += 1
+            while i > 0:  # sift up
+                p = (i - 1) >> 2
+                if key < hk[p]:
+                    hk[i] = hk[p]
+                    m = hn[p]
+                    hn[i] = m
+                    pos[m] = i
+                    i = p
+                else:
+                    break
+            hk[i] = key
+            hn[i] = v
+            pos[v] = i
+    if not found:
+        return np.zeros((0, 2), np.int64), np.inf, expanded
+    count = 1
+    v = t
+    while v != s:
+        v = parent[v]
+        count += 1
+    out = np.empty((count, 2), np.int64)
+    v = t
+    for i in range(count - 1, -1, -1):
+        r = v // wp
+        out[i, 0] = r - 1
+        out[i, 1] = v - r * wp - 1
+        v = parent[v]
+    return out, g[t], expanded
+
+
+def search(occupied: ArrayLike, start: ArrayLike, goal: ArrayLike, *,
+           heuristic: str = "octile", corner_cutting: bool = False, h_gain: float = 0.0,
+           o_gain: float = 0.0, window: float = 0.0, goal_shortcut: bool = False) -> SearchResult:
+    """A* on a bool grid in cell units (eq 12; eq 13 when the gains are non-zero).
+
+    Args:
+        occupied: ``(H, W)`` bool, True = blocked; ``occupied[row, col]``.
+        start: Start cell ``(row, col)``.
+        goal: Goal cell ``(row, col)``.
+        heuristic: ``"octile"`` or ``"euclidean"`` (cells).
+        corner_cutting: See the module docstring.
+        h_gain: alpha / const_2 of eq 13 (dimensionless); 0 = traditional.
+        o_gain: Weight of the obstacle term: o(n) = o_gain * sum 1 / d_i in cells,
+            d_i in cells (``beta / const_1`` with the area weighting of
+            :class:`~dfcoa_opt.planning.astar_improved.ImprovedAStarParams`);
+            0 = traditional.
+        window: Radius (cells) of the disc of obstacle cells summed in eq 13.
+        goal_shortcut: Join the goal by line of sight from the closest node so far.
+
+    Returns:
+        The path cells, g(goal) in cells, nodes expanded and the search time.
+        An unreachable goal, or a start/goal that is blocked or outside the
+        grid, gives an empty path and ``cost = inf``.
+
+    Raises:
+        ValueError: Unknown heuristic.
+    """
+    t0 = time.perf_counter()
+    if heuristic not in ("octile", "euclidean"):
+        raise ValueError(f"heuristic must be 'octile' or 'euclidean', got {heuristic!r}")
+    occ = np.ascontiguousarray(occupied, dtype=bool)
+    sr, sc = (int(v) for v in np.asarray(start).reshape(2))
+    gr, gc = (int(v) for v in np.asarray(goal).reshape(2))
+    n_rows, n_cols = occ.shape
+    inside = all(0 <= r < n_rows and 0 <= c < n_cols for r, c in ((sr, sc), (gr, gc)))
+    if not inside or occ[sr, sc] or occ[gr, gc]:
+        return SearchResult(np.zeros((0, 2), np.int64), math.inf, 0, time.perf_counter() - t0)
+    offsets, inv_dist = _NO_OFFSETS, _NO_WEIGHTS
+    if o_gain > 0.0 and window >= 1.0:
+        w = int(math.floor(window))
+        dr, dc = np.mgrid[-w:w + 1, -w:w + 1]
+        d = np.hypot(dr, dc).ravel()
+        keep = (d > 0) & (d <= window)
+        offsets = np.ascontiguousarray(np.column_stack((dr.ravel(), dc.ravel()))[keep])
+        inv_dist = 1.0 / d[keep]
+    else:
+        o_gain = 0.0
+    wp = n_cols + 2
+    st = np.ones((n_rows + 2, wp), np.uint8)
+    st[1:-1, 1:-1] = occ
+    cells, cost, expanded = _kernel(
+        st.reshape(-1), wp, occ, (sr + 1) * wp + sc + 1, (gr + 1) * wp + gc + 1,
+        0 if heuristic == "octile" else 1, bool(corner_cutting), float(h_gain),
+        math.hypot(sr - gr, sc - gc), float(o_gain), offsets, inv_dist, bool(goal_shortcut))
+    return SearchResult(cells, float(cost), int(expanded), time.perf_counter() - t0)
+
+
+def plan(grid: OccupancyGrid, start: ArrayLike, goal: ArrayLike,
+         params: AStarParams | None = None) -> AStarResult:
+    """Plan from ``start`` to ``goal`` (world m) with A* or improved A* and post-process.
+
+    Steps: inflate obstacles by ``params.inflate``
+    (:func:`~dfcoa_opt.planning.postprocess.planning_grid`, which releases the
+    surroundings of a start or goal that only inflation blocks); search
+    (:func:`search` with the options of ``params``, so an
+    :class:`~dfcoa_opt.planning.astar_improved.ImprovedAStarParams` runs eq 13);
+    shorten by line of sight; smooth; convert to m. The path
+    starts at ``start`` and ends at ``goal`` exactly: they are joined to the
+    centres of their own cells (a hop inside one free cell).
+
+    Args:
+        grid: The map.
+        start: ``(x, y)`` m.
+        goal: ``(x, y)`` m.
+        params: Planner options; default :class:`AStarParams()`.
+    """
+    t0 = time.perf_counter()
+    params = params if params is not None else AStarParams()
+    start = np.asarray(start, dtype=float).reshape(2)
+    goal = np.asarray(goal, dtype=float).reshape(2)
+    occ = postprocess.planning_grid(grid, params.inflate, (start, goal))
+    s_rc = tuple(int(v) for v in grid.world_to_cell(start))
+    g_rc = tuple(int(v) for v in grid.world_to_cell(goal))
+    res = search(occ, s_rc, g_rc, **params.search_options(grid.resolution))
+    if not res.found:
+        empty = np.zeros((0, 2))
+        return AStarResult(res, empty, empty, time.perf_counter() - t0, occ)
+    h, ox, oy = grid.cell_size, grid.origin[0], grid.origin[1]
+
+    def to_world(xy_cells: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.column_stack((ox + xy_cells[:, 0] * h, oy + xy_cells[:, 1] * h))
+
+    def with_ends(path: NDArray[np.float64]) -> NDArray[np.float64]:
+        # the hop from the exact start (goal) to its cell centre stays inside that cell
+        head = [] if tuple(path[0]) == tuple(start) else [start]
+        tail = [] if tuple(path[-1]) == tuple(goal) else [goal]
+        return np.vstack([*head, path, *tail])
+
+    centres = res.cells[:, ::-1] + 0.5  # (x, y) in cell coordinates
+    raw = with_ends(to_world(centres))
+    kept = res.cells
+    if params.shorten:
+        kept = postprocess.shorten(occ, res.cells, params.corner_cutting)
+    pts = kept[:, ::-1] + 0.5
+    if params.smooth:
+        pts = postprocess.smooth(occ, pts, params.smooth_iterations)
+    path = with_ends(to_world(pts))
+    return AStarResult(res, raw, path, time.perf_counter() - t0, occ)
+
+
+@register_planner("astar", params=AStarParams)
+def astar_planner(grid: OccupancyGrid, start: NDArray[np.float64], goal: NDArray[np.float64],
+                  spec: Any, options: AStarParams | None = None) -> NDArray[np.float64]:
+    """Traditional A* leader planner: ``(P, 2)`` path in m, empty when unreachable."""
+    return plan(grid, start, goal, options).path

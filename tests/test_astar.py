@@ -1,0 +1,324 @@
+"""A* planners: MovingAI oracle, move rules, post-processing, eq 13, registration."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.planning import postprocess
+from dfcoa_opt.planning.astar import AStarParams, plan, search
+from dfcoa_opt.planning.astar_improved import (
+    PAPER_CLAIMS,
+    ImprovedAStarParams,
+    compare_planners,
+    comparison_markdown,
+    default_planners,
+    random_map,
+    random_tasks,
+)
+from dfcoa_opt.planning.registry import get_planner, planner_names
+from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.world.grid import OccupancyGrid
+
+MOVINGAI = Path(__file__).resolve().parents[2] / "shared" / "data" / "movingai"
+SQRT2 = math.sqrt(2.0)
+
+
+# ------------------------------------------------------------------ helpers
+def load_movingai_map(path: Path) -> OccupancyGrid:
+    """Parse a MovingAI .map: '.' and 'G' passable, anything else blocked; row 0 at the bottom."""
+    lines = path.read_text().splitlines()
+    height = int(lines[1].split()[1])
+    width = int(lines[2].split()[1])
+    assert lines[0].strip() == "type octile" and lines[3].strip() == "map"
+    rows = lines[4:4 + height]
+    assert len(rows) == height and all(len(r) == width for r in rows)
+    occ = np.array([[ch not in ".G" for ch in r] for r in rows])
+    return OccupancyGrid(occ[::-1], resolution=1.0)
+
+
+def movingai_problems() -> list[tuple[int, int, int, int, float]]:
+    """(start_x, start_y, goal_x, goal_y, optimal length) of arena.map.scen (y from the top)."""
+    lines = (MOVINGAI / "arena.map.scen").read_text().splitlines()
+    assert lines[0].startswith("version")
+    out = []
+    for ln in lines[1:]:
+        f = ln.split("\t")
+        if len(f) >= 9:
+            out.append((int(f[4]), int(f[5]), int(f[6]), int(f[7]), float(f[8])))
+    return out
+
+
+def dijkstra_cost(occ: np.ndarray, s: tuple[int, int], g: tuple[int, int],
+                  corner_cutting: bool = False) -> float:
+    """Independent oracle: scipy Dijkstra on the 8-connected graph."""
+    n_rows, n_cols = occ.shape
+    idx = np.arange(occ.size).reshape(occ.shape)
+    src, dst, w = [], [], []
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1), (-1, 0), (0, -1)):
+        for r in range(n_rows):
+            for c in range(n_cols):
+                vr, vc = r + dr, c + dc
+                if not (0 <= vr < n_rows and 0 <= vc < n_cols) or occ[r, c] or occ[vr, vc]:
+                    continue
+                if dr and dc:
+                    a, b = occ[r, vc], occ[vr, c]
+                    if (a and b) if corner_cutting else (a or b):
+                        continue
+                src.append(idx[r, c])
+                dst.append(idx[vr, vc])
+                w.append(SQRT2 if dr and dc else 1.0)
+    graph = coo_matrix((w, (src, dst)), shape=(occ.size, occ.size)).tocsr()
+    return float(dijkstra(graph, indices=idx[s])[idx[g]])
+
+
+def random_free_pair(rng: np.random.Generator, occ: np.ndarray) -> tuple[tuple, tuple]:
+    free = np.argwhere(~occ)
+    a, b = rng.choice(len(free), 2, replace=False)
+    return tuple(int(v) for v in free[a]), tuple(int(v) for v in free[b])
+
+
+def assert_valid_moves(occ: np.ndarray, cells: np.ndarray, corner_cutting: bool = False) -> None:
+    """Consecutive 8-neighbours on free cells; diagonals obey the corner rule."""
+    assert not occ[cells[:, 0], cells[:, 1]].any(), "path crosses a blocked cell"
+    steps = np.diff(cells, axis=0)
+    assert np.abs(steps).max(initial=0) <= 1 and (np.abs(steps).sum(1) > 0).all()
+    for (r, c), (dr, dc) in zip(cells[:-1], steps, strict=True):
+        if dr and dc:
+            a, b = occ[r, c + dc], occ[r + dr, c]
+            assert not (a and b), "squeezes between two blocked cells"
+            if not corner_cutting:
+                assert not (a or b), "cuts a corner"
+
+
+def sampled_segment_free(occ: np.ndarray, p: np.ndarray, q: np.ndarray) -> bool:
+    """Dense sampling (cell coordinates (x, y)): every sample lies in a free cell."""
+    t = np.linspace(0.0, 1.0, 2001)[:, None]
+    pts = p + t * (q - p)
+    col, row = np.floor(pts[:, 0]).astype(int), np.floor(pts[:, 1]).astype(int)
+    return not occ[row, col].any()
+
+
+def scenario_dict(**leader: object) -> dict:
+    """A minimal valid scenario with a wall between start and goal."""
+    return {
+        "world": {"size": [20.0, 10.0], "resolution": 5,
+                  "obstacles": [{"type": "rectangle", "min": [9.0, 0.0], "max": [10.0, 7.0]}]},
+        "robots": {"model": "unicycle", "radius": 0.2},
+        "team": {"n": 3},
+        "formation": {"shape": "line", "spacing": 0.8},
+        "leader": {"start": [2.0, 2.0], "goal": [17.0, 2.0], **leader},
+    }
+
+
+# ------------------------------------------------------------------ oracle
+@pytest.mark.skipif(not MOVINGAI.exists(), reason="MovingAI data not present")
+def test_movingai_arena_all_optimal_lengths():
+    grid = load_movingai_map(MOVINGAI / "arena.map")
+    n_rows = grid.shape[0]
+    problems = movingai_problems()
+    assert len(problems) == 130
+    for sx, sy, gx, gy, length in problems:
+        s, g = (n_rows - 1 - sy, sx), (n_rows - 1 - gy, gx)  # MovingAI y counts from the top
+        for heuristic in ("octile", "euclidean"):
+            res = search(grid.occupied, s, g, heuristic=heuristic)
+            assert res.cost == pytest.approx(length, abs=1e-6), (sx, sy, gx, gy, heuristic)
+            assert len(res.cells) and tuple(res.cells[0]) == s and tuple(res.cells[-1]) == g
+            assert_valid_moves(grid.occupied, res.cells)
+        # the same through the world-coordinate wrapper (1 cell/m: cost in cells = m)
+        out = plan(grid, (sx + 0.5, n_rows - sy - 0.5), (gx + 0.5, n_rows - gy - 0.5),
+                   AStarParams(inflate=0.0, shorten=False))
+        assert out.search.cost == pytest.approx(length, abs=1e-6)
+        assert postprocess.path_length(out.path) == pytest.approx(length, abs=1e-6)
+
+
+def test_random_maps_match_dijkstra_both_heuristics_and_corner_rules():
+    rng = np.random.default_rng(7)
+    for k in range(12):
+        occ = random_map(rng, (24, 30), 0.25, "cells" if k % 2 else "blocks")
+        s, g = random_free_pair(rng, occ)
+        for cut in (False, True):
+            ref = dijkstra_cost(occ, s, g, cut)
+            for heuristic in ("octile", "euclidean"):
+                res = search(occ, s, g, heuristic=heuristic, corner_cutting=cut)
+                if math.isinf(ref):
+                    assert not res.found and math.isinf(res.cost)
+                    continue
+                assert res.cost == pytest.approx(ref, abs=1e-9)
+                assert postprocess.path_length(res.cells) == pytest.approx(ref, abs=1e-9)
+                assert_valid_moves(occ, res.cells, corner_cutting=cut)
+
+
+# ------------------------------------------------------------------ move rules
+def test_no_corner_cutting_between_diagonal_blocks():
+    occ = np.zeros((3, 3), dtype=bool)
+    occ[0, 1] = occ[1, 0] = True  # (0,0) touches (1,1) only through a corner
+    assert not search(occ, (0, 0), (1, 1)).found
+    assert not search(occ, (0, 0), (1, 1), corner_cutting=True).found  # never squeezes
+    occ[1, 0] = False  # one side free: only corner cutting allows the diagonal
+    assert search(occ, (0, 0), (1, 1)).cost == pytest.approx(2.0)
+    assert search(occ, (0, 0), (1, 1), corner_cutting=True).cost == pytest.approx(SQRT2)
+
+
+def test_unreachable_blocked_or_outside_gives_empty():
+    occ = np.zeros((10, 10), dtype=bool)
+    occ[:, 5] = True
+    for s, g in (((2, 2), (2, 8)), ((0, 5), (2, 8)), ((2, 2), (2, 12)), ((-1, 0), (2, 2))):
+        res = search(occ, s, g)
+        assert not res.found and res.cells.shape == (0, 2) and math.isinf(res.cost)
+    grid = OccupancyGrid(occ, 1.0)
+    for name in ("astar", "improved_astar"):
+        path = get_planner(name)(grid, np.array([2.5, 2.5]), np.array([8.5, 2.5]), None,
+                                 AStarParams(inflate=0.0) if name == "astar" else None)
+        assert path.shape == (0, 2)
+
+
+def test_start_equals_goal_and_endpoints():
+    occ = random_map(np.random.default_rng(3), (20, 20), 0.2)
+    occ[4, 4:18] = occ[4:16, 17] = False  # a free L from (4, 4) to (15, 17)
+    res = search(occ, (4, 4), (4, 4))
+    assert res.found and res.cost == 0.0 and res.cells.tolist() == [[4, 4]]
+    grid = OccupancyGrid(occ, 2.0, origin=(-1.0, 3.0))
+    start, goal = np.array([1.3, 5.2]), np.array([7.6, 10.8])
+    out = plan(grid, start, goal, AStarParams(inflate=0.0))
+    assert out.found
+    np.testing.assert_array_equal(out.path[0], start)
+    np.testing.assert_array_equal(out.path[-1], goal)
+    rows, cols = grid.world_to_cell(np.vstack((start, goal)))
+    assert tuple(out.cells[0]) == (rows[0], cols[0]) and tuple(out.cells[-1]) == (rows[1], cols[1])
+
+
+# ------------------------------------------------------------------ post-processing
+def test_line_of_sight_is_exact_against_sampling():
+    rng = np.random.default_rng(11)
+    for _ in range(30):
+        occ = random_map(rng, (16, 16), 0.15, "cells")
+        for _ in range(20):
+            a, b = random_free_pair(rng, occ)
+            los = postprocess.line_of_sight(occ, a, b)
+            assert los == postprocess.line_of_sight(occ, b, a)  # symmetric
+            p, q = np.array(a[::-1]) + 0.5, np.array(b[::-1]) + 0.5
+            if los:
+                assert sampled_segment_free(occ, p, q)
+                assert postprocess.segment_free(occ, p, q)
+    corner = np.zeros((2, 2), dtype=bool)
+    corner[0, 1] = True
+    assert not postprocess.line_of_sight(corner, (0, 0), (1, 1))  # through the corner
+    assert postprocess.line_of_sight(corner, (0, 0), (1, 1), corner_cutting=True)
+
+
+@pytest.mark.parametrize("params", [ImprovedAStarParams(inflate=0.0),
+                                    ImprovedAStarParams(inflate=0.0, goal_shortcut=True),
+                                    ImprovedAStarParams(inflate=0.0, smooth=True)])
+def test_improved_paths_are_free_and_shortening_helps(params):
+    rng = np.random.default_rng(5)
+    for task in random_tasks(rng, 8, (40, 40), 0.2):
+        out = plan(task.grid, task.start, task.goal, params)
+        occ = out.occupied
+        assert out.found
+        if not params.goal_shortcut:
+            assert_valid_moves(occ, out.cells)
+        assert out.length <= postprocess.path_length(out.raw_path) + 1e-9
+        xy = (out.path - np.array(task.grid.origin)) * task.grid.resolution
+        for p, q in zip(xy[:-1], xy[1:], strict=True):
+            assert postprocess.segment_free(occ, p, q)
+            assert sampled_segment_free(occ, p, q)
+        if not params.smooth:
+            kept = postprocess.shorten(occ, out.cells)
+            for a, b in zip(kept[:-1], kept[1:], strict=True):
+                assert postprocess.line_of_sight(occ, a, b)
+
+
+def test_clearance_along_path_matches_brute_force():
+    task = random_tasks(np.random.default_rng(4), 1, (30, 30), 0.15)[0]
+    grid = OccupancyGrid(task.grid.occupied, 4.0, origin=(1.0, -2.0))
+    start = np.array(task.start) / 4.0 + (1.0, -2.0)
+    goal = np.array(task.goal) / 4.0 + (1.0, -2.0)
+    out = plan(grid, start, goal, ImprovedAStarParams(inflate=0.3))
+    assert out.found
+    pts, clr = postprocess.path_clearance(grid, out.path)
+    rows, cols = np.nonzero(grid.occupied)
+    lo = np.column_stack((grid.origin[0] + cols / 4.0, grid.origin[1] + rows / 4.0))
+    hi = lo + 0.25
+    d = np.maximum(np.maximum(lo[None] - pts[:, None], 0.0), pts[:, None] - hi[None])
+    brute = np.hypot(d[..., 0], d[..., 1]).min(axis=1)
+    np.testing.assert_allclose(clr, brute, atol=1e-12)
+    assert postprocess.min_clearance(grid, out.path) == pytest.approx(brute.min())
+    assert brute.min() > 0.3 - 0.25  # inflation keeps the path away from the obstacles
+
+
+# ------------------------------------------------------------------ eq 13
+def test_alpha_term_expands_more_nodes_on_an_open_map():
+    """Measured truth: reducing h (eq 13, alpha > 0) makes A* less informed, not faster."""
+    occ = np.zeros((48, 48), dtype=bool)
+    base = search(occ, (2, 3), (45, 40))
+    assert base.expanded == 44  # deep tie-breaking walks straight to the goal
+    for alpha in (0.25, 0.5, 1.0):
+        res = search(occ, (2, 3), (45, 40), h_gain=alpha)
+        assert res.expanded > 5 * base.expanded
+        assert res.cost == pytest.approx(base.cost)  # still shortest on an empty map
+
+
+def test_obstacle_term_keeps_raw_path_farther_from_obstacles():
+    occ = np.zeros((30, 40), dtype=bool)
+    occ[8:22, 18:22] = True  # a block in the middle, start and goal level with its top edge
+    grid = OccupancyGrid(occ, 1.0)
+    plain = plan(grid, (2.5, 21.5), (37.5, 21.5), AStarParams(inflate=0.0, shorten=False))
+    improved = plan(grid, (2.5, 21.5), (37.5, 21.5),
+                    ImprovedAStarParams(inflate=0.0, shorten=False, alpha=0.0, beta=4.0))
+    mean_clr = [postprocess.path_clearance(grid, r.raw_path)[1].mean() for r in (plain, improved)]
+    assert mean_clr[1] > mean_clr[0]
+    assert improved.search.cost >= plain.search.cost
+
+
+# ------------------------------------------------------------------ registration, options
+def test_planners_registered_and_run_from_a_scenario():
+    assert {"astar", "improved_astar"} <= set(planner_names())
+    for name in ("astar", "improved_astar"):
+        sc = scenario_from_dict(scenario_dict(planner=name, planner_options={"inflate": 0.4}))
+        path = sc.leader_path
+        np.testing.assert_array_equal(path[0], [2.0, 2.0])
+        np.testing.assert_array_equal(path[-1], [17.0, 2.0])
+        assert path[:, 1].max() > 7.0  # goes round the wall
+        assert not sc.world.grid.is_occupied_at(postprocess.sample_path(path, 0.05)).any()
+
+
+@pytest.mark.parametrize(("planner", "options", "key"), [
+    ("astar", {"heuristic": "manhattan"}, "leader.planner_options.heuristic"),
+    ("astar", {"inflate": -1.0}, "leader.planner_options.inflate"),
+    ("astar", {"alpha": 0.5}, "leader.planner_options.alpha"),
+    ("improved_astar", {"const1": 0.0}, "leader.planner_options.const1"),
+    ("improved_astar", {"shorten": "yes"}, "leader.planner_options.shorten"),
+])
+def test_bad_planner_options_name_the_key(planner, options, key):
+    with pytest.raises(ScenarioError, match=key.replace(".", r"\.")):
+        scenario_from_dict(scenario_dict(planner=planner, planner_options=options), "s.toml")
+
+
+# ------------------------------------------------------------------ comparison
+def test_random_map_is_seeded_and_has_the_density():
+    a = random_map(np.random.default_rng(1), (50, 60), 0.2, "blocks")
+    b = random_map(np.random.default_rng(1), (50, 60), 0.2, "blocks")
+    np.testing.assert_array_equal(a, b)
+    assert a.shape == (50, 60) and 0.2 <= a.mean() < 0.3
+    assert abs(random_map(np.random.default_rng(1), (100, 100), 0.2, "cells").mean() - 0.2) < 0.02
+    with pytest.raises(ValueError):
+        random_map(np.random.default_rng(1), (5, 5), 1.0)
+
+
+def test_compare_planners_rows_and_markdown():
+    tasks = random_tasks(np.random.default_rng(0), 3, (32, 32), 0.2)
+    rows = compare_planners(tasks, default_planners(), repeats=2)
+    assert len(rows) == 3 * len(default_planners())
+    for r in rows:
+        assert r["found"] and r["nodes"] > 0 and r["time_ms"] > 0 and r["length_m"] > 0
+        assert r["length_m"] <= r["raw_length_m"] + 1e-9 and r["min_clearance_m"] >= 0
+    text = comparison_markdown(rows)
+    assert f"{PAPER_CLAIMS['time']:+.0%}" in text and f"{PAPER_CLAIMS['nodes']:+.0%}" in text
+    assert "improved_astar" in text and "nodes expanded" in text
