@@ -39,7 +39,7 @@ from dfcoa_opt.bench.store import ResultsStore
 from dfcoa_opt.errors import DfcoaError, did_you_mean
 
 #: Modules whose import registers recipes, in index order.
-RECIPE_MODULES = ("dfcoa_opt.bench.recipes",)
+RECIPE_MODULES = ("dfcoa_opt.bench.recipes", "dfcoa_opt.bench.recipes_dfcoa")
 
 
 @dataclass(frozen=True)
