@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import heapq
 import math
-import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks.bench_lidar import row
+from benchmarks.bench_lidar import time_calls as lidar_time_calls
 from dfcoa_opt.planning.astar import AStarParams, plan, search
 from dfcoa_opt.planning.astar_improved import ImprovedAStarParams
 from dfcoa_opt.world.grid import OccupancyGrid
@@ -88,21 +89,7 @@ def random_grid(n: int = 1024, density: float = 0.2, seed: int = 0) -> np.ndarra
 
 def time_calls(fn: Callable[[], object], samples: int) -> np.ndarray:
     """Per-call times in us of ``fn()`` (after one warm-up)."""
-    fn()
-    out = np.empty(samples)
-    for k in range(samples):
-        t0 = time.perf_counter()
-        fn()
-        out[k] = time.perf_counter() - t0
-    return out * 1e6
-
-
-def row(what: str, ours: np.ndarray, reference: str, ref: np.ndarray) -> dict:
-    """One result row (medians, extremes and the speed-up ``ref / ours``)."""
-    med, ref_med = float(np.median(ours)), float(np.median(ref))
-    return {"what": what, "median_us": med, "min_us": float(ours.min()),
-            "max_us": float(ours.max()), "samples": len(ours), "reference": reference,
-            "ref_median_us": ref_med, "ratio": ref_med / med}
+    return lidar_time_calls(lambda _k: fn(), samples)
 
 
 def _check(ours: float, ref: float, what: str) -> None:
