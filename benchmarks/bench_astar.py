@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.bench_lidar import row
+from benchmarks.bench_lidar import print_rows, row
 from benchmarks.bench_lidar import time_calls as lidar_time_calls
 from dfcoa_opt.planning.astar import AStarParams, plan, search
 from dfcoa_opt.planning.astar_improved import ImprovedAStarParams
@@ -133,7 +133,4 @@ def run() -> list[dict]:
 
 
 if __name__ == "__main__":
-    for r in run():
-        print(f"{r['what']}: median {r['median_us']:.1f} us (min {r['min_us']:.1f}, "
-              f"max {r['max_us']:.1f}, n={r['samples']}); {r['reference']}: "
-              f"{r['ref_median_us']:.1f} us; ratio {r['ratio']:.1f}x")
+    print_rows(run())

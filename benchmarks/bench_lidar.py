@@ -74,6 +74,14 @@ def time_calls(fn: Callable[[int], object], samples: int) -> np.ndarray:
     return out * 1e6
 
 
+def print_rows(rows: list[dict]) -> None:
+    """Print rows made by :func:`row`, one line each (``python -m benchmarks.bench_*``)."""
+    for r in rows:
+        print(f"{r['what']}: median {r['median_us']:.1f} us (min {r['min_us']:.1f}, "
+              f"max {r['max_us']:.1f}, n={r['samples']}); {r['reference']}: "
+              f"{r['ref_median_us']:.1f} us; ratio {r['ratio']:.2f}x")
+
+
 def row(what: str, ours: np.ndarray, reference: str, ref: np.ndarray) -> dict:
     """One result row (medians, extremes and the speed-up ``ref / ours``)."""
     med, ref_med = float(np.median(ours)), float(np.median(ref))
@@ -128,7 +136,4 @@ def run() -> list[dict]:
 
 
 if __name__ == "__main__":
-    for r in run():
-        print(f"{r['what']}: median {r['median_us']:.1f} us (min {r['min_us']:.1f}, "
-              f"max {r['max_us']:.1f}, n={r['samples']}); {r['reference']}: "
-              f"{r['ref_median_us']:.1f} us; ratio {r['ratio']:.1f}x")
+    print_rows(run())

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.bench_lidar import row
+from benchmarks.bench_lidar import print_rows, row
 from dfcoa_opt.control.registry import make_controller
 from dfcoa_opt.localization import mcl_models
 from dfcoa_opt.localization.mcl import MonteCarloLocalization
@@ -137,7 +137,4 @@ def run() -> list[dict]:
 
 
 if __name__ == "__main__":
-    for r in run():
-        print(f"{r['what']}: median {r['median_us']:.1f} us (min {r['min_us']:.1f}, "
-              f"max {r['max_us']:.1f}, n={r['samples']}); {r['reference']}: "
-              f"{r['ref_median_us']:.1f} us; ratio {r['ratio']:.2f}x")
+    print_rows(run())

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from benchmarks.bench_lidar import make_grid, numpy_sampling_scan, row, time_calls
+from benchmarks.bench_lidar import make_grid, numpy_sampling_scan, print_rows, row, time_calls
 from dfcoa_opt.control.registry import make_controller
 from dfcoa_opt.sim import neighbours
 from dfcoa_opt.sim.loader import scenario_from_dict
@@ -79,6 +79,5 @@ def run() -> list[dict]:
 
 if __name__ == "__main__":
     t0 = time.perf_counter()
-    for r in run():
-        print(r)
+    print_rows(run())
     print(f"{time.perf_counter() - t0:.1f} s")

@@ -181,6 +181,30 @@ def build(cls: type[T], data: Mapping[str, Any], src: str, prefix: str = "") -> 
     return obj
 
 
+def build_options(cls: type | None, options: Mapping[str, Any], src: str, key: str,
+                  owner: str) -> Any:
+    """Options table of a pluggable part (planner, estimator) built against its ``Params``.
+
+    Args:
+        cls: The part's ``Params`` dataclass, or None when it takes no options.
+        options: The table from the file.
+        src: File name for messages.
+        key: Key path of the table, e.g. ``leader.planner_options``.
+        owner: What takes the options, e.g. ``planner 'astar'``.
+
+    Returns:
+        The built dataclass, or None for a part without options.
+
+    Raises:
+        ScenarioError: Options given to a part without ``Params``, or a bad key.
+    """
+    if cls is None:
+        if options:
+            raise ScenarioError(src, key, f"{owner} takes no options")
+        return None
+    return build(cls, dict(options), src, key)
+
+
 def describe(cls: type, prefix: str = "") -> list[tuple[str, str, str, str, str]]:
     """Key reference of a dataclass: rows ``(key, type, default, unit, doc)``.
 

@@ -19,8 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.params import build
+from dfcoa_opt.params import build_options
 
 #: Modules of this distribution that register estimators when imported.
 ESTIMATOR_MODULES: tuple[str, ...] = ("dfcoa_opt.localization.mcl",)
@@ -55,13 +54,8 @@ def estimator_options(name: str, options: Mapping[str, Any], source: str) -> Any
         ScenarioError: Unknown or bad key (names ``localization.options.<key>``).
     """
     _load()
-    params = getattr(_ESTIMATORS[name], "Params", None)
-    if params is None:
-        if options:
-            raise ScenarioError(source, "localization.options",
-                                f"estimator '{name}' takes no options")
-        return None
-    return build(params, dict(options), source, "localization.options")
+    return build_options(getattr(_ESTIMATORS[name], "Params", None), options, source,
+                         "localization.options", f"estimator '{name}'")
 
 
 def make_estimator(name: str, scenario: Any) -> Any:

@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.errors import ScenarioError, UnknownNameError, did_you_mean
-from dfcoa_opt.params import build
+from dfcoa_opt.errors import UnknownNameError, did_you_mean
+from dfcoa_opt.params import build_options
 from dfcoa_opt.sim.schema import LeaderSpec
 from dfcoa_opt.world.grid import OccupancyGrid
 
@@ -62,13 +62,8 @@ def planner_options(name: str, options: Mapping[str, Any], source: str) -> Any:
         ScenarioError: Unknown or bad key (names ``leader.planner_options.<key>``).
     """
     _load()
-    params = _PARAMS.get(name)
-    if params is None:
-        if options:
-            raise ScenarioError(source, "leader.planner_options",
-                                f"planner '{name}' takes no options")
-        return None
-    return build(params, dict(options), source, "leader.planner_options")
+    return build_options(_PARAMS.get(name), options, source, "leader.planner_options",
+                         f"planner '{name}'")
 
 
 def get_planner(name: str) -> Planner:
