@@ -2,7 +2,8 @@
 
 Each artefact group is a *figure recipe*: a sweep file (under
 ``scenarios/sweeps/``) plus a renderer that turns the sweep's saved results
-into tables and figures. ``make_figures`` runs each recipe's sweep into a
+into tables and figures. A recipe without a sweep (``sweep=None``, e.g. the
+planner comparison, which simulates nothing) computes its artefacts itself. ``make_figures`` runs each recipe's sweep into a
 result cache (``.dfcoa-cache/<recipe>/``; runs already there are reused, so a
 second ``make figures`` only re-renders), renders into ``paper_figures/<recipe>/``
 and writes the index ``paper_figures/README.md``. Renderers read saved rows
@@ -12,8 +13,8 @@ Adding a recipe (what the method issues do)::
 
     from dfcoa_opt.figures import Artefact, recipe
 
-    @recipe("dfcoa_tables", sweep="sweeps/dfcoa_paper.toml",
-            title="Paper 000: Table 5 and Figs 15, 20")
+    @recipe("dfcoa_tables", title="Paper 000: Table 5 and Figs 15, 20",
+            sweep="sweeps/dfcoa_paper.toml")
     def render(store, dest):
         ...                                    # read store.rows(), write into dest
         return [Artefact("table5.md", "paper 000 Table 5", "metrics of S1 and S2")]
@@ -39,7 +40,8 @@ from dfcoa_opt.bench.store import ResultsStore
 from dfcoa_opt.errors import DfcoaError, did_you_mean
 
 #: Modules whose import registers recipes, in index order.
-RECIPE_MODULES = ("dfcoa_opt.bench.recipes", "dfcoa_opt.bench.recipes_dfcoa")
+RECIPE_MODULES = ("dfcoa_opt.bench.recipes", "dfcoa_opt.bench.recipes_dfcoa",
+                  "dfcoa_opt.bench.recipes_astar")
 
 
 @dataclass(frozen=True)
@@ -57,7 +59,9 @@ class Artefact:
     what: str
 
 
-Renderer = Callable[[ResultsStore, Path], list[Artefact]]
+#: ``render(store, dest)`` for a recipe with a sweep; ``render(scenarios, dest)``
+#: (the scenario root) for a recipe without one.
+Renderer = Callable[[Any, Path], list[Artefact]]
 
 
 @dataclass(frozen=True)
@@ -66,13 +70,15 @@ class Recipe:
 
     Attributes:
         name: Recipe id, also the output sub-folder.
-        sweep: Sweep file, relative to the scenario root.
+        sweep: Sweep file, relative to the scenario root, or None for a recipe
+            that computes its artefacts without simulating.
         title: Heading in the index.
-        render: ``render(store, dest) -> artefacts``.
+        render: ``render(store, dest) -> artefacts`` (with a sweep) or
+            ``render(scenarios, dest) -> artefacts`` (without).
     """
 
     name: str
-    sweep: str
+    sweep: str | None
     title: str
     render: Renderer
 
@@ -80,8 +86,8 @@ class Recipe:
 _RECIPES: dict[str, Recipe] = {}
 
 
-def recipe(name: str, sweep: str, title: str) -> Callable[[Renderer], Renderer]:
-    """Decorator registering a renderer as the recipe ``name``."""
+def recipe(name: str, title: str, sweep: str | None = None) -> Callable[[Renderer], Renderer]:
+    """Decorator registering a renderer as the recipe ``name`` (see :class:`Recipe`)."""
 
     def deco(fn: Renderer) -> Renderer:
         if name in _RECIPES and _RECIPES[name].render is not fn:
@@ -132,16 +138,21 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
         if only and r.name not in only:
             continue
         t0 = time.perf_counter()
-        result = run_sweep(scenarios / r.sweep, cache / r.name, config, seeds=seeds,
-                           progress=progress, overrides=overrides)
         dest = out / r.name
         dest.mkdir(parents=True, exist_ok=True)
-        arts = r.render(result.store, dest)
+        if r.sweep is None:
+            arts = r.render(scenarios, dest)
+            done = "computed"
+        else:
+            result = run_sweep(scenarios / r.sweep, cache / r.name, config, seeds=seeds,
+                               progress=progress, overrides=overrides)
+            arts = r.render(result.store, dest)
+            done = (f"{result.ran} runs ({result.failed} failed), {result.skipped} cached")
         atomic_write(dest / "artefacts.json", json.dumps(
             {"recipe": r.name, "title": r.title, "sweep": r.sweep,
              "artefacts": [asdict(a) for a in arts]}, indent=1) + "\n")
-        print(f"{r.name}: {result.ran} runs ({result.failed} failed), {result.skipped} cached; "
-              f"{len(arts)} artefacts in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+        print(f"{r.name}: {done}; {len(arts)} artefacts in {time.perf_counter() - t0:.1f} s",
+              file=sys.stderr)
     return write_index(out, names)
 
 
@@ -157,7 +168,9 @@ def write_index(out: Path, order: Sequence[str]) -> Path:
         if not meta.is_file():
             continue
         info = json.loads(meta.read_text(encoding="utf-8"))
-        lines += [f"## {info['title']}", "", f"Recipe `{name}`, sweep `scenarios/{info['sweep']}`.",
+        source = (f"sweep `scenarios/{info['sweep']}`" if info["sweep"]
+                  else "no sweep (computed directly, nothing simulated)")
+        lines += [f"## {info['title']}", "", f"Recipe `{name}`, {source}.",
                   "", "| file | paper counterpart | what |", "|---|---|---|"]
         lines += [f"| [`{name}/{a['path']}`]({name}/{a['path']}) | {a['paper']} | {a['what']} |"
                   for a in info["artefacts"]]

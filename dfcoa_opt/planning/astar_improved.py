@@ -213,7 +213,8 @@ def comparison_markdown(rows: Sequence[Mapping[str, Any]], base: str = "astar") 
     """
     planners = list(dict.fromkeys(r["planner"] for r in rows))
     n_maps = len({r["map"] for r in rows})
-    lines = [f"Traditional vs improved A* on {n_maps} maps (means over maps; change = ratio of "
+    maps = f"{n_maps} map" + ("" if n_maps == 1 else "s")
+    lines = [f"Traditional vs improved A* on {maps} (means over maps; change = ratio of "
              f"the means - 1 vs `{base}`).", "",
              "| planner | metric | mean | change vs " + base + " | paper (improved vs A*) |",
              "|---|---|---|---|---|"]

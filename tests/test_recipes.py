@@ -1,0 +1,113 @@
+"""The paper-table renderers: Table 5 of paper 000 and the A* comparison."""
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dfcoa_opt import metrics
+from dfcoa_opt.bench import recipes_astar, recipes_dfcoa
+from dfcoa_opt.planning.astar import plan
+from dfcoa_opt.planning.astar_improved import ImprovedAStarParams
+
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+class _Store:
+    """The part of ResultsStore the Table 5 renderer reads."""
+
+    def __init__(self, rows):
+        self._rows = rows
+
+    def rows(self):
+        return self._rows
+
+
+def _row(scenario, mode, seed, values):
+    return {"scenario": scenario, "seed": seed, "status": "ok",
+            "overrides": {"localization.mode": mode}, "metrics": dict(values)}
+
+
+def _cells(text, label):
+    line = next(ln for ln in text.splitlines() if ln.startswith(f"| {label} |"))
+    return [c.strip() for c in line.strip("|").split("|")]
+
+
+def test_table5_has_every_paper_row_paper_values_and_our_means(tmp_path):
+    paper = metrics.PAPER_000_TABLE5
+    rows = []
+    for i, scen in enumerate(recipes_dfcoa.SCENARIOS):
+        for mode, shift in (("truth", 0.0), ("mcl", 0.5)):
+            for seed, jitter in ((0, -0.25), (1, 0.25)):  # mean = paper value + shift
+                vals = {k: v[i] + shift + jitter for k, v in paper.items()}
+                vals.update(collisions=0, loc_rmse=0.1 if mode == "mcl" else 0.0,
+                            time_to_goal=80.0)
+                rows.append(_row(scen, mode, seed, vals))
+    path = recipes_dfcoa._table5(_Store(rows), tmp_path)
+    text = path.read_text()
+    for key, label, unit in recipes_dfcoa.TABLE5_ROWS:
+        cells = _cells(text, label)
+        assert cells[1] == unit
+        # | label | unit | S1 paper | S1 truth | S1 mcl | S2 paper | S2 truth | S2 mcl |
+        assert float(cells[2]) == pytest.approx(paper[key][0])
+        assert float(cells[5]) == pytest.approx(paper[key][1])
+        for col, i, shift in ((3, 0, 0.0), (4, 0, 0.5), (6, 1, 0.0), (7, 1, 0.5)):
+            mean = float(cells[col].split("±")[0])
+            assert mean == pytest.approx(paper[key][i] + shift, abs=1e-4), (label, col)
+    zero = "0.0000 ± 0.0000"
+    assert _cells(text, "Collisions")[2:] == ["0", zero, zero, "0", zero, zero]
+    assert "dfcoa_s1 mcl: 2 runs, 0 failed" in text
+    # truth hits the paper values exactly -> met; mcl is 0.5 worse on FCE -> missed
+    fce = _cells(text, "FCE RMS ≤ paper")
+    assert fce[1:] == ["met", "**missed**", "met", "**missed**"]
+    stab = _cells(text, "stability ≥ paper")
+    assert stab[1:] == ["met", "met", "met", "met"]  # higher stability is better
+
+
+def test_table5_marks_a_missing_mode_and_a_collision(tmp_path):
+    paper = metrics.PAPER_000_TABLE5
+    vals = {k: v[0] for k, v in paper.items()} | {"collisions": 2}
+    text = recipes_dfcoa._table5(_Store([_row("dfcoa_s1", "truth", 0, vals)]), tmp_path).read_text()
+    assert _cells(text, "collisions = 0")[1:] == ["**missed**", "—", "—", "—"]
+    assert _cells(text, "FCE (RMS)")[4] == "—"  # S1 mcl: no runs
+
+
+@pytest.fixture(scope="module")
+def astar_outputs(tmp_path_factory):
+    dest = tmp_path_factory.mktemp("astar")
+    arts = recipes_astar.render_astar(SCENARIOS, dest)
+    return dest, arts
+
+
+def test_astar_recipe_covers_both_dfcoa_maps_and_the_random_maps(astar_outputs):
+    dest, arts = astar_outputs
+    assert {a.path for a in arts} == {"astar_comparison.md", "astar_comparison.csv",
+                                      "astar_paths.png"}
+    text = (dest / "astar_comparison.md").read_text()
+    assert "## dfcoa_s1: start (7.0, 7.0) → goal (12.0, 29.0)" in text
+    assert "## dfcoa_s2: start (31.0, 4.0) → goal (20.55, 27.0)" in text
+    assert f"on {recipes_astar.N_RANDOM} maps" in text
+    assert text.count("| -27% |") == 3 * 2 and text.count("| -35% |") == 3 * 2  # paper column
+    rows = list(csv.DictReader(io.StringIO((dest / "astar_comparison.csv").read_text())))
+    maps = {r["map"] for r in rows}
+    assert {"dfcoa_s1", "dfcoa_s2"} <= maps and len(maps) == 2 + recipes_astar.N_RANDOM
+    assert all(r["found"] == "True" for r in rows)
+    assert (dest / "astar_paths.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_astar_recipe_nodes_and_lengths_are_the_planners_own(astar_outputs):
+    """The deterministic columns equal a direct plan with the scenario's options."""
+    dest, _ = astar_outputs
+    rows = {(r["map"], r["planner"]): r
+            for r in csv.DictReader(io.StringIO((dest / "astar_comparison.csv").read_text()))}
+    tasks, inflate = recipes_astar.dfcoa_tasks(SCENARIOS)
+    assert inflate == pytest.approx(1.2)
+    for task in tasks:
+        res = plan(task.grid, task.start, task.goal, ImprovedAStarParams(inflate=inflate))
+        row = rows[task.name, "improved_astar"]
+        assert int(row["nodes"]) == res.expanded
+        assert float(row["length_m"]) == pytest.approx(res.length, rel=1e-12)
+        np.testing.assert_allclose(res.path[0], task.start)
+        np.testing.assert_allclose(res.path[-1], task.goal)
