@@ -3,11 +3,12 @@
 Each artefact group is a *figure recipe*: a sweep file (under
 ``scenarios/sweeps/``) plus a renderer that turns the sweep's saved results
 into tables and figures. A recipe without a sweep (``sweep=None``, e.g. the
-planner comparison, which simulates nothing) computes its artefacts itself. ``make_figures`` runs each recipe's sweep into a
-result cache (``.dfcoa-cache/<recipe>/``; runs already there are reused, so a
-second ``make figures`` only re-renders), renders into ``paper_figures/<recipe>/``
-and writes the index ``paper_figures/README.md``. Renderers read saved rows
-and logs only; they never simulate.
+planner comparison, which simulates nothing) computes its artefacts itself.
+``make_figures`` runs each recipe's sweep into a result cache
+(``.dfcoa-cache/<recipe>/``; runs already there are reused, so a second
+``make figures`` only re-renders), renders into ``paper_figures/<recipe>/`` and
+writes the index ``paper_figures/README.md``. Renderers of sweep recipes read
+saved rows and logs only; they never simulate.
 
 Adding a recipe (what the method issues do)::
 
@@ -36,7 +37,6 @@ from typing import Any
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
-from dfcoa_opt.bench.store import ResultsStore
 from dfcoa_opt.errors import DfcoaError, did_you_mean
 
 #: Modules whose import registers recipes, in index order.
