@@ -104,16 +104,23 @@ def _table5(store: ResultsStore, dest: Path) -> Path:
 
 
 def _panels(log: RunLog, path: Path, title: str) -> Path:
-    """v, w and steering per robot (Figs 12-13, 17-18)."""
+    """Speed (commanded; dotted: over the ground), ω and steering per robot (Figs 12-13, 17-18).
+
+    The ground speed includes any disturbance (S2's push on a1), which the
+    commanded v does not show.
+    """
     fig = plotting.new_figure((8.0, 7.0))
     axes = fig.subplots(3, 1, sharex=True)
     colors = plotting.robot_colors(log.n_robots)
+    ground = np.linalg.norm(np.diff(log.pose[..., :2], axis=0), axis=2) / np.diff(log.t)[:, None]
     for i in range(log.n_robots):
         lab = f"a{i + 1}"
         axes[0].plot(log.t, log.twist[:, i, 0], color=colors[i], lw=1, label=lab)
+        axes[0].plot(log.t[1:], ground[:, i], color=colors[i], lw=0.8, ls=":")
         axes[1].plot(log.t, log.twist[:, i, 1], color=colors[i], lw=1)
         axes[2].plot(log.t, log.steering[:, i], color=colors[i], lw=1)
-    for ax, lab in zip(axes, ("v (m/s)", "ω (rad/s)", "steering (rad)"), strict=True):
+    for ax, lab in zip(axes, ("v (m/s), dotted: ground", "ω (rad/s)", "steering (rad)"),
+                       strict=True):
         ax.set_ylabel(lab)
         ax.grid(alpha=0.3)
     axes[0].legend(ncol=4, fontsize="small")
