@@ -5,7 +5,8 @@ Every metric is a pure, vectorised function of a :class:`~dfcoa_opt.sim.log.RunL
 ``ScenarioSpec`` / ``Scenario`` whose ``metrics`` section is used). Time series
 have one value per logged step ``t[k]``; summaries average over all logged steps.
 :func:`summary` collects the JSON keys; every definition and choice is written
-down in ``docs/metrics.md``.
+down in ``docs/metrics.md``. The per-robot metrics of the companion papers'
+tables are in :mod:`dfcoa_opt.metrics_robots`.
 """
 
 from __future__ import annotations
@@ -17,6 +18,11 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from dfcoa_opt.metrics_robots import (
+    leader_follower_position_error,
+    mse_per_robot,
+    path_length_per_robot,
+)
 from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_MODIFIED, STATUS_SOLVER_FAIL, RunLog
 from dfcoa_opt.sim.schema import MetricSpec
 
@@ -304,11 +310,6 @@ def min_obstacle_clearance(log: RunLog) -> float:
     return _min(log.clearance - _radius(log))
 
 
-def path_length_per_robot(log: RunLog) -> FloatArray:
-    """Length of each robot's polyline through its logged positions, ``(N,)`` in m."""
-    return np.linalg.norm(np.diff(log.pose[..., :2], axis=0), axis=-1).sum(axis=0)
-
-
 def filter_counts(log: RunLog) -> dict[str, int | float]:
     """Safety-filter statistics over all (step, robot) entries.
 
@@ -327,41 +328,6 @@ def filter_counts(log: RunLog) -> dict[str, int | float]:
         "filter_solver_failures": int(np.count_nonzero(st == STATUS_SOLVER_FAIL)),
         "filter_time_median": float(np.median(log.filter_time[used])) if used.any() else 0.0,
     }
-
-
-# ------------------------------------------------------------------ papers 002 and 004
-def average_velocities_per_robot(log: RunLog) -> tuple[FloatArray, FloatArray]:
-    """Time means of each robot's v (m/s) and signed omega (rad/s), paper 002 Tables II-IV."""
-    avg = log.twist.mean(axis=0)
-    return avg[:, 0], avg[:, 1]
-
-
-def mean_abs_angular_velocity_per_robot(log: RunLog) -> FloatArray:
-    """Time mean of each robot's |omega|, ``(N,)`` in rad/s (companion of paper 002)."""
-    return np.abs(log.twist[..., 1]).mean(axis=0)
-
-
-def distance_travelled(log: RunLog) -> FloatArray:
-    """Distance travelled per robot (paper 002 Tables II-IV), ``(N,)`` in m."""
-    return path_length_per_robot(log)
-
-
-def leader_follower_position_error(log: RunLog) -> FloatArray:
-    """Position error ``||p_i - slot_i||`` (papers 002 and 004), ``(T, N)`` in m."""
-    return np.linalg.norm(log.pose[..., :2] - log.slots, axis=-1)
-
-
-def formation_position_error_per_robot(log: RunLog) -> FloatArray:
-    """Time mean of ``||p_i - slot_i||`` (paper 002 Tables II-IV), ``(N,)`` in m.
-
-    Robot 0 is included; the caller picks the followers.
-    """
-    return leader_follower_position_error(log).mean(axis=0)
-
-
-def mse_per_robot(log: RunLog) -> FloatArray:
-    """Squared distance to the ideal position (the slot), paper 004 eq 14, ``(T, N)`` m^2."""
-    return np.sum(np.square(log.pose[..., :2] - log.slots), axis=-1)
 
 
 # --------------------------------------------------------------------------- summary

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from dfcoa_opt import metrics as m
+from dfcoa_opt import metrics_robots as mr
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.sim.schema import MetricSpec
 
@@ -128,10 +129,10 @@ def test_velocity_centroid_error_and_rms_velocities():
     assert s["vce_rms"] == pytest.approx(0.5)
     assert s["v_rms"] == pytest.approx(math.sqrt(0.1) / 2)
     assert s["w_rms"] == pytest.approx(math.sqrt(0.05) / 2)
-    avg_v, avg_w = m.average_velocities_per_robot(log)
+    avg_v, avg_w = mr.average_velocities_per_robot(log)
     np.testing.assert_allclose(avg_v, [0.1, 0.2])
     np.testing.assert_allclose(avg_w, [0.05, -0.15])
-    np.testing.assert_allclose(m.mean_abs_angular_velocity_per_robot(log), [0.05, 0.15])
+    np.testing.assert_allclose(mr.mean_abs_angular_velocity_per_robot(log), [0.05, 0.15])
 
 
 # -------------------------------------------------------------------- eq 11
@@ -225,8 +226,8 @@ def test_path_length_of_known_polyline():
     p0 = np.array([[0.0, 0.0], [3.0, 4.0], [3.0, 0.0], [3.0, 0.0]])
     pose = np.stack([p0, np.full((4, 2), 7.0)], axis=1)
     log = make_log(pose=pose)
-    np.testing.assert_allclose(m.path_length_per_robot(log), [9.0, 0.0])
-    np.testing.assert_allclose(m.distance_travelled(log), [9.0, 0.0])
+    np.testing.assert_allclose(mr.path_length_per_robot(log), [9.0, 0.0])
+    np.testing.assert_allclose(mr.distance_travelled(log), [9.0, 0.0])
     assert m.summary(log)["path_length_mean"] == pytest.approx(4.5)
 
 
@@ -251,9 +252,9 @@ def test_position_error_and_mse_eq14():
     slots = np.zeros((2, 2, 2))
     pose = np.array([[[3.0, 4.0], [0.0, 1.0]], [[0.0, 0.0], [0.0, -2.0]]])
     log = make_log(pose=pose, slots=slots)
-    np.testing.assert_allclose(m.leader_follower_position_error(log), [[5, 1], [0, 2]])
-    np.testing.assert_allclose(m.mse_per_robot(log), [[25, 1], [0, 4]])
-    np.testing.assert_allclose(m.formation_position_error_per_robot(log), [2.5, 1.5])
+    np.testing.assert_allclose(mr.leader_follower_position_error(log), [[5, 1], [0, 2]])
+    np.testing.assert_allclose(mr.mse_per_robot(log), [[25, 1], [0, 4]])
+    np.testing.assert_allclose(mr.formation_position_error_per_robot(log), [2.5, 1.5])
     s = m.summary(log)
     assert s["mse_mean"] == pytest.approx(7.5) and s["lf_error_mean"] == pytest.approx(2.0)
 

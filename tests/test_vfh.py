@@ -10,18 +10,15 @@ import pytest
 from dfcoa_opt.control.base import Neighbours
 from dfcoa_opt.control.vfh import (
     VFHParams,
-    VFHStar,
     binary_histogram,
-    blend,
-    danger_level,
     polar_histogram,
     repulsion_histogram,
     sector_centres,
     sector_index,
     select_direction,
     turning_mask,
-    vfh_step,
 )
+from dfcoa_opt.control.vfh_star import VFHStar, blend, danger_level, vfh_step
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.params import build
 from dfcoa_opt.sim.schema import LidarSpec

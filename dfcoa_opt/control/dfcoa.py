@@ -10,7 +10,7 @@ Per robot, from its own observation only (distributed, §4.5.4):
    neighbours it perceives into a safe steering direction;
 3. the safety layer of §4.5.3 blends the two: the formation command passes
    unchanged far from obstacles and the VFH* steering overrides it when they
-   are close (:func:`dfcoa_opt.control.vfh.blend`).
+   are close (:func:`dfcoa_opt.control.vfh_star.blend`).
 
 The pose comes from the scenario's estimator (``truth`` or ``mcl``, Algorithm
 3). The virtual leader follows the improved A* path by pure pursuit in the
@@ -27,7 +27,8 @@ import numpy as np
 from dfcoa_opt.control.base import Observation
 from dfcoa_opt.control.formation_law import formation_tracking_law
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.control.vfh import VFHParams, VFHStar, blend
+from dfcoa_opt.control.vfh import VFHParams
+from dfcoa_opt.control.vfh_star import VFHStar, blend
 from dfcoa_opt.geometry import wrap_angle
 from dfcoa_opt.params import param
 

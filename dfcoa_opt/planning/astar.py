@@ -1,7 +1,8 @@
 """Traditional A* on an 8-connected occupancy grid (paper 000, eq 12 with o(n) = 0).
 
-The search is one numba kernel with an array-based, indexed 4-ary min-heap
-(decrease-key; each node is in the heap at most once). The same kernel runs
+The search is one numba kernel (:mod:`dfcoa_opt.planning.astar_kernel`) with
+an array-based, indexed 4-ary min-heap (decrease-key; each node is in the heap
+at most once). The same kernel runs
 the improved A* of eq 13 (:mod:`dfcoa_opt.planning.astar_improved`) when its
 extra terms are non-zero, so both planners share every line of the search.
 
@@ -28,17 +29,15 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dfcoa_opt.params import param
 from dfcoa_opt.planning import postprocess
-from dfcoa_opt.planning.postprocess import los_flat as _los_flat
+from dfcoa_opt.planning.astar_kernel import astar_kernel
 from dfcoa_opt.planning.registry import register_planner
 from dfcoa_opt.world.grid import OccupancyGrid
 
-SQRT2 = math.sqrt(2.0)
 _NO_OFFSETS = np.zeros((0, 2), dtype=np.int64)
 _NO_WEIGHTS = np.zeros(0, dtype=np.float64)
 
@@ -129,196 +128,6 @@ class AStarResult:
         return postprocess.path_length(self.path) if self.found else math.inf
 
 
-# ------------------------------------------------------------------ numba kernel
-# Cell states in the kernel's padded flat array (a one-cell blocked border spares
-# the bounds checks): FREE unseen, BLOCKED, CLOSED, OPEN (in the heap), STACKED.
-_FREE, _BLOCKED, _CLOSED, _OPEN, _STACKED = 0, 1, 2, 3, 4
-#: f values within this many cells of the current minimum are ties (float noise);
-#: distinct path costs a + b sqrt(2) differ by far more on any practical grid.
-_TIE = 1e-7
-#: Heap key = f - _DEPTH g: among equal f, deeper nodes first.
-_DEPTH = 1e-9
-
-
-@numba.njit(cache=True)
-def _heuristic(r, c, gr, gc, kind):  # pragma: no cover - numba
-    """h(n) in cells: octile (kind 0) or Euclidean (kind 1)."""
-    dr = abs(r - gr)
-    dc = abs(c - gc)
-    if kind == 0:
-        return max(dr, dc) + (SQRT2 - 1.0) * min(dr, dc)
-    return math.sqrt(dr * dr + dc * dc)
-
-
-@numba.njit(cache=True)
-def _kernel(st, wp, occ, s, t, kind, corner_cutting, h_gain, big_r, o_gain, offsets, inv_dist,
-            shortcut):  # pragma: no cover - numba
-    """A* on the padded flat state array ``st`` (row stride ``wp``), s -> t.
-
-    Returns ``(path cells (P, 2) (row, col) unpadded, g(goal), expanded)``.
-    Priority (eq 12-13, cells): f = g + h - h_gain h (R - r) / R + o_gain o_sum,
-    ``o_sum`` = sum of ``inv_dist`` over the occupied ``offsets`` around the node
-    in ``occ``; the traditional search has h_gain = o_gain = 0 and then pushes
-    successors whose f equals the current minimum on a LIFO stack instead of the
-    heap (valid for a consistent h: nothing open has a smaller f). The heap is
-    an indexed 4-ary min-heap (decrease-key), so each node is in it at most once.
-    """
-    n = st.size
-    n_rows, n_cols = occ.shape
-    g = np.empty(n)
-    parent = np.empty(n, np.int32)
-    pos = np.empty(n, np.int32)
-    hk = np.empty(n)
-    hn = np.empty(n, np.int32)
-    stack = np.empty(n, np.int32)
-    obst = np.empty(n if o_gain > 0.0 else 1)
-    use_stack = h_gain == 0.0 and o_gain == 0.0 and not shortcut
-    offs = (wp, -wp, 1, -1, wp + 1, wp - 1, -wp + 1, -wp - 1)
-    drs = (1, -1, 0, 0, 1, 1, -1, -1)
-    dcs = (0, 0, 1, -1, 1, -1, 1, -1)
-    side_r = (wp, wp, -wp, -wp)
-    side_c = (1, -1, 1, -1)
-    gr = t // wp
-    gc = t - gr * wp
-    sr = s // wp
-    g[s] = 0.0
-    parent[s] = s
-    f_cur = _heuristic(sr, s - sr * wp, gr, gc, kind)
-    stack[0] = s
-    sp = 1
-    st[s] = _STACKED
-    size = 0
-    expanded = 0
-    found = False
-    best_r = np.inf
-    while sp > 0 or size > 0:
-        if sp > 0:
-            sp -= 1
-            u = stack[sp]
-        else:  # pop the heap minimum
-            u = hn[0]
-            f_cur = hk[0] + _DEPTH * g[u]
-            size -= 1
-            if size > 0:
-                lk = hk[size]
-                ln = hn[size]
-                i = 0
-                while True:
-                    ch = 4 * i + 1
-                    if ch >= size:
-                        break
-                    best = ch
-                    bk = hk[ch]
-                    for j in range(ch + 1, min(ch + 4, size)):
-                        if hk[j] < bk:
-                            bk = hk[j]
-                            best = j
-                    if bk < lk:
-                        hk[i] = bk
-                        m = hn[best]
-                        hn[i] = m
-                        pos[m] = i
-                        i = best
-                    else:
-                        break
-                hk[i] = lk
-                hn[i] = ln
-                pos[ln] = i
-        st[u] = _CLOSED
-        expanded += 1
-        if u == t:
-            found = True
-            break
-        ur = u // wp
-        uc = u - ur * wp
-        gu = g[u]
-        if shortcut:
-            ru = math.sqrt((ur - gr) ** 2 + (uc - gc) ** 2)
-            if ru < best_r:
-                best_r = ru
-                if _los_flat(st, wp, ur, uc, gr, gc, corner_cutting):
-                    parent[t] = u
-                    g[t] = gu + ru
-                    found = True
-                    break
-        for k in range(8):
-            v = u + offs[k]
-            sv = st[v]
-            if sv == _BLOCKED or sv == _CLOSED or sv == _STACKED:
-                continue
-            step = 1.0
-            if k >= 4:
-                a = st[u + side_r[k - 4]] == _BLOCKED
-                b = st[u + side_c[k - 4]] == _BLOCKED
-                if corner_cutting:
-                    if a and b:
-                        continue
-                elif a or b:
-                    continue
-                step = SQRT2
-            ng = gu + step
-            if sv == _OPEN and ng >= g[v]:
-                continue
-            vr = ur + drs[k]
-            vc = uc + dcs[k]
-            if o_gain > 0.0 and sv == _FREE:  # first visit: eq 13 obstacle sum
-                acc = 0.0
-                for m in range(offsets.shape[0]):
-                    wr = vr - 1 + offsets[m, 0]
-                    wc = vc - 1 + offsets[m, 1]
-                    if 0 <= wr < n_rows and 0 <= wc < n_cols and occ[wr, wc]:
-                        acc += inv_dist[m]
-                obst[v] = acc
-            g[v] = ng
-            parent[v] = u
-            h = _heuristic(vr, vc, gr, gc, kind)
-            fv = ng + h
-            if h_gain != 0.0 and big_r > 0.0:
-                fv -= h_gain * h * (big_r - math.sqrt((vr - gr) ** 2 + (vc - gc) ** 2)) / big_r
-            if o_gain > 0.0:
-                fv += o_gain * obst[v]
-            if use_stack and sv == _FREE and fv <= f_cur + _TIE * (1.0 + f_cur):
-                st[v] = _STACKED
-                stack[sp] = v
-                sp += 1
-                continue
-            key = fv - _DEPTH * ng
-            if sv == _OPEN:
-                i = pos[v]
-            else:
-                st[v] = _OPEN
-                i = size
-                size += 1
-            while i > 0:  # sift up
-                p = (i - 1) >> 2
-                if key < hk[p]:
-                    hk[i] = hk[p]
-                    m = hn[p]
-                    hn[i] = m
-                    pos[m] = i
-                    i = p
-                else:
-                    break
-            hk[i] = key
-            hn[i] = v
-            pos[v] = i
-    if not found:
-        return np.zeros((0, 2), np.int64), np.inf, expanded
-    count = 1
-    v = t
-    while v != s:
-        v = parent[v]
-        count += 1
-    out = np.empty((count, 2), np.int64)
-    v = t
-    for i in range(count - 1, -1, -1):
-        r = v // wp
-        out[i, 0] = r - 1
-        out[i, 1] = v - r * wp - 1
-        v = parent[v]
-    return out, g[t], expanded
-
-
 def search(occupied: ArrayLike, start: ArrayLike, goal: ArrayLike, *,
            heuristic: str = "octile", corner_cutting: bool = False, h_gain: float = 0.0,
            o_gain: float = 0.0, window: float = 0.0, goal_shortcut: bool = False) -> SearchResult:
@@ -369,7 +178,7 @@ def search(occupied: ArrayLike, start: ArrayLike, goal: ArrayLike, *,
     wp = n_cols + 2
     st = np.ones((n_rows + 2, wp), np.uint8)
     st[1:-1, 1:-1] = occ
-    cells, cost, expanded = _kernel(
+    cells, cost, expanded = astar_kernel(
         st.reshape(-1), wp, occ, (sr + 1) * wp + sc + 1, (gr + 1) * wp + gc + 1,
         0 if heuristic == "octile" else 1, bool(corner_cutting), float(h_gain),
         math.hypot(sr - gr, sc - gc), float(o_gain), offsets, inv_dist, bool(goal_shortcut))
