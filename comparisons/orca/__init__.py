@@ -1,0 +1,1 @@
+"""ORCA and the improved velocity obstacle of paper 001: lines, exact solver, filter."""
