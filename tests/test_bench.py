@@ -262,10 +262,11 @@ def test_cli_bench_and_report(tmp_path, capsys):
 
 
 def test_cli_bench_bad_sweep_exits_2_with_one_line(tmp_path, capsys):
-    path = _sweep(tmp_path, 'controllers = ["orca"]\n')
+    path = _sweep(tmp_path, 'controllers = ["goto_slat"]\n')
     assert main(["bench", str(path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith(f"dfcoa: error: {path}: controllers[0]: unknown controller 'orca'")
+    assert err.startswith(f"dfcoa: error: {path}: controllers[0]: unknown controller 'goto_slat'")
+    assert "did you mean 'goto_slot'" in err
     assert "\n" not in err
 
 

@@ -34,8 +34,9 @@ from numpy.typing import NDArray
 #: Parallel-line test of the 1D step (RVO2's ``RVO_EPSILON``), dimensionless.
 EPSILON = 1e-5
 
-#: Per-robot outcome codes returned by :func:`solve_lines`.
-FEASIBLE, LEAST_VIOLATION = 0, 1
+#: Per-robot outcome codes: :func:`solve_lines` returns the first two; the
+#: qpsolvers path (:mod:`comparisons.orca.qp`) can also report a solver failure.
+FEASIBLE, LEAST_VIOLATION, SOLVER_FAIL = 0, 1, 2
 
 FloatArray = NDArray[np.float64]
 

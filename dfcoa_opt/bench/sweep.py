@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from dfcoa_opt.errors import DfcoaError, ScenarioError, did_you_mean
+from dfcoa_opt.errors import DfcoaError, ScenarioError
 from dfcoa_opt.params import build, param
 from dfcoa_opt.sim.loader import load_scenario, read_toml
 from dfcoa_opt.sim.scenario import Scenario
@@ -155,17 +155,20 @@ def _combinations(spec: SweepSpec, src: str) -> list[dict[str, Any]]:
 
 
 def _controllers(spec: SweepSpec, src: str) -> list[str]:
-    from dfcoa_opt.control.registry import available
+    from dfcoa_opt.control.registry import available, controller_class
+    from dfcoa_opt.errors import UnknownNameError
 
     known = available()
     out: list[str] = []
     for i, cid in enumerate(spec.controllers):
         if cid == "*":
             out += [c for c in known if c not in out]
-        elif cid not in known:
-            raise ScenarioError(src, f"controllers[{i}]", f"unknown controller '{cid}'"
-                                f"{did_you_mean(cid, known)}; available: {', '.join(known)}")
-        elif cid not in out:
+            continue
+        try:
+            controller_class(cid)
+        except UnknownNameError as exc:
+            raise ScenarioError(src, f"controllers[{i}]", str(exc)) from None
+        if cid not in out:
             out.append(cid)
     return out
 
@@ -188,8 +191,9 @@ def canonical(overrides: Mapping[str, Any]) -> str:
 
 def _for_controller(overrides: Mapping[str, Any], cid: str) -> str:
     """Canonical JSON of the overrides that reach controller ``cid``."""
+    parts = cid.split("+")  # "a+filter": both parts' tables reach it
     return canonical({k: v for k, v in overrides.items()
-                      if not k.startswith("controllers.") or k.split(".")[1] == cid})
+                      if not k.startswith("controllers.") or k.split(".")[1] in parts})
 
 
 def load_sweep(path: str | Path, seeds: int | None = None,

@@ -10,6 +10,13 @@ package -- through the entry-point group ``dfcoa_opt.controllers``::
 
 Scenario files override parameters in ``[controllers.<id>]``; unknown keys are
 errors with a "did you mean" hint, like everywhere else.
+
+Safety filters register the same way with ``@register_filter("my_filter")``
+(a class with ``Params``, built as ``cls(params)``, implementing
+:class:`~dfcoa_opt.control.base.SafetyFilter`). The id ``"<controller>+<filter>"``
+names a controller whose output passes through the filter
+(:class:`~dfcoa_opt.control.base.Filtered`); each part takes its parameters
+from its own ``[controllers.<id>]`` table.
 """
 
 from __future__ import annotations
@@ -24,9 +31,11 @@ from dfcoa_opt.params import build
 
 ENTRY_POINT_GROUP = "dfcoa_opt.controllers"
 #: Modules of this distribution that register controllers when imported.
-BUILTIN_MODULES = ("dfcoa_opt.control.goto_slot", "dfcoa_opt.control.dfcoa")
+BUILTIN_MODULES = ("dfcoa_opt.control.goto_slot", "dfcoa_opt.control.dfcoa",
+                   "comparisons.orca.filter")
 
 _REGISTRY: dict[str, type] = {}
+_FILTERS: dict[str, type] = {}
 _loaded = False
 C = TypeVar("C", bound=type)
 
@@ -44,6 +53,33 @@ def register(controller_id: str) -> Callable[[C], C]:
         return cls
 
     return deco
+
+
+def register_filter(filter_id: str) -> Callable[[C], C]:
+    """Class decorator registering a safety filter under ``filter_id``."""
+
+    def deco(cls: C) -> C:
+        if filter_id in _FILTERS and _FILTERS[filter_id] is not cls:
+            raise ValueError(f"filter id {filter_id!r} is already registered")
+        if not hasattr(cls, "Params"):
+            raise TypeError(f"{cls.__name__} needs a Params dataclass")
+        cls.name = filter_id
+        _FILTERS[filter_id] = cls
+        return cls
+
+    return deco
+
+
+def available_filters() -> list[str]:
+    """Sorted ids of all registered safety filters."""
+    _load_all()
+    return sorted(_FILTERS)
+
+
+def _parts(controller_id: str) -> tuple[str, str | None]:
+    """``("dfcoa", "orca")`` for ``"dfcoa+orca"``; ``(id, None)`` without a filter."""
+    base, sep, filt = controller_id.partition("+")
+    return base, (filt if sep else None)
 
 
 def _load_all() -> None:
@@ -66,17 +102,22 @@ def available() -> list[str]:
 
 
 def controller_class(controller_id: str) -> type:
-    """The class registered under ``controller_id``.
+    """The class registered under ``controller_id`` (the controller part of ``a+filter``).
 
     Raises:
-        UnknownNameError: With a "did you mean" hint.
+        UnknownNameError: Unknown controller or filter, with a "did you mean" hint.
     """
     _load_all()
+    base, filt = _parts(controller_id)
+    if filt is not None and filt not in _FILTERS:
+        raise UnknownNameError(
+            f"unknown safety filter '{filt}' in '{controller_id}'{did_you_mean(filt, _FILTERS)}; "
+            f"available filters: {', '.join(sorted(_FILTERS))}")
     try:
-        return _REGISTRY[controller_id]
+        return _REGISTRY[base]
     except KeyError:
         raise UnknownNameError(
-            f"unknown controller '{controller_id}'{did_you_mean(controller_id, _REGISTRY)}; "
+            f"unknown controller '{base}'{did_you_mean(base, _REGISTRY)}; "
             f"available: {', '.join(sorted(_REGISTRY))}") from None
 
 
@@ -94,8 +135,37 @@ def make_controller(controller_id: str, overrides: Mapping[str, Any] | None = No
         ScenarioError: Bad override (names ``controllers.<id>.<key>``).
     """
     cls = controller_class(controller_id)
-    params = build(cls.Params, dict(overrides or {}), source, f"controllers.{controller_id}")
+    base, filt = _parts(controller_id)
+    if filt is not None:
+        raise ValueError(f"'{controller_id}' has a filter: use build_controller")
+    params = build(cls.Params, dict(overrides or {}), source, f"controllers.{base}")
     return cls(params)
+
+
+def build_controller(controller_id: str, tables: Mapping[str, Mapping[str, Any]] | None = None,
+                     source: str = "<overrides>") -> Any:
+    """Build ``"<controller>"`` or ``"<controller>+<filter>"`` from a file's tables.
+
+    Args:
+        controller_id: Registry id, optionally ``+`` a filter id.
+        tables: The file's ``[controllers.*]`` tables; each part reads its own.
+        source: File name for error messages.
+
+    Raises:
+        UnknownNameError: Unknown controller or filter id.
+        ScenarioError: Bad parameter (names ``controllers.<id>.<key>``).
+    """
+    tables = tables or {}
+    base, filt = _parts(controller_id)
+    controller_class(controller_id)  # validates both parts
+    ctrl = make_controller(base, tables.get(base, {}), source)
+    if filt is None:
+        return ctrl
+    from dfcoa_opt.control.base import Filtered
+
+    fcls = _FILTERS[filt]
+    return Filtered(ctrl, fcls(build(fcls.Params, dict(tables.get(filt, {})), source,
+                                     f"controllers.{filt}")))
 
 
 def check_overrides(controllers: Mapping[str, Mapping[str, Any]], source: str) -> None:
@@ -106,7 +176,8 @@ def check_overrides(controllers: Mapping[str, Mapping[str, Any]], source: str) -
     """
     _load_all()
     for cid, table in controllers.items():
-        if cid not in _REGISTRY:
-            raise ScenarioError(source, f"controllers.{cid}", "unknown controller"
-                                + did_you_mean(cid, _REGISTRY))
-        build(_REGISTRY[cid].Params, dict(table), source, f"controllers.{cid}")
+        cls = _REGISTRY.get(cid, _FILTERS.get(cid))
+        if cls is None:
+            raise ScenarioError(source, f"controllers.{cid}", "unknown controller or filter"
+                                + did_you_mean(cid, [*_REGISTRY, *_FILTERS]))
+        build(cls.Params, dict(table), source, f"controllers.{cid}")

@@ -247,11 +247,10 @@ def run_scenario(scenario: Scenario, controller_id: str, seed: int | None = None
 
     Args:
         scenario: The loaded scenario.
-        controller_id: Registry id.
+        controller_id: Registry id, or ``"<controller>+<filter>"``.
         seed: Run seed; default: the scenario's.
     """
-    from dfcoa_opt.control.registry import make_controller
+    from dfcoa_opt.control.registry import build_controller
 
-    ctrl = make_controller(controller_id, scenario.spec.controllers.get(controller_id, {}),
-                           scenario.source)
+    ctrl = build_controller(controller_id, scenario.spec.controllers, scenario.source)
     return Simulator(scenario, ctrl, seed).run()

@@ -1,0 +1,212 @@
+"""The ORCA / improved-VO safety filter (paper 001 eq 11-13, 16) and the ORCA navigator.
+
+``orca`` (a :class:`~dfcoa_opt.control.base.SafetyFilter`, velocity commands)
+replaces each robot's nominal velocity by the closest velocity inside its ORCA
+half-planes (one per neighbour within communication range, responsibility 1/2,
+horizon ``time_horizon``), the hard half-planes of the static obstacles (mode
+``obstacles``) and the speed disc. Use it after any controller with the id
+``"<controller>+orca"`` (e.g. ``dfcoa+orca``), or alone through the navigator
+``orca_nav``, whose preferred velocity points at the robot's own formation slot.
+
+Infeasible constraints go to the ``infeasible`` policy, and every use is
+counted in the run log (``filter_status``): ``least_violation`` (default; the
+velocity that minimises the largest violation, hard lines kept), ``stop``
+(zero velocity) or ``pass_through`` (the nominal velocity). With
+``safe_discrete`` the robots also keep hard next-step separation half-planes
+(:mod:`comparisons.orca.safe`), so no two robots overlap at a sampling instant.
+Method notes: ``docs/methods/orca_ivo.md``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from comparisons.orca import lp, safe
+from comparisons.orca.velocities import orca_velocities
+from dfcoa_opt.control.base import Filtered, FilterResult, Observation
+from dfcoa_opt.control.registry import register, register_filter
+from dfcoa_opt.params import param
+from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_MODIFIED, STATUS_OK, STATUS_SOLVER_FAIL
+
+#: Commands closer than this to the nominal one count as unchanged, m/s.
+UNCHANGED_TOL = 1e-9
+
+
+@register_filter("orca")
+class OrcaFilter:
+    """ORCA safety filter over nominal velocities (see the module docstring)."""
+
+    command = "velocity"
+
+    @dataclass(frozen=True)
+    class Params:
+        """Parameters of the ``orca`` filter."""
+
+        time_horizon: float = param(2.0, doc="ORCA horizon tau between robots.", unit="s",
+                                    gt=0.0)
+        v_max: float | None = param(None, doc="Speed limit of the new velocity; default the "
+                                              "robots' v_max.", unit="m/s", gt=0.0)
+        infeasible: Literal["least_violation", "stop", "pass_through"] = param(
+            "least_violation", doc="Policy when the half-planes have no common point.")
+        solver: Literal["exact", "qp"] = param(
+            "exact", doc="'exact': incremental 2D LP (fast path); 'qp': qpsolvers.")
+        qp_solver: str = param("osqp", doc="qpsolvers backend when solver = 'qp'.")
+        obstacles: Literal["next_step", "none"] = param(
+            "next_step", doc="Static obstacles: 'next_step': hard half-planes that keep the robot "
+                             "off every polygon edge at the next step (comparisons/orca/safe.py); "
+                             "'none': ignored.")
+        safe_discrete: bool = param(False, doc="Add hard half-planes that forbid overlap at "
+                                               "the next step (comparisons/orca/safe.py).")
+
+    def __init__(self, params: Params) -> None:
+        self.p = params
+        self._radius = 0.2
+        self._v_max = 1.0
+        self._segments = np.zeros((0, 2, 2))
+
+    def reset(self, scenario, rng: np.random.Generator) -> None:
+        """Read the robots' radius and speed limit and the static obstacle edges."""
+        rob = scenario.spec.robots
+        self._radius = rob.radius
+        self._v_max = self.p.v_max if self.p.v_max is not None else rob.v_max
+        edges = []
+        for shape in scenario.world.shapes:
+            v = shape.to_polygon().as_array()
+            edges.append(np.stack((v, np.roll(v, -1, axis=0)), axis=1))
+        self._segments = np.concatenate(edges) if edges else np.zeros((0, 2, 2))
+
+    def _hard_lines(self, obs: Observation):
+        """Hard lines of every robot: static edges and, in safe mode, robot pairs."""
+        n = obs.n
+        radius = np.full(n, self._radius)
+        v_max = np.full(n, self._v_max)
+        segments = self._segments if self.p.obstacles == "next_step" else self._segments[:0]
+        groups = [safe.segment_safety_lines(obs.pose[:, :2], radius, v_max, obs.dt, segments)]
+        if self.p.safe_discrete:
+            groups.append(self._pair_lines(obs, radius, v_max))
+        return concat_lines(groups)
+
+    def _pair_lines(self, obs: Observation, radius, v_max):
+        """Next-step separation from the neighbours each robot knows (its own row only)."""
+        nb = obs.neighbours
+        rel = obs.pose[:, None, :2] - nb.position
+        dist = np.linalg.norm(rel, axis=-1)
+        reach = 2.0 * radius[:, None] + 2.0 * v_max[:, None] * obs.dt
+        used = nb.mask & (dist < reach)
+        order = np.argsort(np.where(used, dist, np.inf), axis=1, kind="stable")
+        count = used.sum(axis=1)
+        dist = np.take_along_axis(dist, order, axis=1)
+        rel = np.take_along_axis(rel, order[..., None], axis=1)
+        ok = np.arange(dist.shape[1])[None, :] < count[:, None]
+        normal = rel / np.where(ok & (dist > 0), dist, 1.0)[..., None]
+        bound = np.where(ok, (2.0 * radius[:, None] - dist) / (2.0 * obs.dt), 0.0)
+        points, directions = safe.halfplane_lines(normal, bound)
+        return points, directions, count
+
+    def filter(self, obs: Observation, nominal: np.ndarray) -> FilterResult:
+        """Closest velocity to ``nominal`` (rows ``(vx, vy)``) within the constraints."""
+        t0 = time.perf_counter()
+        n = obs.n
+        nominal = np.asarray(nominal, dtype=float)[:, :2]
+        nb = obs.neighbours
+        hp, hd, hc = self._hard_lines(obs)
+        count = nb.mask.sum(axis=1)
+        radius = np.full(n, self._radius)
+        v_max = np.full(n, self._v_max)
+        if self.p.solver == "exact":
+            vel, status, slack = orca_velocities(
+                obs.pose[:, :2], obs.velocity, radius, nb.position, nb.velocity,
+                np.full(nb.index.shape, self._radius), count, nominal, v_max,
+                self.p.time_horizon, obs.dt, hp, hd, hc)
+        else:
+            vel, status, slack = self._qp(obs, nominal, radius, v_max, hp, hd, hc, count)
+        out_status = np.where(np.linalg.norm(vel - nominal, axis=1) > UNCHANGED_TOL,
+                              STATUS_MODIFIED, STATUS_OK).astype(np.int8)
+        bad = status != lp.FEASIBLE
+        failed = status == lp.SOLVER_FAIL
+        if bad.any():
+            out_status[bad] = np.where(failed[bad], STATUS_SOLVER_FAIL, STATUS_FALLBACK)
+            if self.p.infeasible == "stop":
+                vel[bad] = 0.0
+            elif self.p.infeasible == "pass_through":
+                vel[bad] = nominal[bad]
+        if self.p.safe_discrete:
+            vel, scaled = safe.scale_into(vel, hp, hd, hc)
+            out_status[scaled & (out_status == STATUS_OK)] = STATUS_MODIFIED
+        per_robot = (time.perf_counter() - t0) / max(n, 1)
+        return FilterResult(vel, out_status, np.where(bad, slack, 0.0), np.full(n, per_robot))
+
+    def _qp(self, obs, nominal, radius, v_max, hp, hd, hc, count):
+        """The qpsolvers path: same lines, solved one robot at a time."""
+        from comparisons.orca.lines import agent_lines
+        from comparisons.orca.qp import solve_lines_qp
+
+        n, k = obs.n, obs.neighbours.index.shape[1]
+        points = np.zeros((n, hp.shape[1] + k, 2))
+        directions = np.zeros_like(points)
+        total = np.zeros(n, np.int64)
+        nb = obs.neighbours
+        for i in range(n):
+            points[i, :hc[i]], directions[i, :hc[i]] = hp[i, :hc[i]], hd[i, :hc[i]]
+            total[i] = agent_lines(obs.pose[i, 0], obs.pose[i, 1], obs.velocity[i, 0],
+                                   obs.velocity[i, 1], radius[i], nb.position[i],
+                                   nb.velocity[i], np.full(k, self._radius), count[i],
+                                   1.0 / self.p.time_horizon, 1.0 / obs.dt, points[i],
+                                   directions[i], hc[i])
+        return solve_lines_qp(points, directions, total, hc, nominal, v_max,
+                              solver=self.p.qp_solver)
+
+
+def concat_lines(groups):
+    """Join per-robot padded line groups ``[(points, directions, count), ...]`` row by row."""
+    n = len(groups[0][2])
+    width = sum(g[0].shape[1] for g in groups)
+    points = np.zeros((n, width, 2))
+    directions = np.zeros((n, width, 2))
+    count = np.zeros(n, np.int64)
+    rows = np.arange(n)
+    for p, d, c in groups:
+        for j in range(p.shape[1]):
+            take = j < c
+            points[rows[take], count[take] + j] = p[take, j]
+            directions[rows[take], count[take] + j] = d[take, j]
+        count = count + c
+    return points, directions, count
+
+
+class _TowardsSlot:
+    """Preferred velocity of the navigator: towards the own slot at up to ``speed``."""
+
+    command = "velocity"
+    name = "pref"
+
+    def __init__(self, speed: float) -> None:
+        self.speed = speed
+
+    def reset(self, scenario, rng: np.random.Generator) -> None:
+        """Stateless."""
+
+    def act(self, obs: Observation) -> np.ndarray:
+        """``speed`` towards the slot, slower within ``speed`` (1 s) of it (RVO2's examples)."""
+        vec = obs.slot - obs.pose[:, :2]
+        dist = np.linalg.norm(vec, axis=1, keepdims=True)
+        return np.where(dist > self.speed, vec * (self.speed / np.maximum(dist, 1e-12)), vec)
+
+
+@register("orca_nav")
+class OrcaNavigator(Filtered):
+    """Standalone ORCA: preferred velocity towards the own slot, then the ``orca`` filter."""
+
+    @dataclass(frozen=True)
+    class Params(OrcaFilter.Params):
+        """Parameters of the ``orca_nav`` navigator (the filter's, plus the preferred speed)."""
+
+        speed: float = param(0.3, doc="Preferred speed towards the slot.", unit="m/s", gt=0.0)
+
+    def __init__(self, params: Params) -> None:
+        fields = {k: getattr(params, k) for k in OrcaFilter.Params.__dataclass_fields__}
+        super().__init__(_TowardsSlot(params.speed), OrcaFilter(OrcaFilter.Params(**fields)))
