@@ -1,0 +1,507 @@
+"""Static polygon obstacles for ORCA, the RVO2 way ("mode (a)": one ORCA line per edge).
+
+An obstacle is a polygon given counter-clockwise (RVO2's ``addObstacle``
+convention; the free space is on the right of every directed edge) or a
+two-vertex polyline, which becomes a segment seen from both sides. The
+vertices form rings: vertex ``k`` starts the edge ``k -> next[k]``, with a unit
+direction and a convexity flag (the turn at ``k`` is to the left or straight).
+
+Each agent considers the edges whose supporting line has the agent strictly on
+its outer (right) side and that are closer than
+``time_horizon_obst * max_speed + radius``; they are visited nearest first (by
+squared distance to the segment) and each yields at most one half-plane of
+velocities, built against the velocity obstacle of the edge truncated at the
+horizon ``time_horizon_obst``: nothing if earlier obstacle lines already push
+both end points' cut-off discs out; a line through the origin when the agent
+already overlaps the edge or an end vertex; otherwise the velocity is projected
+onto the nearest part of the truncated cone (either end's cut-off circle, the
+cut-off segment, or a leg; a leg that would point into the neighbouring edge of
+a convex vertex is replaced by that edge, and projecting onto such a "foreign"
+leg adds nothing). Obstacles are not reciprocal: the agent takes all of the
+avoidance, and these lines are hard (never relaxed by the solver).
+
+RVO2 splits edges while building its obstacle k-d tree (an edge crossing the
+supporting line of a chosen splitter edge is cut in two, the new vertex being
+convex); :func:`prepare_obstacles` rebuilds the same tree in single precision,
+so the rings, and the order in which equidistant edges are visited (the tree
+traversal order), are RVO2's. The line construction itself runs in double
+precision, batched over agents in a numba kernel.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+#: RVO2's ``RVO_EPSILON`` (tree-building side tests and the already-covered test).
+EPSILON = 1e-5
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class ObstacleSet:
+    """Obstacle vertex rings and RVO2's obstacle k-d tree, as flat arrays.
+
+    Attributes:
+        points: ``(V, 2)`` vertex positions, m.
+        next: ``(V,)`` index of the next vertex of the ring (the edge ``k -> next[k]``).
+        prev: ``(V,)`` index of the previous vertex of the ring.
+        directions: ``(V, 2)`` unit direction of edge ``k`` (a split piece keeps its
+            parent's direction).
+        convex: ``(V,)`` True when vertex ``k`` is convex (always for segments and
+            for vertices made by splitting).
+        tree: ``(V, 3)`` k-d tree nodes ``(edge, left child, right child)``, -1 for
+            none; node 0 is the root (an empty set has no nodes).
+        depth: Depth of the tree (nodes on the longest root-to-leaf path).
+        bbox: ``(4,)`` ``(x_min, y_min, x_max, y_max)`` of all vertices, m.
+    """
+
+    points: FloatArray
+    next: IntArray
+    prev: IntArray
+    directions: FloatArray
+    convex: NDArray[np.bool_]
+    tree: IntArray
+    depth: int
+    bbox: FloatArray
+
+    @property
+    def n_edges(self) -> int:
+        """Number of directed edges (= vertices, after splitting)."""
+        return len(self.points)
+
+
+def _left_of(a, b, c):
+    """RVO2's ``leftOf(a, b, c) = det(a - c, b - a)`` (> 0: ``c`` left of ``a -> b``)."""
+    return (a[..., 0] - c[..., 0]) * (b[..., 1] - a[..., 1]) - \
+        (a[..., 1] - c[..., 1]) * (b[..., 0] - a[..., 0])
+
+
+def _build_tree(pts32, nxt, prv, dirs, convex, points):
+    """RVO2's obstacle-tree construction (single precision), splitting edges in place.
+
+    The lists (``pts32`` float32 vertices, ``points`` their float64 copies, ring
+    links, directions, convexity) are extended and relinked as edges are split.
+    Returns the node list ``[edge, left, right]`` and the tree depth.
+    """
+    eps = np.float32(EPSILON)
+    nodes: list[list[int]] = []
+    depth = 0
+    # depth-first, left before right, as RVO2's recursion (the order of the new vertices)
+    todo: list[tuple[list[int], int, int, int]] = [(list(range(len(pts32))), -1, 0, 1)]
+    while todo:
+        members, parent, side, level = todo.pop()
+        if not members:
+            continue
+        n = len(members)
+        p1 = np.array([pts32[j] for j in members], np.float32)
+        p2 = np.array([pts32[nxt[j]] for j in members], np.float32)
+        # side of every edge's end points w.r.t. every candidate splitter (rows)
+        s1 = _left_of(p1[:, None], p2[:, None], p1[None])
+        s2 = _left_of(p1[:, None], p2[:, None], p2[None])
+        left = (s1 >= -eps) & (s2 >= -eps)
+        right = ~left & (s1 <= eps) & (s2 <= eps)
+        off = ~np.eye(n, dtype=bool)
+        n_left = np.count_nonzero(~right & off, axis=1)  # left or crossing
+        n_right = np.count_nonzero(~left & off, axis=1)  # right or crossing
+        big, small = np.maximum(n_left, n_right), np.minimum(n_left, n_right)
+        # splitter: fewest edges on the larger side, then on the smaller; first such
+        best = int(np.lexsort((small, big))[0])
+        i = members[best]
+        a, b = pts32[i], pts32[nxt[i]]
+        lefts, rights = [], []
+        for jj, j in enumerate(members):
+            if jj == best:
+                continue
+            if left[best, jj]:
+                lefts.append(j)
+            elif right[best, jj]:
+                rights.append(j)
+            else:  # edge j crosses the splitter's line: cut it there
+                j2 = nxt[j]
+                ab = b - a
+                t = (ab[0] * (pts32[j][1] - a[1]) - ab[1] * (pts32[j][0] - a[0])) / \
+                    (ab[0] * (pts32[j][1] - pts32[j2][1]) - ab[1] * (pts32[j][0] - pts32[j2][0]))
+                new = len(pts32)
+                pts32.append(pts32[j] + t * (pts32[j2] - pts32[j]))
+                points.append(pts32[-1].astype(np.float64))
+                dirs.append(dirs[j])
+                convex.append(True)
+                nxt.append(j2)
+                prv.append(j)
+                nxt[j] = new
+                prv[j2] = new
+                if s1[best, jj] > 0.0:
+                    lefts.append(j)
+                    rights.append(new)
+                else:
+                    rights.append(j)
+                    lefts.append(new)
+        node = len(nodes)
+        nodes.append([i, -1, -1])
+        if parent >= 0:
+            nodes[parent][side] = node
+        depth = max(depth, level)
+        todo.append((rights, node, 2, level + 1))
+        todo.append((lefts, node, 1, level + 1))
+    return nodes, depth
+
+
+def prepare_obstacles(polygons: Sequence[ArrayLike]) -> ObstacleSet:
+    """Vertex rings and k-d tree of obstacles (RVO2's ``addObstacle``, ``processObstacles``).
+
+    Args:
+        polygons: Obstacles in order, each ``(M, 2)`` vertices in m: a polygon
+            listed counter-clockwise (``M >= 3``) or a segment (``M == 2``).
+
+    Returns:
+        The :class:`ObstacleSet`.
+
+    Raises:
+        ValueError: If an obstacle has fewer than two vertices or a zero-length edge.
+    """
+    pts32, points, nxt, prv, dirs, convex = [], [], [], [], [], []
+    for poly in polygons:
+        v = np.asarray(poly, dtype=np.float64).reshape(-1, 2)
+        m = len(v)
+        if m < 2:
+            raise ValueError("an obstacle needs at least two vertices")
+        if not np.all(np.any(np.roll(v, -1, axis=0) != v, axis=1)):
+            raise ValueError("an obstacle has a zero-length edge (repeated vertex)")
+        v32 = v.astype(np.float32)
+        base = len(pts32)
+        for k in range(m):
+            edge = v[(k + 1) % m] - v[k]
+            pts32.append(v32[k])
+            points.append(v[k])
+            nxt.append(base + (k + 1) % m)
+            prv.append(base + (k - 1) % m)
+            dirs.append(edge / math.hypot(edge[0], edge[1]))
+            convex.append(m == 2 or bool(_left_of(v32[(k - 1) % m], v32[k],
+                                                  v32[(k + 1) % m]) >= 0.0))
+    nodes, depth = _build_tree(pts32, nxt, prv, dirs, convex, points)
+    points = np.array(points, np.float64).reshape(-1, 2)
+    bbox = (np.concatenate((points.min(axis=0), points.max(axis=0))) if len(points)
+            else np.array([np.inf, np.inf, -np.inf, -np.inf]))
+    return ObstacleSet(points=points, next=np.array(nxt, np.int64),
+                       prev=np.array(prv, np.int64),
+                       directions=np.array(dirs, np.float64).reshape(-1, 2),
+                       convex=np.array(convex, np.bool_),
+                       tree=np.array(nodes, np.int64).reshape(-1, 3), depth=depth, bbox=bbox)
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _det(ax, ay, bx, by):  # pragma: no cover - numba
+    return ax * by - ay * bx
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _seg_dist_sq(px, py, pts, a, b):  # pragma: no cover - numba
+    """Squared distance from ``(px, py)`` to the segment ``pts[a] -> pts[b]``, m^2.
+
+    Evaluated in single precision as RVO2 does: it is only the sort key of the
+    neighbour edges, and an agent in a convex corner's diagonal region is at the
+    same distance from both edges; RVO2 then keeps the traversal order, which
+    needs the tie to be exact (in double precision the two values can differ in
+    the last bits).
+    """
+    f = np.float32
+    qx, qy = f(px), f(py)
+    ax, ay = f(pts[a, 0]), f(pts[a, 1])
+    bx, by = f(pts[b, 0]), f(pts[b, 1])
+    ex, ey = bx - ax, by - ay
+    r = ((qx - ax) * ex + (qy - ay) * ey) / (ex * ex + ey * ey)
+    if r < f(0.0):
+        dx, dy = qx - ax, qy - ay
+    elif r > f(1.0):
+        dx, dy = qx - bx, qy - by
+    else:
+        dx, dy = qx - (ax + r * ex), qy - (ay + r * ey)
+    return float(dx * dx + dy * dy)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _neighbours(px, py, range_sq, pts, nxt, tree, stack, nbr, nbr_d, sort):  # pragma: no cover
+    """Visible edges within range in RVO2's tree-traversal order; sorted (stably) if ``sort``.
+
+    The traversal visits the agent's side of a node's line first, then (when
+    the line is in range) the node's own edge, if the agent is on its outer
+    side, and the other side. Returns the number of edges written to ``nbr``.
+    """
+    m = 0
+    top = 0
+    stack[0] = 0  # entries: 2 * node + (0: descend, 1: node and far side)
+    while top >= 0:
+        entry = stack[top]
+        top -= 1
+        node = entry >> 1
+        e = tree[node, 0]
+        a, b = e, nxt[e]
+        ex, ey = pts[b, 0] - pts[a, 0], pts[b, 1] - pts[a, 1]
+        side = (pts[a, 0] - px) * ey - (pts[a, 1] - py) * ex  # leftOf(a, b, agent)
+        near = tree[node, 1] if side >= 0.0 else tree[node, 2]
+        far = tree[node, 2] if side >= 0.0 else tree[node, 1]
+        if entry & 1 == 0:
+            top += 1
+            stack[top] = 2 * node + 1
+            if near >= 0:
+                top += 1
+                stack[top] = 2 * near
+            continue
+        if side * side / (ex * ex + ey * ey) < range_sq:
+            if side < 0.0:
+                d = _seg_dist_sq(px, py, pts, a, b)
+                if d < range_sq:
+                    slot = m
+                    m += 1
+                    if sort:
+                        while slot > 0 and d < nbr_d[slot - 1]:
+                            nbr[slot] = nbr[slot - 1]
+                            nbr_d[slot] = nbr_d[slot - 1]
+                            slot -= 1
+                    nbr[slot] = e
+                    nbr_d[slot] = d
+            if far >= 0:
+                top += 1
+                stack[top] = 2 * far
+    return m
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _leg(rx, ry, dist_sq, radius, sign):  # pragma: no cover - numba
+    """Unit direction of the tangent from the agent to the disc of ``radius`` at ``(rx, ry)``.
+
+    ``sign = +1``: the left leg, ``-1``: the right leg (both pointing away from the agent).
+    """
+    leg = math.sqrt(dist_sq - radius * radius)
+    return ((rx * leg - sign * ry * radius) / dist_sq,
+            (sign * rx * radius + ry * leg) / dist_sq)
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _push(P, D, m, qx, qy, dx, dy):  # pragma: no cover - numba
+    P[m, 0], P[m, 1], D[m, 0], D[m, 1] = qx, qy, dx, dy
+    return m + 1
+
+
+@numba.njit(cache=True, error_model="numpy")
+def edge_line(px, py, vx, vy, radius, inv_tau, e, pts, nxt, prv, dirs, convex, P, D, m
+              ):  # pragma: no cover - numba
+    """Add the ORCA line of edge ``e`` for one agent to ``P[:m], D[:m]`` (if any).
+
+    Args:
+        px: Agent x position, m.
+        py: Agent y position, m.
+        vx: Agent x velocity, m/s.
+        vy: Agent y velocity, m/s.
+        radius: Agent radius, m.
+        inv_tau: 1 / obstacle time horizon, 1/s.
+        e: Edge (its first vertex).
+        pts: ``(V, 2)`` obstacle vertices, m.
+        nxt: ``(V,)`` next vertex of each ring.
+        prv: ``(V,)`` previous vertex of each ring.
+        dirs: ``(V, 2)`` unit edge directions.
+        convex: ``(V,)`` vertex convexity.
+        P: ``(L, 2)`` line points, m/s (rows ``< m`` are this agent's earlier lines).
+        D: ``(L, 2)`` unit line directions (allowed side on the left).
+        m: Lines written so far.
+
+    Returns:
+        The new number of lines (``m`` or ``m + 1``).
+    """
+    v1, v2 = e, nxt[e]
+    r1x, r1y = pts[v1, 0] - px, pts[v1, 1] - py
+    r2x, r2y = pts[v2, 0] - px, pts[v2, 1] - py
+    margin = inv_tau * radius
+    for j in range(m):  # cut-off discs of both ends already outside an earlier line?
+        c1 = _det(inv_tau * r1x - P[j, 0], inv_tau * r1y - P[j, 1], D[j, 0], D[j, 1])
+        c2 = _det(inv_tau * r2x - P[j, 0], inv_tau * r2y - P[j, 1], D[j, 0], D[j, 1])
+        if c1 - margin >= -EPSILON and c2 - margin >= -EPSILON:
+            return m
+    d1 = r1x * r1x + r1y * r1y
+    d2 = r2x * r2x + r2y * r2y
+    r_sq = radius * radius
+    ox, oy = pts[v2, 0] - pts[v1, 0], pts[v2, 1] - pts[v1, 1]
+    s = -(r1x * ox + r1y * oy) / (ox * ox + oy * oy)  # agent's projection on the edge
+    qx, qy = -r1x - s * ox, -r1y - s * oy
+    d_line = qx * qx + qy * qy
+    # already overlapping: leave along the outward normal, through the origin
+    if s < 0.0 and d1 <= r_sq:
+        if convex[v1]:
+            n = math.sqrt(d1)
+            m = _push(P, D, m, 0.0, 0.0, -r1y / n, r1x / n)
+        return m
+    if s > 1.0 and d2 <= r_sq:
+        if convex[v2] and _det(r2x, r2y, dirs[v2, 0], dirs[v2, 1]) >= 0.0:
+            n = math.sqrt(d2)
+            m = _push(P, D, m, 0.0, 0.0, -r2y / n, r2x / n)
+        return m
+    if 0.0 <= s <= 1.0 and d_line <= r_sq:
+        return _push(P, D, m, 0.0, 0.0, -dirs[v1, 0], -dirs[v1, 1])
+    # legs of the truncated cone
+    if s < 0.0 and d_line <= r_sq:  # seen end-on: vertex v1 alone
+        if not convex[v1]:
+            return m
+        v2 = v1
+        lx, ly = _leg(r1x, r1y, d1, radius, 1.0)
+        rx, ry = _leg(r1x, r1y, d1, radius, -1.0)
+    elif s > 1.0 and d_line <= r_sq:  # seen end-on: vertex v2 alone
+        if not convex[v2]:
+            return m
+        v1 = v2
+        lx, ly = _leg(r2x, r2y, d2, radius, 1.0)
+        rx, ry = _leg(r2x, r2y, d2, radius, -1.0)
+    else:
+        if convex[v1]:
+            lx, ly = _leg(r1x, r1y, d1, radius, 1.0)
+        else:  # concave corner: the leg continues the cut-off line
+            lx, ly = -dirs[v1, 0], -dirs[v1, 1]
+        if convex[v2]:
+            rx, ry = _leg(r2x, r2y, d2, radius, -1.0)
+        else:
+            rx, ry = dirs[v1, 0], dirs[v1, 1]
+    # a leg may not point into the neighbouring edge of a convex vertex
+    left_foreign = False
+    right_foreign = False
+    nb = prv[v1]
+    if convex[v1] and _det(lx, ly, -dirs[nb, 0], -dirs[nb, 1]) >= 0.0:
+        lx, ly = -dirs[nb, 0], -dirs[nb, 1]
+        left_foreign = True
+    if convex[v2] and _det(rx, ry, dirs[v2, 0], dirs[v2, 1]) <= 0.0:
+        rx, ry = dirs[v2, 0], dirs[v2, 1]
+        right_foreign = True
+    # cut-off centres and the projection of the velocity on the cone
+    lcx, lcy = inv_tau * (pts[v1, 0] - px), inv_tau * (pts[v1, 1] - py)
+    rcx, rcy = inv_tau * (pts[v2, 0] - px), inv_tau * (pts[v2, 1] - py)
+    cx, cy = rcx - lcx, rcy - lcy
+    single = v1 == v2
+    wlx, wly = vx - lcx, vy - lcy
+    wrx, wry = vx - rcx, vy - rcy
+    t = 0.5 if single else (wlx * cx + wly * cy) / (cx * cx + cy * cy)
+    t_left = wlx * lx + wly * ly
+    t_right = wrx * rx + wry * ry
+    if (t < 0.0 and t_left < 0.0) or (single and t_left < 0.0 and t_right < 0.0):
+        n = math.sqrt(wlx * wlx + wly * wly)  # onto the left cut-off circle
+        ux, uy = wlx / n, wly / n
+        return _push(P, D, m, lcx + margin * ux, lcy + margin * uy, uy, -ux)
+    if t > 1.0 and t_right < 0.0:
+        n = math.sqrt(wrx * wrx + wry * wry)  # onto the right cut-off circle
+        ux, uy = wrx / n, wry / n
+        return _push(P, D, m, rcx + margin * ux, rcy + margin * uy, uy, -ux)
+    d_cut = math.inf
+    if not (t < 0.0 or t > 1.0 or single):
+        gx, gy = vx - (lcx + t * cx), vy - (lcy + t * cy)
+        d_cut = gx * gx + gy * gy
+    d_left = math.inf
+    if t_left >= 0.0:
+        gx, gy = vx - (lcx + t_left * lx), vy - (lcy + t_left * ly)
+        d_left = gx * gx + gy * gy
+    d_right = math.inf
+    if t_right >= 0.0:
+        gx, gy = vx - (rcx + t_right * rx), vy - (rcy + t_right * ry)
+        d_right = gx * gx + gy * gy
+    if d_cut <= d_left and d_cut <= d_right:  # onto the cut-off segment
+        dx, dy = -dirs[v1, 0], -dirs[v1, 1]
+        return _push(P, D, m, lcx - margin * dy, lcy + margin * dx, dx, dy)
+    if d_left <= d_right:  # onto the left leg
+        if left_foreign:
+            return m
+        return _push(P, D, m, lcx - margin * ly, lcy + margin * lx, lx, ly)
+    if right_foreign:  # onto the right leg
+        return m
+    return _push(P, D, m, rcx + margin * ry, rcy - margin * rx, -rx, -ry)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _near_box(px, py, range_sq, bbox):  # pragma: no cover - numba
+    dx = max(bbox[0] - px, 0.0, px - bbox[2])
+    dy = max(bbox[1] - py, 0.0, py - bbox[3])
+    return dx * dx + dy * dy < range_sq
+
+
+@numba.njit(cache=True, parallel=True, error_model="numpy")
+def _count_kernel(pos, range_sq, pts, nxt, tree, depth, bbox, chunk, count
+                  ):  # pragma: no cover - numba
+    n = pos.shape[0]
+    for c in numba.prange((n + chunk - 1) // chunk):
+        stack = np.empty(depth + 2, np.int64)
+        nbr = np.empty(pts.shape[0], np.int64)
+        nbr_d = np.empty(pts.shape[0])
+        for i in range(c * chunk, min(n, (c + 1) * chunk)):
+            count[i] = 0
+            if _near_box(pos[i, 0], pos[i, 1], range_sq[i], bbox):
+                count[i] = _neighbours(pos[i, 0], pos[i, 1], range_sq[i], pts, nxt, tree, stack,
+                                       nbr, nbr_d, False)
+
+
+@numba.njit(cache=True, parallel=True, error_model="numpy")
+def _lines_kernel(pos, vel, radius, range_sq, inv_tau, pts, nxt, prv, dirs, convex, tree, depth,
+                  bbox, chunk, P, D, count):  # pragma: no cover - numba
+    n = pos.shape[0]
+    for c in numba.prange((n + chunk - 1) // chunk):
+        stack = np.empty(depth + 2, np.int64)
+        nbr = np.empty(pts.shape[0], np.int64)
+        nbr_d = np.empty(pts.shape[0])
+        for i in range(c * chunk, min(n, (c + 1) * chunk)):
+            count[i] = 0
+            px, py = pos[i, 0], pos[i, 1]
+            if not _near_box(px, py, range_sq[i], bbox):
+                continue
+            k = _neighbours(px, py, range_sq[i], pts, nxt, tree, stack, nbr, nbr_d, True)
+            m = 0
+            for j in range(k):
+                m = edge_line(px, py, vel[i, 0], vel[i, 1], radius[i], inv_tau, nbr[j], pts, nxt,
+                              prv, dirs, convex, P[i], D[i], m)
+            count[i] = m
+
+
+def obstacle_lines(pos: ArrayLike, vel: ArrayLike, radius: ArrayLike | float,
+                   max_speed: ArrayLike | float, time_horizon_obst: float,
+                   obstacles: ObstacleSet | Sequence[ArrayLike]
+                   ) -> tuple[FloatArray, FloatArray, IntArray]:
+    """RVO2's obstacle ORCA lines of every agent (hard lines for :mod:`comparisons.orca.lp`).
+
+    Args:
+        pos: ``(N, 2)`` agent positions, m.
+        vel: ``(N, 2)`` agent velocities, m/s.
+        radius: ``(N,)`` or scalar agent radii, m.
+        max_speed: ``(N,)`` or scalar speed limits, m/s (they set the search
+            range ``time_horizon_obst * max_speed + radius``, m).
+        time_horizon_obst: Obstacle time horizon tau_obst, s.
+        obstacles: A prepared :class:`ObstacleSet` or a list of polygons for
+            :func:`prepare_obstacles`.
+
+    Returns:
+        ``(points (N, H, 2) m/s, directions (N, H, 2), count (N,))``: each agent's
+        lines (allowed side on the left), nearest edge first, rows padded past
+        ``count``; ``H`` is the largest number of candidate edges of an agent
+        (0 when no agent is near an obstacle).
+    """
+    obs = obstacles if isinstance(obstacles, ObstacleSet) else prepare_obstacles(obstacles)
+    pos = np.ascontiguousarray(pos, dtype=np.float64).reshape(-1, 2)
+    n = len(pos)
+    radius = np.ascontiguousarray(np.broadcast_to(radius, (n,)), dtype=np.float64)
+    reach = time_horizon_obst * np.broadcast_to(np.asarray(max_speed, np.float64), (n,)) + radius
+    range_sq = np.ascontiguousarray(reach * reach)
+    count = np.empty(n, np.int64)
+    if obs.n_edges == 0 or n == 0:
+        count[:] = 0
+        return np.zeros((n, 0, 2)), np.zeros((n, 0, 2)), count
+    chunk = max(1, -(-n // (4 * numba.get_num_threads())))
+    _count_kernel(pos, range_sq, obs.points, obs.next, obs.tree, obs.depth, obs.bbox, chunk,
+                  count)
+    h = int(count.max())
+    P = np.zeros((n, h, 2))
+    D = np.zeros((n, h, 2))
+    if h > 0:
+        _lines_kernel(pos, np.ascontiguousarray(vel, dtype=np.float64).reshape(-1, 2), radius,
+                      range_sq, 1.0 / time_horizon_obst, obs.points, obs.next, obs.prev,
+                      obs.directions, obs.convex, obs.tree, obs.depth, obs.bbox, chunk, P, D, count)
+    return P, D, count
