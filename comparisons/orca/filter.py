@@ -26,6 +26,7 @@ from typing import Literal
 import numpy as np
 
 from comparisons.orca import lp, safe
+from comparisons.orca.obstacles import ObstacleSet, obstacle_lines, prepare_obstacles
 from comparisons.orca.velocities import orca_velocities
 from dfcoa_opt.control.base import Filtered, FilterResult, Observation
 from dfcoa_opt.control.registry import register, register_filter
@@ -55,10 +56,13 @@ class OrcaFilter:
         solver: Literal["exact", "qp"] = param(
             "exact", doc="'exact': incremental 2D LP (fast path); 'qp': qpsolvers.")
         qp_solver: str = param("osqp", doc="qpsolvers backend when solver = 'qp'.")
-        obstacles: Literal["next_step", "none"] = param(
-            "next_step", doc="Static obstacles: 'next_step': hard half-planes that keep the robot "
-                             "off every polygon edge at the next step (comparisons/orca/safe.py); "
-                             "'none': ignored.")
+        obstacles: Literal["orca", "next_step", "none"] = param(
+            "orca", doc="Static obstacles: 'orca': RVO2's obstacle ORCA lines (mode a, horizon "
+                        "time_horizon_obst); 'next_step': hard half-planes that keep the robot "
+                        "off every polygon edge at the next step (comparisons/orca/safe.py); "
+                        "'none': ignored.")
+        time_horizon_obst: float = param(2.0, doc="ORCA horizon of static obstacles (mode "
+                                                  "'orca').", unit="s", gt=0.0)
         safe_discrete: bool = param(False, doc="Add hard half-planes that forbid overlap at "
                                                "the next step (comparisons/orca/safe.py).")
 
@@ -67,6 +71,7 @@ class OrcaFilter:
         self._radius = 0.2
         self._v_max = 1.0
         self._segments = np.zeros((0, 2, 2))
+        self._obstacles: ObstacleSet | None = None
 
     def reset(self, scenario, rng: np.random.Generator) -> None:
         """Read the robots' radius and speed limit and the static obstacle edges."""
@@ -78,16 +83,29 @@ class OrcaFilter:
             v = shape.to_polygon().as_array()
             edges.append(np.stack((v, np.roll(v, -1, axis=0)), axis=1))
         self._segments = np.concatenate(edges) if edges else np.zeros((0, 2, 2))
+        polygons = [shape.to_polygon().as_array() for shape in scenario.world.shapes]
+        self._obstacles = prepare_obstacles(polygons) if polygons else None
 
     def _hard_lines(self, obs: Observation):
-        """Hard lines of every robot: static edges and, in safe mode, robot pairs."""
+        """Hard lines of every robot: static obstacles and, in safe mode, next-step separation.
+
+        In safe mode the next-step edge half-planes are added whatever ``obstacles`` is,
+        so that the no-overlap guarantee covers static obstacles too.
+        """
         n = obs.n
         radius = np.full(n, self._radius)
         v_max = np.full(n, self._v_max)
-        segments = self._segments if self.p.obstacles == "next_step" else self._segments[:0]
-        groups = [safe.segment_safety_lines(obs.pose[:, :2], radius, v_max, obs.dt, segments)]
+        groups = []
+        if self.p.obstacles == "orca" and self._obstacles is not None:
+            groups.append(obstacle_lines(obs.pose[:, :2], obs.velocity, radius, v_max,
+                                         self.p.time_horizon_obst, self._obstacles))
+        if self.p.obstacles == "next_step" or self.p.safe_discrete:
+            groups.append(safe.segment_safety_lines(obs.pose[:, :2], radius, v_max, obs.dt,
+                                                    self._segments))
         if self.p.safe_discrete:
             groups.append(self._pair_lines(obs, radius, v_max))
+        if not groups:
+            return np.zeros((n, 0, 2)), np.zeros((n, 0, 2)), np.zeros(n, np.int64)
         return concat_lines(groups)
 
     def _pair_lines(self, obs: Observation, radius, v_max):
