@@ -105,3 +105,10 @@ def test_filter_params_reject_unknown_policy():
 
     with pytest.raises(ScenarioError, match="infeasible"):
         build(OrcaFilter.Params, {"infeasible": "ignore"}, "f.toml", "controllers.orca")
+
+
+def test_qp_solver_path_gives_the_same_run_as_the_exact_path():
+    """The filter's two solving paths agree on a whole swap run (positions to 1e-6 m)."""
+    logs = [run_scenario(swap_scenario(n=4, controllers={"orca": {"solver": s}}),
+                         "goto_slot+orca") for s in ("exact", "qp")]
+    np.testing.assert_allclose(logs[0].pose[..., :2], logs[1].pose[..., :2], atol=1e-6)
