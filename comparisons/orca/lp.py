@@ -42,7 +42,8 @@ FloatArray = NDArray[np.float64]
 
 
 @numba.njit(cache=True, inline="always")
-def _det(ax, ay, bx, by):  # pragma: no cover - numba
+def det(ax, ay, bx, by):  # pragma: no cover - numba
+    """``det(a, b) = a_x b_y - a_y b_x``; > 0 when ``b`` is counter-clockwise of ``a``."""
     return ax * by - ay * bx
 
 
@@ -58,8 +59,8 @@ def _on_line(P, D, k, radius, ox, oy, direction_opt, out):  # pragma: no cover -
     t_left = -dot - root
     t_right = -dot + root
     for i in range(k):
-        den = _det(dkx, dky, D[i, 0], D[i, 1])
-        num = _det(D[i, 0], D[i, 1], pkx - P[i, 0], pky - P[i, 1])
+        den = det(dkx, dky, D[i, 0], D[i, 1])
+        num = det(D[i, 0], D[i, 1], pkx - P[i, 0], pky - P[i, 1])
         if abs(den) <= EPSILON:  # (almost) parallel
             if num < 0.0:
                 return False
@@ -98,7 +99,7 @@ def _incremental(P, D, n, radius, ox, oy, direction_opt, out):  # pragma: no cov
         out[0] = ox
         out[1] = oy
     for i in range(n):
-        if _det(D[i, 0], D[i, 1], P[i, 0] - out[0], P[i, 1] - out[1]) > 0.0:
+        if det(D[i, 0], D[i, 1], P[i, 0] - out[0], P[i, 1] - out[1]) > 0.0:
             keep_x, keep_y = out[0], out[1]
             if not _on_line(P, D, i, radius, ox, oy, direction_opt, out):
                 out[0] = keep_x
@@ -112,21 +113,21 @@ def _least_violation(P, D, n, n_hard, begin, radius, out, QP, QD):  # pragma: no
     """Minimise the largest violation of lines ``n_hard..n-1``, hard lines kept."""
     distance = 0.0
     for i in range(begin, n):
-        if _det(D[i, 0], D[i, 1], P[i, 0] - out[0], P[i, 1] - out[1]) <= distance:
+        if det(D[i, 0], D[i, 1], P[i, 0] - out[0], P[i, 1] - out[1]) <= distance:
             continue
         m = 0
         for j in range(n_hard):
             QP[m, 0], QP[m, 1], QD[m, 0], QD[m, 1] = P[j, 0], P[j, 1], D[j, 0], D[j, 1]
             m += 1
         for j in range(n_hard, i):
-            det_ij = _det(D[i, 0], D[i, 1], D[j, 0], D[j, 1])
+            det_ij = det(D[i, 0], D[i, 1], D[j, 0], D[j, 1])
             if abs(det_ij) <= EPSILON:
                 if D[i, 0] * D[j, 0] + D[i, 1] * D[j, 1] > 0.0:
                     continue  # same direction: line j adds nothing
                 px = 0.5 * (P[i, 0] + P[j, 0])
                 py = 0.5 * (P[i, 1] + P[j, 1])
             else:
-                s = _det(D[j, 0], D[j, 1], P[i, 0] - P[j, 0], P[i, 1] - P[j, 1]) / det_ij
+                s = det(D[j, 0], D[j, 1], P[i, 0] - P[j, 0], P[i, 1] - P[j, 1]) / det_ij
                 px = P[i, 0] + s * D[i, 0]
                 py = P[i, 1] + s * D[i, 1]
             bx = D[j, 0] - D[i, 0]
@@ -138,7 +139,7 @@ def _least_violation(P, D, n, n_hard, begin, radius, out, QP, QD):  # pragma: no
         if _incremental(QP, QD, m, radius, -D[i, 1], D[i, 0], True, out) < m:
             out[0] = keep_x  # only floating-point error can get here: keep the result
             out[1] = keep_y
-        distance = _det(D[i, 0], D[i, 1], P[i, 0] - out[0], P[i, 1] - out[1])
+        distance = det(D[i, 0], D[i, 1], P[i, 0] - out[0], P[i, 1] - out[1])
 
 
 @numba.njit(cache=True)
@@ -151,7 +152,7 @@ def solve_one(P, D, n, n_hard, pref_x, pref_y, v_max, out, QP, QD):  # pragma: n
         status = LEAST_VIOLATION
     worst = 0.0
     for k in range(n):
-        worst = max(worst, _det(D[k, 0], D[k, 1], P[k, 0] - out[0], P[k, 1] - out[1]))
+        worst = max(worst, det(D[k, 0], D[k, 1], P[k, 0] - out[0], P[k, 1] - out[1]))
     return status, worst
 
 

@@ -40,34 +40,29 @@ _loaded = False
 C = TypeVar("C", bound=type)
 
 
-def register(controller_id: str) -> Callable[[C], C]:
-    """Class decorator registering a controller under ``controller_id``."""
+def _registrar(table: dict[str, type], kind: str, key: str) -> Callable[[C], C]:
+    """Class decorator putting a class with ``Params`` into ``table`` under ``key``."""
 
     def deco(cls: C) -> C:
-        if controller_id in _REGISTRY and _REGISTRY[controller_id] is not cls:
-            raise ValueError(f"controller id {controller_id!r} is already registered")
+        if key in table and table[key] is not cls:
+            raise ValueError(f"{kind} id {key!r} is already registered")
         if not hasattr(cls, "Params"):
             raise TypeError(f"{cls.__name__} needs a Params dataclass")
-        cls.name = controller_id
-        _REGISTRY[controller_id] = cls
+        cls.name = key
+        table[key] = cls
         return cls
 
     return deco
+
+
+def register(controller_id: str) -> Callable[[C], C]:
+    """Class decorator registering a controller under ``controller_id``."""
+    return _registrar(_REGISTRY, "controller", controller_id)
 
 
 def register_filter(filter_id: str) -> Callable[[C], C]:
     """Class decorator registering a safety filter under ``filter_id``."""
-
-    def deco(cls: C) -> C:
-        if filter_id in _FILTERS and _FILTERS[filter_id] is not cls:
-            raise ValueError(f"filter id {filter_id!r} is already registered")
-        if not hasattr(cls, "Params"):
-            raise TypeError(f"{cls.__name__} needs a Params dataclass")
-        cls.name = filter_id
-        _FILTERS[filter_id] = cls
-        return cls
-
-    return deco
+    return _registrar(_FILTERS, "filter", filter_id)
 
 
 def available_filters() -> list[str]:
