@@ -167,3 +167,24 @@ def test_localization_shorthand_and_unknown_mode():
     assert small(localization="truth").spec.localization.mode == "truth"
     with pytest.raises(ScenarioError, match="localization.mode: unknown mode 'gps'"):
         small(localization="gps")
+
+
+def test_world_clearance_is_exact_against_shapely():
+    """Contacts are measured on the exact shapes (and map cells), not the rasterised shapes.
+
+    Oracle: shapely's distance to the union of the polygons and circles.
+    """
+    sc = load_scenario(SCEN / "example_obstacles.toml")
+    world = sc.world
+    geoms = [shapely.Polygon(v) for v in world.polygons]
+    geoms += [shapely.Point(c.center).buffer(c.radius, quad_segs=4096) for c in world.circles]
+    union = shapely.union_all(geoms)
+    rng = np.random.default_rng(3)
+    pts = rng.uniform([0.0, 0.0], [24.0, 14.0], size=(2000, 2))
+    ours = world.clearance(pts, cap=100.0)
+    ref = np.array([union.distance(shapely.Point(p)) for p in pts])
+    assert np.max(np.abs(ours - ref)) < 1e-6
+    assert np.any(ours == 0.0) and np.any(ours > 1.0)
+    # the rasterised grid differs by up to a cell diagonal: the old measure was not exact
+    grid = world.grid.clearance(pts, cap=100.0)
+    assert np.max(np.abs(grid - ref)) > 0.03

@@ -26,6 +26,7 @@ from typing import Literal
 import numpy as np
 
 from comparisons.orca import lp, safe
+from comparisons.orca.ivo import ivo_lines
 from comparisons.orca.obstacles import ObstacleSet, obstacle_lines, prepare_obstacles
 from comparisons.orca.velocities import orca_velocities
 from dfcoa_opt.control.base import Filtered, FilterResult, Observation
@@ -56,13 +57,22 @@ class OrcaFilter:
         solver: Literal["exact", "qp"] = param(
             "exact", doc="'exact': incremental 2D LP (fast path); 'qp': qpsolvers.")
         qp_solver: str = param("osqp", doc="qpsolvers backend when solver = 'qp'.")
-        obstacles: Literal["orca", "next_step", "none"] = param(
+        obstacles: Literal["orca", "ivo", "next_step", "none"] = param(
             "orca", doc="Static obstacles: 'orca': RVO2's obstacle ORCA lines (mode a, horizon "
-                        "time_horizon_obst); 'next_step': hard half-planes that keep the robot "
-                        "off every polygon edge at the next step (comparisons/orca/safe.py); "
-                        "'none': ignored.")
+                        "time_horizon_obst); 'ivo': paper 001's improved VO (mode b, eq 8-10, "
+                        "comparisons/orca/ivo.py); 'next_step': hard half-planes that keep the "
+                        "robot off every polygon edge at the next step (comparisons/orca/safe.py)"
+                        "; 'none': ignored.")
         time_horizon_obst: float = param(2.0, doc="ORCA horizon of static obstacles (mode "
-                                                  "'orca').", unit="s", gt=0.0)
+                                                  "'orca'); with v_max it also sets the 'ivo' "
+                                                  "range.", unit="s", gt=0.0)
+        ivo_tau: Literal["center", "gap"] = param(
+            "center", doc="Eq 9 horizon of mode 'ivo': distance from the robot's centre "
+                          "('center') or from its rim ('gap') to the ellipse, over the speed.")
+        ivo_max_segment: float | None = param(
+            None, doc="Mode 'ivo': split polygon edges into pieces no longer than this, each "
+                      "with its own eq-8 ellipse; default: one ellipse per edge (facade).",
+            unit="m", gt=0.0)
         safe_discrete: bool = param(False, doc="Add hard half-planes that forbid overlap at "
                                                "the next step (comparisons/orca/safe.py).")
 
@@ -72,6 +82,7 @@ class OrcaFilter:
         self._v_max = 1.0
         self._segments = np.zeros((0, 2, 2))
         self._obstacles: ObstacleSet | None = None
+        self._polygons: list[np.ndarray] = []
 
     def reset(self, scenario, rng: np.random.Generator) -> None:
         """Read the robots' radius and speed limit and the static obstacle edges."""
@@ -83,8 +94,8 @@ class OrcaFilter:
             v = shape.to_polygon().as_array()
             edges.append(np.stack((v, np.roll(v, -1, axis=0)), axis=1))
         self._segments = np.concatenate(edges) if edges else np.zeros((0, 2, 2))
-        polygons = [shape.to_polygon().as_array() for shape in scenario.world.shapes]
-        self._obstacles = prepare_obstacles(polygons) if polygons else None
+        self._polygons = [shape.to_polygon().as_array() for shape in scenario.world.shapes]
+        self._obstacles = prepare_obstacles(self._polygons) if self._polygons else None
 
     def _hard_lines(self, obs: Observation):
         """Hard lines of every robot: static obstacles and, in safe mode, next-step separation.
@@ -99,6 +110,11 @@ class OrcaFilter:
         if self.p.obstacles == "orca" and self._obstacles is not None:
             groups.append(obstacle_lines(obs.pose[:, :2], obs.velocity, radius, v_max,
                                          self.p.time_horizon_obst, self._obstacles))
+        if self.p.obstacles == "ivo" and self._polygons:
+            reach = v_max[0] * self.p.time_horizon_obst + self._radius
+            groups.append(ivo_lines(obs.pose[:, :2], obs.velocity, radius, self._polygons,
+                                    reach, tau=self.p.ivo_tau, tau_min=max(obs.dt, 0.1),
+                                    max_segment=self.p.ivo_max_segment))
         if self.p.obstacles == "next_step" or self.p.safe_discrete:
             groups.append(safe.segment_safety_lines(obs.pose[:, :2], radius, v_max, obs.dt,
                                                     self._segments))

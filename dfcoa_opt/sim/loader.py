@@ -252,9 +252,10 @@ def _build_world(spec: ScenarioSpec, source: str, base_dir: Path, offsets: np.nd
         if abs(w - ws.size[0]) > grid.cell_size / 2 or abs(h - ws.size[1]) > grid.cell_size / 2:
             raise ScenarioError(source, "world.size", f"{list(ws.size)} m does not match the map, "
                                 f"which is {w:g} x {h:g} m at {ws.resolution:g} cells/m")
+    raster = grid if ws.map_ascii is not None or ws.map_image is not None else None
     shapes = tuple(_shape(o, source, f"world.obstacles[{i}]") for i, o in enumerate(ws.obstacles))
     shapes += _clutter(spec, offsets, grid.extent)
     grid = grid.with_shapes(shapes)
     discs = tuple(MovingDisc(d.radius, d.speed, d.waypoints, d.start_time, d.end)
                   for d in ws.dynamic_obstacles)
-    return World(grid=grid, shapes=shapes, dynamic=DynamicObstacles(discs))
+    return World(grid=grid, shapes=shapes, dynamic=DynamicObstacles(discs), raster=raster)

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
+from dfcoa_opt.geometry import point_segment_distance, points_in_polygon
 from dfcoa_opt.sim.schema import ScenarioSpec
 from dfcoa_opt.world.dynamic import DynamicObstacles
 from dfcoa_opt.world.grid import OccupancyGrid
@@ -17,15 +19,57 @@ from dfcoa_opt.world.shapes import Circle, Shape
 class World:
     """Static grid, exact obstacle geometry and moving obstacles.
 
+    The static obstacles *are* the exact shapes plus the cells of the map file
+    (``raster``); ``grid`` rasterises the shapes too (a cell touched by a shape
+    is occupied) for the LiDAR and the planners. Contacts and clearances are
+    measured by :meth:`clearance` against the exact shapes and the map cells,
+    not against the rasterised shapes, which are up to a cell diagonal fatter.
+
     Attributes:
         grid: Occupancy grid (map plus rasterised shapes).
         shapes: Exact static shapes (polygons, rectangles, circles), in file order.
         dynamic: Moving discs.
+        raster: Grid of the map file alone (``map_ascii``/``map_image``); None without one.
     """
 
     grid: OccupancyGrid
     shapes: tuple[Shape, ...]
     dynamic: DynamicObstacles
+    raster: OccupancyGrid | None = None
+
+    @cached_property
+    def _edges(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Polygon edges ``(E, 2)`` starts and ends, m."""
+        polys = self.polygons
+        if not polys:
+            return np.zeros((0, 2)), np.zeros((0, 2))
+        return (np.concatenate(polys), np.concatenate([np.roll(v, -1, axis=0) for v in polys]))
+
+    def clearance(self, points: ArrayLike, cap: float = 10.0) -> NDArray[np.float64]:
+        """Distance (m) from points to the nearest static obstacle; 0 inside one.
+
+        Exact for the shapes (polygon edges, circles) and for the map cells.
+
+        Args:
+            points: ``(P, 2)`` world points, m.
+            cap: Larger distances are reported as ``cap``, m.
+        """
+        p = np.asarray(points, dtype=float).reshape(-1, 2)
+        out = np.full(len(p), float(cap))
+        a, b = self._edges
+        if len(a):
+            out = np.minimum(out, point_segment_distance(p[:, None, :], a, b).min(axis=1))
+            for poly in self.polygons:
+                out[points_in_polygon(p, poly)] = 0.0
+        circles = self.circles
+        if circles:
+            c = np.array([ci.center for ci in circles])
+            r = np.array([ci.radius for ci in circles])
+            gap = np.linalg.norm(p[:, None, :] - c[None], axis=-1) - r[None]
+            out = np.minimum(out, np.maximum(gap.min(axis=1), 0.0))
+        if self.raster is not None:
+            out = np.minimum(out, self.raster.clearance(p, cap))
+        return out
 
     @property
     def polygons(self) -> list[NDArray[np.float64]]:

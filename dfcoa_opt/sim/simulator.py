@@ -107,7 +107,7 @@ class Simulator:
         estimator = make_estimator(spec.localization.mode, sc)
         estimator.reset(rng)
         self.controller.reset(sc, rng)
-        grid, cap = sc.world.grid, spec.metrics.clearance_cap
+        world, cap = sc.world, spec.metrics.clearance_cap
         sensors = spec.sensors
         owners = np.concatenate((np.arange(n), np.full(m, -1)))
         disc_r = np.concatenate((np.full(n, self.radius), dyn.radii))
@@ -149,7 +149,7 @@ class Simulator:
             new_state = self.model.step(state, native, dt, self._disturbance(self._dist_v, t),
                                         self._disturbance(self._dist_f, t))
             # -- contacts at t_k
-            clearance = grid.clearance(pos, cap)
+            clearance = world.clearance(pos, cap)
             static_hit = clearance < self.radius
             dyn_hit = dyn_dist < self.radius + dyn.radii[None, :]
             pairs = set(prox.contact_keys.tolist())
