@@ -281,3 +281,30 @@ def test_dask_scheduler_address_of_a_running_cluster(tmp_path):
                         progress=False)
     assert res.ran == 2
     assert _deterministic(res.store.rows()) == _deterministic(ref.store.rows())
+
+
+def test_process_pool_survives_a_parent_that_ran_parallel_numba(tmp_path):
+    """``make figures`` runs parallel numba kernels in-process between sweeps.
+
+    With GNU OpenMP as numba's threading layer, a child forked from such a
+    process dies as soon as it runs a parallel kernel itself ("fork() called from
+    a process already using GNU OpenMP"), which broke the pool; workers now start
+    from a fork server. Run in a fresh interpreter so the parent's state is
+    exactly that, with runs of the ``orca`` filter (parallel kernels).
+    """
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'scenarios = [{str(DATA / "tiny.toml")!r}]\n'
+                     'controllers = ["goto_slot+orca"]\nseeds = 2\n')
+    script = f"""
+from comparisons.orca.crowd import OrcaCrowd, circle_positions
+from dfcoa_opt.bench.executors import ExecutorConfig
+from dfcoa_opt.bench.harness import run_sweep
+crowd = OrcaCrowd(circle_positions(50, 40.0))
+crowd.step(-crowd.positions / 40.0)  # a parallel kernel: the threading layer is now up
+res = run_sweep({str(sweep)!r}, {str(tmp_path / "out")!r}, ExecutorConfig("process", 2),
+                progress=False)
+assert res.failed == 0 and res.ran == 2, res
+"""
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=300, cwd=Path(__file__).resolve().parents[1])
+    assert proc.returncode == 0, proc.stderr[-2000:]

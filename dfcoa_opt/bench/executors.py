@@ -16,6 +16,7 @@ processes ever write the same file and a remote cluster needs no shared disk
 from __future__ import annotations
 
 import itertools
+import multiprocessing
 import os
 from collections.abc import Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -70,9 +71,16 @@ def run_all(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome
 
 
 def _processes(runs: Sequence[RunSpec], jobs: int) -> Iterator[Outcome]:
-    """At most ``2 * jobs`` runs in flight, so finished logs never pile up in memory."""
+    """At most ``2 * jobs`` runs in flight, so finished logs never pile up in memory.
+
+    Workers start from a fork server, not by forking this process: once this
+    process has run a parallel numba kernel, GNU OpenMP's threads are up and a
+    forked child dies ("fork() called from a process already using GNU
+    OpenMP"); ``make figures`` runs such kernels between sweeps.
+    """
     queue = iter(runs)
-    with ProcessPoolExecutor(max_workers=min(jobs, len(runs))) as pool:
+    ctx = multiprocessing.get_context("forkserver")
+    with ProcessPoolExecutor(max_workers=min(jobs, len(runs)), mp_context=ctx) as pool:
         active = {pool.submit(execute, r) for r in itertools.islice(queue, 2 * jobs)}
         try:
             while active:

@@ -124,6 +124,27 @@ class Observation:
                            self.goal, self.slot_offset[rows], self.slot[rows])
 
 
+
+def slot_velocity(leader: FloatArray, slot: FloatArray) -> FloatArray:
+    """World velocity of points fixed in the virtual leader's frame (the slots' feed-forward).
+
+    ``d/dt slot = v_l (cos th_l, sin th_l) + w_l J (slot - p_l)`` with ``J`` the
+    rotation by +90 deg: the velocity a slot has while the leader moves with its
+    broadcast (v, omega). With ``omega = 0`` it is the leader's velocity.
+
+    Args:
+        leader: ``(5,)`` broadcast leader state (x m, y m, theta rad, v m/s, omega rad/s).
+        slot: ``(..., 2)`` world positions of the slots (or any leader-fixed points), m.
+
+    Returns:
+        ``(..., 2)`` their world velocities, m/s.
+    """
+    x, y, th, v, w = np.asarray(leader, dtype=float)
+    rel = np.asarray(slot, dtype=float) - np.array([x, y])
+    return v * np.array([np.cos(th), np.sin(th)]) + w * np.stack((-rel[..., 1], rel[..., 0]),
+                                                                 axis=-1)
+
+
 @runtime_checkable
 class Controller(Protocol):
     """A multi-robot controller: one command row per robot.

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dfcoa_opt.control.base import Observation
+from dfcoa_opt.control.base import Observation, slot_velocity
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.params import param
 
@@ -20,7 +20,8 @@ class GotoSlot:
     """Velocity command ``u_i = kp (slot_i - p_i) + d/dt slot_i``.
 
     The feed-forward ``d/dt slot_i = v_l (cos th_l, sin th_l) + w_l J (slot_i - p_l)``
-    (``J`` = rotation by +90 deg) is the slot's velocity under the leader's motion.
+    (``J`` = rotation by +90 deg) is the slot's velocity under the leader's motion
+    (:func:`~dfcoa_opt.control.base.slot_velocity`).
     """
 
     command = "velocity"
@@ -42,8 +43,5 @@ class GotoSlot:
         """Row i uses only robot i's pose and slot and the broadcast leader."""
         u = self.p.kp * (obs.slot - obs.pose[:, :2])
         if self.p.feedforward:
-            x, y, th, v, w = obs.leader
-            rel = obs.slot - np.array([x, y])
-            u = u + v * np.array([np.cos(th), np.sin(th)]) + w * np.column_stack((-rel[:, 1],
-                                                                                   rel[:, 0]))
+            u = u + slot_velocity(obs.leader, obs.slot)
         return u

@@ -27,6 +27,10 @@ STATUS_FALLBACK = 2    # infeasible: the configured fallback policy was applied
 STATUS_SOLVER_FAIL = 3  # solver error: the configured fallback policy was applied
 
 
+#: Log fields that are measured wall-clock times (not part of a run's result).
+TIMING_FIELDS = ("filter_time",)
+
+
 @dataclass
 class RunLog:
     """Arrays of one run (T steps, N robots, M moving obstacles).
@@ -128,9 +132,15 @@ class RunLog:
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "meta"}
 
     def digest(self) -> str:
-        """SHA-256 over every array's bytes: equal digests mean bit-identical runs."""
+        """SHA-256 over every array's bytes but the timings: equal digests = bit-identical runs.
+
+        ``filter_time`` is wall-clock time, different in every run, so it is left out
+        (:data:`TIMING_FIELDS`).
+        """
         h = hashlib.sha256()
         for name, arr in sorted(self.arrays().items()):
+            if name in TIMING_FIELDS:
+                continue
             a = np.ascontiguousarray(arr)
             h.update(name.encode())
             h.update(str(a.dtype).encode() + str(a.shape).encode())
