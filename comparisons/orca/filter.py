@@ -26,6 +26,7 @@ from typing import Literal
 import numpy as np
 
 from comparisons.orca import lp, safe
+from comparisons.orca.ellipse import polygon_segments
 from comparisons.orca.ivo import ivo_lines
 from comparisons.orca.obstacles import ObstacleSet, obstacle_lines, prepare_obstacles
 from comparisons.orca.velocities import orca_velocities
@@ -83,19 +84,19 @@ class OrcaFilter:
         self._segments = np.zeros((0, 2, 2))
         self._obstacles: ObstacleSet | None = None
         self._polygons: list[np.ndarray] = []
+        self._ivo_segments = np.zeros((0, 4))
 
     def reset(self, scenario, rng: np.random.Generator) -> None:
         """Read the robots' radius and speed limit and the static obstacle edges."""
         rob = scenario.spec.robots
         self._radius = rob.radius
         self._v_max = self.p.v_max if self.p.v_max is not None else rob.v_max
-        edges = []
-        for shape in scenario.world.shapes:
-            v = shape.to_polygon().as_array()
-            edges.append(np.stack((v, np.roll(v, -1, axis=0)), axis=1))
-        self._segments = np.concatenate(edges) if edges else np.zeros((0, 2, 2))
         self._polygons = [shape.to_polygon().as_array() for shape in scenario.world.shapes]
+        edges = polygon_segments(self._polygons)
+        self._segments = edges.reshape(-1, 2, 2)
         self._obstacles = prepare_obstacles(self._polygons) if self._polygons else None
+        self._ivo_segments = (edges if self.p.ivo_max_segment is None
+                              else polygon_segments(self._polygons, self.p.ivo_max_segment))
 
     def _hard_lines(self, obs: Observation):
         """Hard lines of every robot: static obstacles and, in safe mode, next-step separation.
@@ -110,11 +111,10 @@ class OrcaFilter:
         if self.p.obstacles == "orca" and self._obstacles is not None:
             groups.append(obstacle_lines(obs.pose[:, :2], obs.velocity, radius, v_max,
                                          self.p.time_horizon_obst, self._obstacles))
-        if self.p.obstacles == "ivo" and self._polygons:
+        if self.p.obstacles == "ivo" and len(self._ivo_segments):
             reach = v_max[0] * self.p.time_horizon_obst + self._radius
-            groups.append(ivo_lines(obs.pose[:, :2], obs.velocity, radius, self._polygons,
-                                    reach, tau=self.p.ivo_tau, tau_min=max(obs.dt, 0.1),
-                                    max_segment=self.p.ivo_max_segment))
+            groups.append(ivo_lines(obs.pose[:, :2], obs.velocity, radius, self._ivo_segments,
+                                    reach, tau=self.p.ivo_tau, tau_min=max(obs.dt, 0.1)))
         if self.p.obstacles == "next_step" or self.p.safe_discrete:
             groups.append(safe.segment_safety_lines(obs.pose[:, :2], radius, v_max, obs.dt,
                                                     self._segments))

@@ -324,7 +324,8 @@ def ivo_line(pos: ArrayLike, v_opt: ArrayLike, radius: float, ellipse: Ellipse,
                    float(out[4]), bool(out[5]))
 
 
-def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike, polygons: list[ArrayLike],
+def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
+              polygons: list[ArrayLike] | FloatArray,
               max_range: float, tau: float | str = "center", tau_min: float = 0.1,
               tau_max: float = 10.0, clearance: float | ArrayLike | None = None,
               stretch: float = 1.0, max_segment: float | None = None,
@@ -342,7 +343,9 @@ def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike, polygons: l
         pos: ``(N, 2)`` robot positions, m.
         vel_opt: ``(N, 2)`` optimal velocities ``v_A^opt`` (usually the current ones), m/s.
         radius: ``(N,)`` or scalar robot radii ``r_A``, m.
-        polygons: Obstacle vertex arrays ``(M, 2)``, m (see :func:`polygon_segments`).
+        polygons: Obstacle vertex arrays ``(M, 2)``, m (see :func:`polygon_segments`),
+            or the ``(S, 4)`` array that function returns (computed once by a
+            caller that steps many times; ``max_segment`` is then not used).
         max_range: Obstacle avoidance range, m.
         tau: Horizon of eq 9: ``"center"``, ``"gap"`` or a fixed value, s (see
             :func:`ivo_line`).
@@ -373,7 +376,9 @@ def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike, polygons: l
     if stretch < 1.0 or np.any(m < 0.0):
         raise ValueError("need stretch >= 1 and clearance >= 0")
     rule, fixed = _tau_rule(tau)
-    seg = np.ascontiguousarray(polygon_segments(polygons, max_segment))
+    prepared = isinstance(polygons, np.ndarray) and polygons.ndim == 2 and polygons.shape[1] == 4
+    seg = np.ascontiguousarray(polygons if prepared else polygon_segments(polygons, max_segment),
+                               dtype=float)
     if len(seg) == 0 or n == 0:
         return np.zeros((n, 0, 2)), np.zeros((n, 0, 2)), np.zeros(n, np.int64)
     dist = point_segment_distance(p[:, None, :], seg[None, :, 0:2], seg[None, :, 2:4])

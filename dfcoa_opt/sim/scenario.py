@@ -45,6 +45,12 @@ class World:
             return np.zeros((0, 2)), np.zeros((0, 2))
         return (np.concatenate(polys), np.concatenate([np.roll(v, -1, axis=0) for v in polys]))
 
+    @cached_property
+    def _boxes(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Bounding boxes ``(Q, 2)`` lower and upper corners of the polygons, m."""
+        return (np.array([v.min(axis=0) for v in self.polygons]).reshape(-1, 2),
+                np.array([v.max(axis=0) for v in self.polygons]).reshape(-1, 2))
+
     def clearance(self, points: ArrayLike, cap: float = 10.0) -> NDArray[np.float64]:
         """Distance (m) from points to the nearest static obstacle; 0 inside one.
 
@@ -59,8 +65,11 @@ class World:
         a, b = self._edges
         if len(a):
             out = np.minimum(out, point_segment_distance(p[:, None, :], a, b).min(axis=1))
-            for poly in self.polygons:
-                out[points_in_polygon(p, poly)] = 0.0
+            lo, hi = self._boxes
+            in_box = np.all((p[:, None, :] >= lo) & (p[:, None, :] <= hi), axis=2)
+            for k in np.flatnonzero(in_box.any(axis=0)):
+                rows = np.flatnonzero(in_box[:, k])
+                out[rows[points_in_polygon(p[rows], self.polygons[k])]] = 0.0
         circles = self.circles
         if circles:
             c = np.array([ci.center for ci in circles])
@@ -71,7 +80,7 @@ class World:
             out = np.minimum(out, self.raster.clearance(p, cap))
         return out
 
-    @property
+    @cached_property
     def polygons(self) -> list[NDArray[np.float64]]:
         """Polygons and rectangles as ``(V, 2)`` counter-clockwise vertex arrays, m."""
         return [s.to_polygon().as_array() for s in self.shapes if not isinstance(s, Circle)]
