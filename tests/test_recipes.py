@@ -111,3 +111,52 @@ def test_astar_recipe_nodes_and_lengths_are_the_planners_own(astar_outputs):
         assert float(row["length_m"]) == pytest.approx(res.length, rel=1e-12)
         np.testing.assert_allclose(res.path[0], task.start)
         np.testing.assert_allclose(res.path[-1], task.goal)
+
+
+def _paper001(tmp_path, name, overrides=None):
+    """Run one paper-001 recipe's real sweep (serially) and render it into ``tmp_path``."""
+    from dfcoa_opt.bench.executors import ExecutorConfig
+    from dfcoa_opt.bench.harness import run_sweep
+    from dfcoa_opt.figures import recipes
+
+    rec = next(r for r in recipes() if r.name == name)
+    res = run_sweep(SCENARIOS / rec.sweep, tmp_path / "cache", ExecutorConfig("serial"),
+                    progress=False, overrides=overrides)
+    assert res.failed == 0
+    arts = rec.render(res.store, tmp_path)
+    return arts, res.store
+
+
+def test_paper001_table1_reports_each_obstacle_mode_beside_the_paper(tmp_path):
+    from dfcoa_opt.bench import recipes_paper001 as rp
+
+    arts, store = _paper001(tmp_path, "paper001_ivo")
+    text = (tmp_path / "table1.md").read_text()
+    cells = {m: _cells(text, m) for m in ("orca", "ivo", "none")}
+    for mode, row in cells.items():
+        assert row[2] == rp.PAPER_TABLE1[mode]
+    assert cells["orca"][3] == "0/2" and cells["ivo"][3] == "2/2" and cells["none"][3] == "2/2"
+    assert int(cells["none"][7]) > 0 and int(cells["ivo"][7]) == 0 == int(cells["orca"][7])
+    # the numbers are the logs' own
+    for row in store.rows():
+        log = rp.RunLog.load(store.root / row["log"])
+        mode = row["overrides"]["controllers.orca_nav.obstacles"]
+        gap = float(np.min(log.clearance) - log.meta["robot_radius"])
+        assert cells[mode][5] == f"{gap:.3f}"
+    assert {a.path for a in arts} == {"table1.md", "fig_orca.png", "fig_ivo.png", "fig_none.png"}
+    assert all((tmp_path / a.path).stat().st_size > 0 for a in arts)
+
+
+def test_paper001_table2_has_every_variant_and_the_leader_arrival(tmp_path):
+    from dfcoa_opt.bench import recipes_paper001 as rp
+
+    arts, store = _paper001(tmp_path, "paper001_consensus", {"t_max": 1.0})
+    text = (tmp_path / "table2.md").read_text()
+    assert rp.PAPER_TABLE2 in text
+    body = [ln for ln in text.splitlines() if ln.startswith("| consensus")]
+    assert len(body) == 6 == len(store.rows())  # 3 controller variants x 2 speed limits
+    assert sum("8.485" in ln for ln in body) == 3
+    for row in store.rows():  # the leader (4.24 m/s, 35 m) is still moving at 1 s
+        log = rp.RunLog.load(store.root / row["log"])
+        assert rp.leader_arrival(log) == log.n_steps - 1
+    assert sum(a.path.startswith("fig8_") for a in arts) == 6

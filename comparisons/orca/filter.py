@@ -94,7 +94,8 @@ class OrcaFilter:
         self._polygons = [shape.to_polygon().as_array() for shape in scenario.world.shapes]
         edges = polygon_segments(self._polygons)
         self._segments = edges.reshape(-1, 2, 2)
-        self._obstacles = prepare_obstacles(self._polygons) if self._polygons else None
+        self._obstacles = (prepare_obstacles(self._polygons)
+                           if self._polygons and self.p.obstacles == "orca" else None)
         self._ivo_segments = (edges if self.p.ivo_max_segment is None
                               else polygon_segments(self._polygons, self.p.ivo_max_segment))
 
@@ -202,12 +203,10 @@ def concat_lines(groups):
     points = np.zeros((n, width, 2))
     directions = np.zeros((n, width, 2))
     count = np.zeros(n, np.int64)
-    rows = np.arange(n)
     for p, d, c in groups:
-        for j in range(p.shape[1]):
-            take = j < c
-            points[rows[take], count[take] + j] = p[take, j]
-            directions[rows[take], count[take] + j] = d[take, j]
+        rows, cols = np.nonzero(np.arange(p.shape[1])[None, :] < np.asarray(c)[:, None])
+        points[rows, count[rows] + cols] = p[rows, cols]
+        directions[rows, count[rows] + cols] = d[rows, cols]
         count = count + c
     return points, directions, count
 

@@ -80,7 +80,8 @@ def _processes(runs: Sequence[RunSpec], jobs: int) -> Iterator[Outcome]:
     """
     queue = iter(runs)
     ctx = multiprocessing.get_context("forkserver")
-    with ProcessPoolExecutor(max_workers=min(jobs, len(runs)), mp_context=ctx) as pool:
+    with ProcessPoolExecutor(max_workers=min(jobs, len(runs)), mp_context=ctx,
+                             initializer=_one_numba_thread) as pool:
         active = {pool.submit(execute, r) for r in itertools.islice(queue, 2 * jobs)}
         try:
             while active:
@@ -91,6 +92,18 @@ def _processes(runs: Sequence[RunSpec], jobs: int) -> Iterator[Outcome]:
         finally:
             for fut in active:
                 fut.cancel()
+
+
+def _one_numba_thread() -> None:
+    """Pool workers run one numba thread each: the runs are already spread over the cores.
+
+    With one OpenMP thread per core in every worker, ``jobs`` workers put
+    ``jobs x cores`` spinning threads on the cores; measured on the comparison
+    sweep (2 workers, 2 cores), runs with parallel kernels took 3-4x longer.
+    """
+    import numba
+
+    numba.set_num_threads(1)
 
 
 def _dask(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome]:

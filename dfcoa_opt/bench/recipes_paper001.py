@@ -18,12 +18,13 @@ from typing import Any
 import numpy as np
 from matplotlib.patches import Circle as CirclePatch
 
-from dfcoa_opt import plotting
+from dfcoa_opt import metrics, plotting
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.plots import save_png, scenario_for_row
 from dfcoa_opt.bench.store import ResultsStore
 from dfcoa_opt.figures import Artefact, recipe
-from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_SOLVER_FAIL, RunLog
+from dfcoa_opt.metrics_robots import leader_follower_position_error
+from dfcoa_opt.sim.log import RunLog
 
 #: A robot has reached its target within this distance, m.
 REACH_TOL = 0.1
@@ -69,17 +70,14 @@ def run_summary(log: RunLog) -> dict[str, float]:
         overlap), ``contacts`` (contact events) and ``infeasible`` (robot-steps
         whose constraints had no common point or whose solver failed).
     """
-    r = _radius(log)
-    err = np.linalg.norm(log.pose[..., :2] - log.slots, axis=2)
+    err = leader_follower_position_error(log)
     done = np.all(err <= REACH_TOL, axis=1)
-    gaps = pair_distances(log)[0] - 2.0 * r if log.n_robots > 1 else np.full((1, 1), np.inf)
-    bad = np.isin(log.filter_status, (STATUS_FALLBACK, STATUS_SOLVER_FAIL))
     return {"reached": float(np.sum(err[-1] <= REACH_TOL)),
             "t_reach": float(log.t[np.argmax(done)]) if done.any() else float("nan"),
-            "min_obstacle_gap": float(np.min(log.clearance) - r),
-            "min_robot_gap": float(np.min(gaps)),
+            "min_obstacle_gap": metrics.min_obstacle_clearance(log),
+            "min_robot_gap": metrics.min_inter_robot_distance(log) - 2.0 * _radius(log),
             "contacts": float(np.sum(log.collision_events)),
-            "infeasible": float(np.sum(bad))}
+            "infeasible": float(metrics.filter_counts(log)["filter_fallbacks"])}
 
 
 def _num(value: float, fmt: str = "{:.2f}") -> str:
@@ -185,11 +183,6 @@ def leader_arrival(log: RunLog) -> int:
     return int(np.argmax(stopped)) if stopped.any() else log.n_steps - 1
 
 
-def formation_error(log: RunLog) -> np.ndarray:
-    """``(T, N)`` distance of each robot from its slot ``x_L + Delta_i``, m (``|x̂_i|``)."""
-    return np.linalg.norm(log.pose[..., :2] - log.slots, axis=2)
-
-
 def velocity_jitter(log: RunLog) -> float:
     """RMS step-to-step change of the robots' velocity, m/s (Fig. 8c's "jitter")."""
     return float(np.sqrt(np.mean(np.diff(log.velocity, axis=0) ** 2)))
@@ -213,7 +206,7 @@ def _fig8(log: RunLog, row: dict[str, Any], path: Path, title: str) -> Path:
         ax.grid(alpha=0.3)
     axes[0].set_title("(c) velocity components")
     axes[0].legend(fontsize="small", ncol=4)
-    err = formation_error(log)
+    err = leader_follower_position_error(log)
     for i, color in enumerate(colors):
         axes[2].plot(log.t, err[:, i], color=color, lw=1)
     axes[2].set_ylabel("|x_i - x_L - Δ_i| (m)")
@@ -244,9 +237,7 @@ def _fig8(log: RunLog, row: dict[str, Any], path: Path, title: str) -> Path:
         sweep="sweeps/paper001_consensus.toml")
 def render_consensus(store: ResultsStore, dest: Path) -> list[Artefact]:
     """``table2.md`` and one Fig. 8 like figure per controller variant (first seed)."""
-    runs = sorted(_loaded(store), key=lambda rl: (_variant(rl[0])[0], rl[0]["seed"],
-                                                 float(rl[1].meta.get("v_max", 0.0)),
-                                                 _variant(rl[0])[1]))
+    runs = sorted(_loaded(store), key=lambda rl: (*_variant(rl[0]), rl[0]["seed"]))
     lines = ["# Paper 001, Table II: consensus formation through a polygon field", "",
              f"Paper (one run, words only): {PAPER_TABLE2}.", "",
              "Formation error = |x_i − x_L − Δ_i| (eq 3-4 with the virtual leader); final = at "
@@ -261,7 +252,7 @@ def render_consensus(store: ResultsStore, dest: Path) -> list[Artefact]:
     drawn = set()
     for row, log in runs:
         s = run_summary(log)
-        err = formation_error(log)
+        err = leader_follower_position_error(log)
         name, tag = _variant(row)
         v_max = float((row.get("overrides") or {}).get("robots.v_max",
                                                        scenario_for_row(row).spec.robots.v_max))
