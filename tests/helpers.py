@@ -17,3 +17,18 @@ def assert_distributed(controller, obs: Observation) -> None:
         alone = np.asarray(controller.act(obs.take([i])))
         assert alone.shape == (1, full.shape[1])
         np.testing.assert_array_equal(alone[0], full[i], err_msg=f"row {i} depends on other rows")
+
+
+class Capture:
+    """A controller wrapper that records every observation it is given."""
+
+    def __init__(self, inner):
+        self.inner, self.obs = inner, []
+        self.command, self.name = inner.command, getattr(inner, "name", "capture")
+
+    def reset(self, scenario, rng):
+        self.inner.reset(scenario, rng)
+
+    def act(self, obs):
+        self.obs.append(obs)
+        return self.inner.act(obs)

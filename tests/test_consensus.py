@@ -16,7 +16,7 @@ from dfcoa_opt.robots.models import integrate_unicycle
 from dfcoa_opt.sim.loader import scenario_from_dict
 from dfcoa_opt.sim.log import STATUS_OK
 from dfcoa_opt.sim.simulator import Simulator, run_scenario
-from tests.helpers import assert_distributed
+from tests.helpers import Capture, assert_distributed
 
 K1, K2, K3 = 0.25, 0.45, 37.5  # paper 001, section V.B
 DT = 0.01  # s; explicit Euler needs K3 * DT < 2
@@ -324,21 +324,6 @@ def test_consensus_ivo_avoids_the_polygon_that_consensus_hits(law):
     assert log.meta["reached_goal"]  # and the formation settled again after it
     pushed = np.linalg.norm(log.pose[:, :2, :2] - log.slots[:, :2], axis=-1).max()
     assert pushed > 1.0  # robots 0-1 left their slots to go round (measured 2.7-3.0 m)
-
-
-class Capture:
-    name = "capture"
-    command = "acceleration"
-
-    def __init__(self, inner):
-        self.inner, self.obs = inner, []
-
-    def reset(self, scenario, rng):
-        self.inner.reset(scenario, rng)
-
-    def act(self, obs):
-        self.obs.append(obs)
-        return self.inner.act(obs)
 
 
 def test_both_controllers_are_distributed():

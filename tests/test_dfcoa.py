@@ -9,23 +9,9 @@ from dfcoa_opt import metrics
 from dfcoa_opt.control.registry import make_controller
 from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.simulator import Simulator, run_scenario
+from tests.helpers import Capture
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
-
-
-class Capture:
-    """Records the observations a controller receives."""
-
-    def __init__(self, inner):
-        self.inner, self.obs = inner, []
-        self.command, self.name = inner.command, inner.name
-
-    def reset(self, scenario, rng):
-        self.inner.reset(scenario, rng)
-
-    def act(self, obs):
-        self.obs.append(obs)
-        return self.inner.act(obs)
 
 
 def test_rows_depend_only_on_their_own_observation():

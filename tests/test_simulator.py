@@ -8,7 +8,7 @@ from dfcoa_opt.control.goto_slot import GotoSlot
 from dfcoa_opt.sim.loader import load_scenario, scenario_from_dict
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.sim.simulator import ControllerError, Simulator, run_scenario
-from tests.helpers import assert_distributed
+from tests.helpers import Capture, assert_distributed
 
 SCEN = Path(__file__).resolve().parents[1] / "scenarios"
 
@@ -83,21 +83,6 @@ def test_log_roundtrip(tmp_path):
     log = run_scenario(small(), "goto_slot")
     back = RunLog.load(log.save(tmp_path / "run.npz"))
     assert back.digest() == log.digest() and back.meta["controller"] == "goto_slot"
-
-
-class Capture:
-    name = "capture"
-    command = "velocity"
-
-    def __init__(self, inner):
-        self.inner, self.obs = inner, []
-
-    def reset(self, scenario, rng):
-        self.inner.reset(scenario, rng)
-
-    def act(self, obs):
-        self.obs.append(obs)
-        return self.inner.act(obs)
 
 
 def test_observation_rows_and_goto_slot_is_distributed():
