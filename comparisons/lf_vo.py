@@ -1,0 +1,236 @@
+"""Paper 002's leader-follower V formation with a sampled velocity obstacle: ``lf_vo``.
+
+Every robot is a unicycle (``command = "unicycle"``, rows ``(v, omega)``) and
+runs the same law on its own observation row:
+
+1. **Target.** The paper's leader robot is robot ``leader_index`` (default 0,
+   the apex of ``formation.shape = "v"``, slot offset (0, 0)). Its target is its
+   slot, i.e. the broadcast virtual leader, which the simulator moves along the
+   planned path by pure pursuit. A follower's target is eq 5-6 applied to the
+   leader robot's broadcast state (``follow = "robot"``, default): position from
+   ``obs.neighbours`` (the entry whose index is ``leader_index``), heading
+   ``atan2`` of its broadcast velocity (a unicycle with ``v > 0`` moves along
+   its heading). The observation carries no neighbour heading, so when the
+   leader robot moves slower than 1 mm/s the virtual leader's heading is used;
+   when it is out of communication range the follower uses its own slot
+   ``obs.slot`` (the virtual-leader-relative target). ``follow = "virtual"``
+   always uses ``obs.slot``.
+2. **Preferred command.** Eq 7-11 (distance ``l``, direction ``theta_T``, angle
+   ``alpha``) and eq 4: ``v = min(l / t, v_max)``, ``omega = 2 v sin(-alpha) / l``.
+3. **Sampled velocity obstacle (eq 12).** ``(v, omega)`` samples on a grid over
+   ``[0, v_max] x [-w_max, w_max]`` (plus the preferred command) are rolled out
+   over ``horizon`` s; a sample is rejected when its path comes closer than the
+   robot radius + ``safety_margin`` to a static disc (``scenario.world.circles``),
+   another robot (``obs.neighbours``, constant velocity) or a moving human
+   (``obs.obstacles``, constant velocity). The safe sample with the least
+   penalty (:func:`comparisons.lf_vo_core.vo_cost`) is applied.
+4. **Fallback.** When every sample is rejected: ``"least_penetration"``
+   (default) applies the sample whose path keeps the largest clearance;
+   ``"stop"`` applies (0, 0). ``last_fallbacks`` counts the robots that fell
+   back at the latest step (the simulator does not log it).
+
+Decisions (the paper's words, the choice and the reason; also in
+``docs/methods/lf_vo.md``):
+
+* Follower v_max. Table I: "Maximum Linear Velocity for Followers 6.5 m/s",
+  13 times the leader's 0.5 m/s, while Tables II-IV report follower mean speeds
+  of 0.45-0.49 m/s. We read it as a misprint of 0.65 m/s (``follower_v_max``
+  default): followers need a little more speed than the leader to catch up.
+* Time interval t of eq 4 ("calculated based on the distance towards the
+  target, given the time interval t"): no value is given. ``reach_time``
+  defaults to 0.5 s: with t = dt = 0.1 s the law is dead-beat, the leader
+  robot weaved at +-w_max around the virtual leader and the followers (whose
+  targets turn with it) lost the formation. Cost: a steady lag of
+  ``v * reach_time`` (0.2 m at 0.4 m/s) behind each target.
+* Eq 4's ``alpha`` (target minus heading, eq 1) and eq 11's (heading minus
+  target) have opposite signs; ``omega`` turns towards the target. A target
+  behind the robot (``cos alpha < 0``) makes pure pursuit drive away (its
+  ``sin`` vanishes); ``turn_when_behind`` (default) turns in place instead.
+* Eq 12 is an infinite-horizon cone on a straight-line velocity; a unicycle
+  sample ``(v, omega)`` turns for ``turn_time`` (1 s) and then goes straight,
+  and the cone test is done on that predicted path over ``horizon`` (the
+  paper gives none; 3 s), against constant-velocity obstacles. Holding
+  ``omega`` over the whole horizon (circles) left no escape from a head-on
+  human.
+* Penalties: "distance to the optimum selected velocity and consistency with
+  the target direction" -- norms and weights are not given. We use the
+  distance between world velocities and the shortfall of the progress towards
+  the target (:func:`comparisons.lf_vo_core.vo_cost`); an angle penalty made
+  stopping in front of a static disc cheaper than going round it (deadlock).
+* The preferred command (eq 4) is added to the samples
+  (``include_preferred``), so in free space the robot runs eq 4 exactly.
+* Speed limits are also capped at the scenario's ``robots.v_max``/``w_max``
+  (the model clips there, and predictions must match what the robot does).
+* Only circular static obstacles are avoided (the paper's static obstacles are
+  discs); polygons and map cells are not seen by this controller.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from comparisons.lf_vo_core import (
+    formation_target,
+    path_clearance,
+    reference_command,
+    rollout,
+    target_error,
+    vo_cost,
+)
+from dfcoa_opt.control.base import Observation
+from dfcoa_opt.control.registry import register
+from dfcoa_opt.params import param
+
+#: Below this broadcast speed the leader robot's heading is taken from the virtual leader, m/s.
+_STILL = 1e-3
+
+
+@register("lf_vo")
+class LeaderFollowerVO:
+    """Leader-follower V formation (eq 4-11) with a sampled velocity obstacle (eq 12)."""
+
+    command = "unicycle"
+
+    @dataclass(frozen=True)
+    class Params:
+        """Parameters of ``lf_vo`` (Table I for the speed limits)."""
+
+        leader_index: int = param(0, doc="Robot index of the paper's leader robot (its slot "
+                                         "should be the formation apex).", ge=0)
+        leader_v_max: float = param(0.5, doc="Leader robot's largest speed (Table I).",
+                                    unit="m/s", gt=0.0)
+        follower_v_max: float = param(0.65, doc="Followers' largest speed (Table I's 6.5 m/s "
+                                                "read as 0.65).", unit="m/s", gt=0.0)
+        w_max: float = param(1.0, doc="Largest turn rate (Table I).", unit="rad/s", gt=0.0)
+        reach_time: float = param(0.5, doc="Time interval t of eq 4, v = min(l/t, v_max) "
+                                           "(not given by the paper).", unit="s", gt=0.0)
+        turn_when_behind: bool = param(True, doc="Turn in place (v = 0, |omega| = w_max) "
+                                                 "towards a target behind the robot.")
+        follow: Literal["robot", "virtual"] = param(
+            "robot", doc="Followers' eq 5-6 reference: the leader robot's broadcast state "
+                         "('robot') or the virtual leader ('virtual', i.e. obs.slot).")
+        v_samples: int = param(11, doc="Speed samples in [0, v_max].", ge=2)
+        w_samples: int = param(21, doc="Turn-rate samples in [-w_max, w_max] (odd: includes "
+                                       "0).", ge=2)
+        include_preferred: bool = param(True, doc="Add the eq 4 preferred command as a sample.")
+        horizon: float = param(3.0, doc="Prediction horizon of the velocity obstacle.",
+                               unit="s", gt=0.0)
+        turn_time: float = param(1.0, doc="A sample turns at omega for this long, then goes "
+                                           "straight (rollout and heading penalty).", unit="s",
+                                 gt=0.0)
+        horizon_steps: int = param(30, doc="Prediction steps over the horizon.", ge=1)
+        safety_margin: float = param(0.05, doc="Clearance added to robot + obstacle radii.",
+                                     unit="m", ge=0.0)
+        avoid_robots: bool = param(True, doc="Treat neighbours as constant-velocity obstacles.")
+        pref_weight: float = param(1.0, doc="Weight of the distance to the preferred "
+                                            "velocity.", unit="s/m", ge=0.0)
+        heading_weight: float = param(1.0, doc="Weight of the progress shortfall towards the "
+                                               "target direction.", unit="s/m", ge=0.0)
+        fallback: Literal["least_penetration", "stop"] = param(
+            "least_penetration", doc="Command when every sample is rejected.")
+
+    def __init__(self, params: Params) -> None:
+        self.p = params
+        self.last_fallbacks = 0
+        self._radius = 0.2
+        self._v_lead, self._v_fol, self._w_max = (params.leader_v_max, params.follower_v_max,
+                                                  params.w_max)
+        self._lead_offset = np.zeros(2)
+        self._circles = np.zeros((0, 2))
+        self._circle_r = np.zeros(0)
+
+    def reset(self, scenario, rng: np.random.Generator) -> None:
+        """Keep the robot radius, speed limits, the leader's offset and the static discs.
+
+        Raises:
+            ValueError: ``leader_index`` is not a robot of the scenario.
+        """
+        p, spec = self.p, scenario.spec
+        if p.leader_index >= scenario.n:
+            raise ValueError(f"lf_vo: leader_index = {p.leader_index} but the scenario has "
+                             f"{scenario.n} robot(s) (0..{scenario.n - 1})")
+        self._radius = spec.robots.radius
+        self._v_lead = min(p.leader_v_max, spec.robots.v_max)
+        self._v_fol = min(p.follower_v_max, spec.robots.v_max)
+        self._w_max = min(p.w_max, spec.robots.w_max)
+        self._lead_offset = np.asarray(scenario.offsets[p.leader_index], dtype=float)
+        circles = scenario.world.circles
+        self._circles = np.array([c.center for c in circles], dtype=float).reshape(-1, 2)
+        self._circle_r = np.array([c.radius for c in circles], dtype=float)
+        self.last_fallbacks = 0
+
+    def targets(self, obs: Observation) -> np.ndarray:
+        """``(N, 2)`` eq 5-6 targets: the slot for the leader robot, else around its state."""
+        target = obs.slot.copy()
+        if self.p.follow == "virtual":
+            return target
+        nb = obs.neighbours
+        hit = nb.index == self.p.leader_index  # (N, K)
+        seen = hit.any(axis=1) & (obs.robot_ids != self.p.leader_index)
+        if not seen.any():
+            return target
+        k = np.argmax(hit, axis=1)
+        rows = np.arange(obs.n)
+        pos = nb.position[rows, k]
+        vel = nb.velocity[rows, k]
+        moving = np.hypot(vel[:, 0], vel[:, 1]) > _STILL
+        heading = np.where(moving, np.arctan2(vel[:, 1], vel[:, 0]), obs.leader[2])
+        lead_pose = np.column_stack((pos, heading))
+        around = formation_target(lead_pose, obs.slot_offset - self._lead_offset)
+        return np.where(seen[:, None], around, target)
+
+    def _obstacles(self, obs: Observation) -> tuple[np.ndarray, ...]:
+        """Centres, velocities, collision distances and mask, ``(N, Q, ...)``."""
+        n, r = obs.n, self._radius + self.p.safety_margin
+        parts = [(np.broadcast_to(self._circles, (n, *self._circles.shape)),
+                  np.zeros((n, *self._circles.shape)),
+                  np.broadcast_to(self._circle_r + r, (n, len(self._circle_r))),
+                  np.ones((n, len(self._circle_r)), dtype=bool))]
+        if self.p.avoid_robots:
+            nb = obs.neighbours
+            parts.append((nb.position, nb.velocity, np.full(nb.index.shape, self._radius + r),
+                          nb.mask))
+        mo = obs.obstacles
+        parts.append((mo.position, mo.velocity, mo.radius + r, mo.mask))
+        return tuple(np.concatenate([np.asarray(part[j]) for part in parts], axis=1)
+                     for j in range(4))
+
+    def samples(self, v_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(N, S)`` grid of (v, omega) samples for per-robot speed limits ``v_max`` (m/s)."""
+        frac = np.linspace(0.0, 1.0, self.p.v_samples)
+        ws = np.linspace(-self._w_max, self._w_max, self.p.w_samples)
+        v = np.repeat(v_max[:, None] * frac, self.p.w_samples, axis=1)
+        w = np.broadcast_to(np.tile(ws, self.p.v_samples), v.shape).copy()
+        return v, w
+
+    def act(self, obs: Observation) -> np.ndarray:
+        """Row i uses robot i's pose, neighbours, sensed humans, slot and the broadcast leader."""
+        p = self.p
+        pose = obs.pose
+        lead = obs.robot_ids == p.leader_index
+        v_max = np.where(lead, self._v_lead, self._v_fol)
+        dist, theta_t, alpha = target_error(pose, self.targets(obs))
+        v_ref, w_ref = reference_command(dist, alpha, v_max, self._w_max, p.reach_time,
+                                         p.turn_when_behind)
+        v, w = self.samples(v_max)
+        if p.include_preferred:
+            v = np.column_stack((v, v_ref))
+            w = np.column_stack((w, w_ref))
+        step = p.horizon / p.horizon_steps
+        pts = rollout(pose, v, w, step, p.horizon_steps, p.turn_time)
+        clear = path_clearance(pts, step, *self._obstacles(obs))
+        cost = vo_cost(pose[:, 2], v, w, v_ref, w_ref, theta_t, p.turn_time, p.pref_weight,
+                       p.heading_weight)
+        safe = clear >= 0.0
+        best = np.argmin(np.where(safe, cost, np.inf), axis=1)
+        fell = ~safe.any(axis=1)
+        best = np.where(fell, np.argmax(clear, axis=1), best)
+        rows = np.arange(obs.n)
+        cmd = np.column_stack((v[rows, best], w[rows, best]))
+        if p.fallback == "stop":
+            cmd[fell] = 0.0
+        self.last_fallbacks = int(fell.sum())
+        return cmd

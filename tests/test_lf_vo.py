@@ -1,0 +1,225 @@
+"""``lf_vo``: paper 002's leader-follower V formation with a sampled velocity obstacle."""
+
+import math
+
+import numpy as np
+import pytest
+
+from comparisons.lf_vo import LeaderFollowerVO
+from comparisons.lf_vo_core import (
+    formation_target,
+    path_clearance,
+    reference_command,
+    rollout,
+    target_error,
+    vo_cost,
+)
+from dfcoa_opt.control.base import MovingObstacles, Neighbours, Observation
+from dfcoa_opt.control.registry import available, make_controller
+from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.sim.simulator import Simulator, run_scenario
+from tests.helpers import assert_distributed
+
+R = 0.25  # robot radius (Table I wheelbase 0.5 m), m
+
+
+def v_scenario(humans=(), circles=(), poses=None, **extra):
+    """Three unicycles in a V (spacing 1 m, half-angle 30 deg) behind a leader going +x."""
+    team = {"n": 3} if poses is None else {"n": 3, "placement": "explicit", "poses": poses}
+    data = {
+        "name": "lf_vo_test", "dt": 0.1, "t_max": 40.0, "seed": 1,
+        "world": {"size": [20.0, 10.0], "resolution": 10,
+                  "obstacles": [{"type": "circle", "center": list(c), "radius": r}
+                                for c, r in circles],
+                  "dynamic_obstacles": list(humans)},
+        "robots": {"radius": R, "v_max": 0.65, "w_max": 1.0},
+        "team": team,
+        "formation": {"shape": "v", "spacing": 1.0, "angle": math.pi / 6},
+        "leader": {"start": [2.0, 5.0], "goal": [16.0, 5.0], "speed": 0.4},
+        "sensors": {"lidar": {"enabled": False}, "obstacle_range": 5.0},
+        **extra,
+    }
+    return scenario_from_dict(data, "<lf_vo>")
+
+
+HEAD_ON = {"radius": 0.3, "speed": 0.5, "waypoints": [[14.0, 5.0], [0.0, 5.0]]}
+
+
+def ctrl(scenario=None, **params):
+    c = make_controller("lf_vo", params)
+    c.reset(scenario or v_scenario(), np.random.default_rng(0))
+    return c
+
+
+def observation(pose, slot, leader=(0.0, 0.0, 0.0, 0.0, 0.0), nb=None, humans=None):
+    """A hand-made observation: ``nb`` = list of (index, pos, vel) per robot (same for all)."""
+    pose = np.asarray(pose, dtype=float)
+    n = len(pose)
+    nb = nb or []
+    k = max(len(nb), 1)
+    idx = np.full((n, k), -1)
+    pos, vel, dist = np.zeros((n, k, 2)), np.zeros((n, k, 2)), np.full((n, k), np.inf)
+    for j, (i, p, v) in enumerate(nb):
+        idx[:, j], pos[:, j], vel[:, j], dist[:, j] = i, p, v, 1.0
+    humans = humans or []
+    m = max(len(humans), 1)
+    hp, hv, hr = np.zeros((n, m, 2)), np.zeros((n, m, 2)), np.zeros((n, m))
+    hm = np.zeros((n, m), dtype=bool)
+    for j, (p, v, r) in enumerate(humans):
+        hp[:, j], hv[:, j], hr[:, j], hm[:, j] = p, v, r, True
+    slot = np.asarray(slot, dtype=float)
+    return Observation(0.0, 0.1, np.arange(n), pose, np.zeros((n, 2)), np.zeros((n, 2)), None,
+                       Neighbours(idx, pos, vel, dist), MovingObstacles(hp, hv, hr, hm),
+                       np.asarray(leader, dtype=float), np.zeros(2), np.zeros((n, 2)), slot)
+
+
+def test_registered():
+    assert "lf_vo" in available()
+    assert LeaderFollowerVO.command == "unicycle"
+
+
+def test_eq_5_to_11_by_hand():
+    # eq 5-6: leader at (1, 2) heading 90 deg, d = 2, phi = -30 deg (left wing of the V)
+    d, phi, th = 2.0, -math.pi / 6, math.pi / 2
+    offset = [-d * math.cos(phi), -d * math.sin(phi)]  # = v_offsets' left follower, rank 2
+    xt, yt = formation_target([1.0, 2.0, th], offset)
+    assert xt == pytest.approx(1.0 - d * math.cos(th + phi))  # 1 - 2 cos 60 = 0
+    assert yt == pytest.approx(2.0 - d * math.sin(th + phi))  # 2 - 2 sin 60
+    assert (xt, yt) == pytest.approx((0.0, 2.0 - math.sqrt(3.0)))
+    # eq 7-11: follower at (1, 1) heading 0, target (4, 5): l = 5, theta_T = atan2(4, 3)
+    dist, theta_t, alpha = target_error([1.0, 1.0, 0.0], [4.0, 5.0])
+    assert dist == pytest.approx(5.0)
+    assert theta_t == pytest.approx(math.atan2(4.0, 3.0))
+    assert alpha == pytest.approx(0.0 - math.atan2(4.0, 3.0))  # eq 11: theta_F - theta_T
+    # eq 4: v = min(l / t, v_max); omega = 2 v sin(theta_T - theta) / l (turns left, to the target)
+    v, w = reference_command(dist, alpha, 0.65, 1.0, 0.5)
+    assert v == pytest.approx(0.65)
+    assert w == pytest.approx(2 * 0.65 * 0.8 / 5.0)
+    v, w = reference_command(0.1, 0.0, 0.65, 1.0, 0.5)
+    assert (v, w) == pytest.approx((0.2, 0.0))
+    # a target behind: turn in place towards it (decision), or plain eq 4 without it
+    v, w = reference_command(1.0, -(math.pi - 0.1), 0.65, 1.0, 0.5)
+    assert (v, w) == pytest.approx((0.0, 1.0))
+    v, w = reference_command(1.0, -(math.pi - 0.1), 0.65, 1.0, 0.5, turn_when_behind=False)
+    assert (v, w) == pytest.approx((0.65, 2 * 0.65 * math.sin(math.pi - 0.1)))
+
+
+def test_eq_12_cost_by_hand_for_two_samples():
+    # heading 0, target straight ahead (theta_T = 0), preferred (0.5, 0), tau = 1 s
+    v = np.array([[0.5, 0.4]])
+    w = np.array([[0.0, 0.5]])
+    cost = vo_cost([0.0], v, w, [0.5], [0.0], [0.0], 1.0, 2.0, 3.0)
+    # sample 1 is the preferred velocity, straight at the target: 0
+    # sample 2: V = 0.4 (cos .5, sin .5); |V - (0.5, 0)| and shortfall 0.5 - 0.4 cos .5
+    dv = math.hypot(0.4 * math.cos(0.5) - 0.5, 0.4 * math.sin(0.5))
+    expected = 2.0 * dv + 3.0 * (0.5 - 0.4 * math.cos(0.5))
+    np.testing.assert_allclose(cost, [[0.0, expected]], atol=1e-12)
+
+
+def test_sample_into_a_static_disc_is_rejected_one_clear_of_it_accepted():
+    pose = np.array([[0.0, 0.0, 0.0]])
+    v = np.array([[0.5, 0.5]])
+    w = np.array([[0.0, 1.0]])  # straight at the disc; turning left away from it
+    pts = rollout(pose, v, w, 0.1, 30, 1.0)
+    # straight: x = 0.5 t exactly
+    np.testing.assert_allclose(pts[0, 0, :, 0], 0.05 * np.arange(1, 31), atol=1e-12)
+    reach = np.array([[0.5 + R + 0.05]])  # disc radius + robot radius + margin
+    clear = path_clearance(pts, 0.1, np.array([[[2.0, 0.0]]]), np.zeros((1, 1, 2)), reach,
+                           np.array([[True]]))
+    assert clear[0, 0] == pytest.approx(2.0 - 1.5 - 0.8)  # 1.5 m travelled in 3 s: inside
+    assert clear[0, 0] < 0.0 < clear[0, 1]
+    # the controller picks the accepted one although its target is behind the disc
+    c = ctrl(v_scenario(circles=[((2.0, 0.0), 0.5)]), include_preferred=False)
+    cmd = c.act(observation([[0.0, 0.0, 0.0]], [[4.0, 0.0]], leader=(4.0, 0.0, 0.0, 0.0, 0.0)))
+    assert c.last_fallbacks == 0
+    pts = rollout(np.array([[0.0, 0.0, 0.0]]), cmd[:, :1], cmd[:, 1:], 0.1, 30, 1.0)
+    assert np.linalg.norm(pts[0, 0] - [2.0, 0.0], axis=-1).min() >= 0.8 - 1e-9
+    assert abs(cmd[0, 1]) > 0.0
+
+
+def test_fallback_when_every_sample_is_rejected():
+    # a human right on top of the robot: every path starts inside it
+    obs = observation([[0.0, 0.0, 0.0]], [[3.0, 0.0]], humans=[((0.3, 0.0), (0.0, 0.0), 0.3)])
+    c = ctrl()
+    cmd = c.act(obs)
+    assert c.last_fallbacks == 1
+    assert cmd[0, 0] == 0.0  # least penetration: not forwards into it
+    c = ctrl(fallback="stop")
+    np.testing.assert_array_equal(c.act(obs), [[0.0, 0.0]])
+    assert c.last_fallbacks == 1
+
+
+def test_followers_use_the_leader_robots_broadcast_state():
+    # robot 0 at (5, 5) moving +y; the follower's V slot (left, rank 1) turns with it
+    sc = v_scenario()
+    c = ctrl(sc)
+    off = sc.offsets
+    obs = observation([[5.0, 5.0, 0.0], [3.0, 3.0, 0.0]], [[6.0, 5.0], [0.0, 0.0]],
+                      leader=(6.0, 5.0, 0.0, 0.4, 0.0),
+                      nb=[(0, (5.0, 5.0), (0.0, 0.5))])
+    obs = Observation(obs.t, obs.dt, obs.robot_ids, obs.pose, obs.velocity, obs.twist, None,
+                      obs.neighbours, obs.obstacles, obs.leader, obs.goal, off[:2], obs.slot)
+    tg = c.targets(obs)
+    np.testing.assert_allclose(tg[0], [6.0, 5.0])  # the leader robot: its slot
+    np.testing.assert_allclose(tg[1], formation_target([5.0, 5.0, math.pi / 2], off[1]))
+    c = ctrl(sc, follow="virtual")
+    np.testing.assert_allclose(c.targets(obs), obs.slot)
+
+
+def test_distributed_rows():
+    sc = v_scenario(circles=[((6.0, 5.3), 0.3)], humans=[HEAD_ON])
+    from tests.helpers import Capture
+
+    cap = Capture(make_controller("lf_vo"))
+    Simulator(sc, cap).run()
+    c = ctrl(sc)
+    for k in (0, 40, 80):
+        assert_distributed(c, cap.obs[k])
+
+
+def test_head_on_human_is_avoided_where_goto_slot_hits_it():
+    sc = v_scenario(humans=[HEAD_ON])
+    log = run_scenario(sc, "lf_vo")
+    assert log.collision_events.sum() == 0
+    gap = np.linalg.norm(log.pose[:, :, None, :2] - log.dyn_pos[:, None], axis=-1)
+    assert gap.min() >= R + 0.3 - 1e-9
+    assert log.meta["reached_goal"]
+    assert run_scenario(sc, "goto_slot").collision_events.sum() > 0
+
+
+def test_followers_reach_the_v_behind_the_leader_in_free_space():
+    sc = v_scenario(poses=[[2.0, 5.0, 0.0], [0.5, 3.0, 0.5], [0.0, 7.0, -0.5]])
+    log = run_scenario(sc, "lf_vo")
+    assert log.meta["reached_goal"]
+    assert log.collision_events.sum() == 0
+    # the shape relative to robot 0 (what the followers track) is the V, each robot lagging
+    # its target by about v * reach_time = 0.4 m/s * 0.5 s along the heading (+x)
+    rel = log.pose[-1, 1:, :2] - log.pose[-1, 0, :2]
+    want = sc.offsets[1:] - sc.offsets[0]
+    np.testing.assert_allclose(rel[:, 1], want[:, 1], atol=0.05)
+    np.testing.assert_allclose(rel[:, 0], want[:, 0] - 0.2, atol=0.05)
+    err = np.linalg.norm(log.pose[-1, :, :2] - log.slots[-1], axis=1)
+    assert err.max() < sc.spec.leader.settle_tolerance
+    start_err = np.linalg.norm(log.pose[0, :, :2] - log.slots[0], axis=1)
+    assert start_err[1:].min() > 1.0
+
+
+def test_same_seed_same_digest():
+    sc = v_scenario(humans=[HEAD_ON], team={"n": 3, "start_noise": 0.05})
+    a, b = run_scenario(sc, "lf_vo", seed=4), run_scenario(sc, "lf_vo", seed=4)
+    assert a.digest() == b.digest()
+    assert run_scenario(sc, "lf_vo", seed=5).digest() != a.digest()
+
+
+def test_bad_params_raise_clear_errors():
+    with pytest.raises(ScenarioError, match="controllers.lf_vo.v_samples"):
+        make_controller("lf_vo", {"v_samples": 1})
+    with pytest.raises(ScenarioError, match="controllers.lf_vo.follower_v_max"):
+        make_controller("lf_vo", {"follower_v_max": 0.0})
+    with pytest.raises(ScenarioError, match="did you mean 'horizon'"):
+        make_controller("lf_vo", {"horizn": 2.0})
+    with pytest.raises(ScenarioError, match="controllers.lf_vo.fallback"):
+        make_controller("lf_vo", {"fallback": "panic"})
+    with pytest.raises(ValueError, match="leader_index = 5"):
+        ctrl(leader_index=5)
