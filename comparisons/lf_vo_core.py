@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dfcoa_opt.geometry import wrap_angle
+from dfcoa_opt.geometry import body_to_world, wrap_angle
 
 FloatArray = NDArray[np.float64]
 
@@ -38,13 +38,8 @@ def formation_target(leader_pose: ArrayLike, offset: ArrayLike) -> FloatArray:
     Returns:
         ``(..., 2)`` world targets, m.
     """
-    lp = np.asarray(leader_pose, dtype=float)
-    o = np.asarray(offset, dtype=float)
-    d = np.hypot(o[..., 0], o[..., 1])
-    phi = np.arctan2(-o[..., 1], -o[..., 0])
-    x = lp[..., 0] - d * np.cos(lp[..., 2] + phi)
-    y = lp[..., 1] - d * np.sin(lp[..., 2] + phi)
-    return np.stack((x, y), axis=-1)
+    # -d (cos(theta + phi), sin(theta + phi)) = R(theta) o: the leader-frame offset in the world
+    return body_to_world(leader_pose, offset)
 
 
 def target_error(pose: ArrayLike, target: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
