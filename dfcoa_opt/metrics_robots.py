@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from dfcoa_opt.geometry import body_to_world
 from dfcoa_opt.sim.log import RunLog
 
 FloatArray = NDArray[np.float64]
@@ -53,3 +54,59 @@ def formation_position_error_per_robot(log: RunLog) -> FloatArray:
 def mse_per_robot(log: RunLog) -> FloatArray:
     """Squared distance to the ideal position (the slot), paper 004 eq 14, ``(T, N)`` m^2."""
     return np.sum(np.square(log.pose[..., :2] - log.slots), axis=-1)
+
+
+def leader_robot_target_error(log: RunLog, leader_index: int = 0) -> FloatArray:
+    """Follower error against its eq 5-6 target around the leader robot (paper 002), ``(T, N)`` m.
+
+    Paper 002 defines the formation position error as "the difference between
+    the target position of the follower robot and the actual position", the
+    target being eq 5-6 applied to the leader robot's pose:
+    ``x_T = x_L + R(theta_L) (o_i - o_L)`` with the leader-frame slot offsets
+    ``o`` of ``log.offsets``. Unlike :func:`leader_follower_position_error`
+    (against the virtual leader's slots), this follows the leader robot's real
+    pose. The leader robot's own column is 0.
+
+    Args:
+        log: The run log.
+        leader_index: Column of the leader robot.
+
+    Returns:
+        ``(T, N)`` distances ``||p_i - x_T,i||``, m.
+    """
+    lead = log.pose[:, leader_index]  # (T, 3)
+    rel = log.offsets - log.offsets[leader_index]  # (N, 2)
+    target = body_to_world(lead[:, None, :], rel[None, :, :])
+    return np.linalg.norm(log.pose[..., :2] - target, axis=-1)
+
+
+def _onsets(touch: NDArray[np.bool_]) -> NDArray[np.int64]:
+    """Count False -> True transitions along axis 0 (a contact already at t_0 counts)."""
+    before = np.concatenate((np.zeros_like(touch[:1]), touch[:-1]), axis=0)
+    return np.sum(touch & ~before, axis=0)
+
+
+def collisions_per_robot(log: RunLog) -> NDArray[np.int64]:
+    """Collision events each robot takes part in (paper 002 Tables II-IV), ``(N,)``.
+
+    An event is the start of a contact, as in the simulator's
+    ``collision_events``: with a static obstacle (``clearance < r``), with a
+    moving obstacle (centre distance ``< r + r_k``) or with another robot
+    (``< 2 r``; the event counts for both robots). Summed over robots, robot
+    pairs count twice.
+
+    Args:
+        log: The run log.
+
+    Returns:
+        ``(N,)`` event counts.
+    """
+    r = float(log.meta["robot_radius"])
+    pos = log.pose[..., :2]
+    count = _onsets(log.clearance < r)
+    if log.dyn_pos.shape[1]:
+        gap = np.linalg.norm(pos[:, :, None, :] - log.dyn_pos[:, None, :, :], axis=-1)
+        count = count + _onsets(gap < r + log.dyn_radius[None, None, :]).sum(axis=1)
+    pair = np.linalg.norm(pos[:, :, None, :] - pos[:, None, :, :], axis=-1) < 2.0 * r
+    pair &= ~np.eye(log.n_robots, dtype=bool)[None]
+    return count + _onsets(pair).sum(axis=1)

@@ -259,6 +259,43 @@ def test_position_error_and_mse_eq14():
     assert s["mse_mean"] == pytest.approx(7.5) and s["lf_error_mean"] == pytest.approx(2.0)
 
 
+
+def test_leader_robot_target_error_follows_the_leader_robots_pose():
+    """Paper 002: the target is eq 5-6 around robot 0's real pose, not the virtual slot."""
+    offsets = np.array([[0.0, 0.0], [-1.0, 0.5], [-1.0, -0.5]])
+    lead = np.array([[2.0, 3.0, math.pi / 2], [2.0, 4.0, 0.0]])  # two steps, robot 0
+    rel = offsets - offsets[0]
+    pose = np.zeros((2, 3, 3))
+    pose[:, 0] = lead
+    # robot 1 exactly on its target at t0 (heading +y: (-1, 0.5) -> (-0.5, -1)), 0.3 m off at t1
+    pose[0, 1, :2] = lead[0, :2] + [-0.5, -1.0]
+    pose[1, 1, :2] = lead[1, :2] + rel[1] + [0.0, 0.3]
+    pose[:, 2, :2] = lead[:, :2] + 10.0  # far away
+    log = make_log(pose=pose, slots=np.zeros((2, 3, 2)), offsets=offsets)
+    err = mr.leader_robot_target_error(log)
+    assert err[:, 0] == pytest.approx([0.0, 0.0])
+    assert err[:, 1] == pytest.approx([0.0, 0.3])
+    assert err[1, 2] == pytest.approx(np.hypot(10.0 - rel[2, 0], 10.0 - rel[2, 1]))
+
+
+def test_collisions_per_robot_counts_contact_onsets_with_each_kind():
+    r = 0.2
+    n_t = 6
+    pose = np.zeros((n_t, 3, 2))
+    pose[:, 0] = [0.0, 0.0]
+    pose[:, 1] = [[5.0, 0.0], [0.3, 0.0], [0.3, 0.0], [5.0, 0.0], [0.35, 0.0], [5.0, 0.0]]
+    pose[:, 2] = [10.0, 10.0]
+    clearance = np.full((n_t, 3), 5.0)
+    clearance[[1, 2, 4], 2] = 0.1  # robot 2 touches a static obstacle twice (onsets 1, 4)
+    dyn = np.zeros((n_t, 1, 2))
+    dyn[:, 0] = [[0.0, 9.0], [0.0, 0.45], [0.0, 9.0], [0.0, 9.0], [0.0, 9.0], [0.0, 0.3]]
+    log = make_log(pose=pose, radius=r, clearance=clearance, dyn_pos=dyn,
+                   dyn_radius=np.array([0.3]))
+    # robot 0: pair onsets with robot 1 at t1 and t4, human onsets at t1 and t5 (0.45 < 0.5)
+    # robot 1: the two pair onsets; robot 2: two static onsets
+    assert mr.collisions_per_robot(log).tolist() == [4, 2, 2]
+
+
 # ------------------------------------------------------------------- summary
 REQUIRED = """fce_rms fce_mean fce_max fce_x_rms fce_y_rms fse_rms fse_mean fste_max fste_final
 stability_pct vce_rms v_rms w_rms risk_mean risk_max min_inter_robot_distance

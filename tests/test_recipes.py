@@ -113,8 +113,8 @@ def test_astar_recipe_nodes_and_lengths_are_the_planners_own(astar_outputs):
         np.testing.assert_allclose(res.path[-1], task.goal)
 
 
-def _paper001(tmp_path, name, overrides=None):
-    """Run one paper-001 recipe's real sweep (serially) and render it into ``tmp_path``."""
+def _recipe_run(tmp_path, name, overrides=None):
+    """Run one paper recipe's real sweep (serially) and render it into ``tmp_path``."""
     from dfcoa_opt.bench.executors import ExecutorConfig
     from dfcoa_opt.bench.harness import run_sweep
     from dfcoa_opt.figures import recipes
@@ -130,7 +130,7 @@ def _paper001(tmp_path, name, overrides=None):
 def test_paper001_table1_reports_each_obstacle_mode_beside_the_paper(tmp_path):
     from dfcoa_opt.bench import recipes_paper001 as rp
 
-    arts, store = _paper001(tmp_path, "paper001_ivo")
+    arts, store = _recipe_run(tmp_path, "paper001_ivo")
     text = (tmp_path / "table1.md").read_text()
     cells = {m: _cells(text, m) for m in ("orca", "ivo", "none")}
     for mode, row in cells.items():
@@ -150,7 +150,7 @@ def test_paper001_table1_reports_each_obstacle_mode_beside_the_paper(tmp_path):
 def test_paper001_table2_has_every_variant_and_the_leader_arrival(tmp_path):
     from dfcoa_opt.bench import recipes_paper001 as rp
 
-    arts, store = _paper001(tmp_path, "paper001_consensus", {"t_max": 1.0})
+    arts, store = _recipe_run(tmp_path, "paper001_consensus", {"t_max": 1.0})
     text = (tmp_path / "table2.md").read_text()
     assert rp.PAPER_TABLE2 in text
     body = [ln for ln in text.splitlines() if ln.startswith("| consensus")]
@@ -160,3 +160,28 @@ def test_paper001_table2_has_every_variant_and_the_leader_arrival(tmp_path):
         log = rp.RunLog.load(store.root / row["log"])
         assert rp.leader_arrival(log) == log.n_steps - 1
     assert sum(a.path.startswith("fig8_") for a in arts) == 6
+
+
+def test_paper002_tables_put_the_papers_values_beside_the_logs_own(tmp_path):
+    from dfcoa_opt.bench import recipes_paper002 as rp
+
+    arts, store = _recipe_run(tmp_path, "paper002_tables", {"t_max": 2.0})
+    text = (tmp_path / "tables.md").read_text()
+    rows = store.rows()
+    assert len(rows) == 3 * 5
+    for name, (table, _angle) in rp.SCENARIOS.items():
+        section = text.split(f"## Table {table}:")[1].split("## Table")[0]
+        runs = [rp.RunLog.load(store.root / r["log"]) for r in sorted(
+            (r for r in rows if r["scenario"] == name), key=lambda r: r["seed"])]
+        dist = np.array([rp.distance_travelled(log) for log in runs])  # (seeds, 3)
+        cells = _cells(section, "Distance")
+        # | Distance | m | R1 paper | R1 ours | R2 paper | R2 ours | R3 paper | R3 ours |
+        for i in range(3):
+            assert float(cells[2 + 2 * i]) == pytest.approx(rp.PAPER[table]["dist"][i])
+            mean = float(cells[3 + 2 * i].split(" [")[0])
+            assert mean == pytest.approx(dist[:, i].mean(), abs=6e-4)
+        err = _cells(section, "Error formation position")
+        assert err[2] == "—" and err[3] == "—"  # the paper and we give none for Robot 1
+        # 2 s is too short to reach the target: never reached, said so
+        assert _cells(section, "Time to target")[3] == "—"
+    assert {a.path for a in arts} == {"tables.md", *(f"fig_{n}.png" for n in rp.SCENARIOS)}

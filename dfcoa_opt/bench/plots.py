@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench.store import file_sha256
+from dfcoa_opt.bench.store import ResultsStore, file_sha256
 from dfcoa_opt.bench.sweep import safe_name
 from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.plotting import draw_world, new_figure, robot_colors
@@ -69,6 +69,13 @@ def scenario_for_row(row: Row) -> Scenario:
     """
     return load_scenario(str(row.get("scenario_file", "")), int(row["seed"]),
                          row.get("overrides") or {})
+
+
+def ok_runs(store: ResultsStore) -> list[tuple[Row, RunLog]]:
+    """The successful rows of a store with their logs, by controller, overrides, seed."""
+    rows = sorted((r for r in store.rows() if r["status"] == "ok"),
+                  key=lambda r: (r["controller"], r.get("overrides_hash", ""), r["seed"]))
+    return [(r, RunLog.load(store.root / r["log"])) for r in rows]
 
 
 def save_png(fig: Figure, path: str | Path) -> Path:

@@ -20,7 +20,7 @@ from matplotlib.patches import Circle as CirclePatch
 
 from dfcoa_opt import metrics, plotting
 from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench.plots import save_png, scenario_for_row
+from dfcoa_opt.bench.plots import ok_runs, save_png, scenario_for_row
 from dfcoa_opt.bench.store import ResultsStore
 from dfcoa_opt.figures import Artefact, recipe
 from dfcoa_opt.metrics_robots import leader_follower_position_error
@@ -38,13 +38,6 @@ PAPER_TABLE1 = {
 PAPER_TABLE2 = ("robot spacing > 0 throughout (Fig. 8d); velocities converge to the desired one, "
                 "with jitter when passing the obstacles (Fig. 8c); formation re-forms after "
                 "the obstacle zone and reaches the target (Fig. 8e)")
-
-
-def _loaded(store: ResultsStore) -> list[tuple[dict[str, Any], RunLog]]:
-    """The successful rows (seed order) with their logs."""
-    rows = sorted((r for r in store.rows() if r["status"] == "ok"),
-                  key=lambda r: (r["controller"], r.get("overrides_hash", ""), r["seed"]))
-    return [(r, RunLog.load(store.root / r["log"])) for r in rows]
 
 
 def _radius(log: RunLog) -> float:
@@ -135,7 +128,7 @@ def _fig_table1(log: RunLog, row: dict[str, Any], path: Path, title: str) -> Pat
         sweep="sweeps/paper001_ivo.toml")
 def render_ivo(store: ResultsStore, dest: Path) -> list[Artefact]:
     """``table1.md`` and one Figs 5-6 like figure per obstacle mode (first seed)."""
-    runs = _loaded(store)
+    runs = ok_runs(store)
     lines = ["# Paper 001, Table I: two robots crossing a polygon field", "",
              "`orca_nav` (preferred velocity: full speed towards the target) with the static "
              "obstacles handled by RVO2's obstacle lines (`orca`, the paper's conventional "
@@ -237,7 +230,7 @@ def _fig8(log: RunLog, row: dict[str, Any], path: Path, title: str) -> Path:
         sweep="sweeps/paper001_consensus.toml")
 def render_consensus(store: ResultsStore, dest: Path) -> list[Artefact]:
     """``table2.md`` and one Fig. 8 like figure per controller variant (first seed)."""
-    runs = sorted(_loaded(store), key=lambda rl: (*_variant(rl[0]), rl[0]["seed"]))
+    runs = sorted(ok_runs(store), key=lambda rl: (*_variant(rl[0]), rl[0]["seed"]))
     lines = ["# Paper 001, Table II: consensus formation through a polygon field", "",
              f"Paper (one run, words only): {PAPER_TABLE2}.", "",
              "Formation error = |x_i − x_L − Δ_i| (eq 3-4 with the virtual leader); final = at "
