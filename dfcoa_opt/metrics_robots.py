@@ -56,7 +56,8 @@ def mse_per_robot(log: RunLog) -> FloatArray:
     return np.sum(np.square(log.pose[..., :2] - log.slots), axis=-1)
 
 
-def leader_robot_target_error(log: RunLog, leader_index: int = 0) -> FloatArray:
+def leader_robot_target_error(log: RunLog, leader_index: int = 0,
+                              frame_heading: float | None = None) -> FloatArray:
     """Follower error against its eq 5-6 target around the leader robot (paper 002), ``(T, N)`` m.
 
     Paper 002 defines the formation position error as "the difference between
@@ -65,16 +66,23 @@ def leader_robot_target_error(log: RunLog, leader_index: int = 0) -> FloatArray:
     ``x_T = x_L + R(theta_L) (o_i - o_L)`` with the leader-frame slot offsets
     ``o`` of ``log.offsets``. Unlike :func:`leader_follower_position_error`
     (against the virtual leader's slots), this follows the leader robot's real
-    pose. The leader robot's own column is 0.
+    pose. The leader robot's own column is 0. With ``frame_heading`` the
+    offsets are turned by that fixed angle instead of the leader robot's
+    heading: paper 004's constant world-frame errors ``E_i``, where the
+    follower's target is ``p_L + E_i`` (eq 4-5).
 
     Args:
         log: The run log.
         leader_index: Column of the leader robot.
+        frame_heading: Fixed heading of the offsets' frame, rad; default: the
+            leader robot's logged heading.
 
     Returns:
         ``(T, N)`` distances ``||p_i - x_T,i||``, m.
     """
-    lead = log.pose[:, leader_index]  # (T, 3)
+    lead = log.pose[:, leader_index].copy()  # (T, 3)
+    if frame_heading is not None:
+        lead[:, 2] = frame_heading
     rel = log.offsets - log.offsets[leader_index]  # (N, 2)
     target = body_to_world(lead[:, None, :], rel[None, :, :])
     return np.linalg.norm(log.pose[..., :2] - target, axis=-1)

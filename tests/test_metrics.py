@@ -276,6 +276,10 @@ def test_leader_robot_target_error_follows_the_leader_robots_pose():
     assert err[:, 0] == pytest.approx([0.0, 0.0])
     assert err[:, 1] == pytest.approx([0.0, 0.3])
     assert err[1, 2] == pytest.approx(np.hypot(10.0 - rel[2, 0], 10.0 - rel[2, 1]))
+    # paper 004: a fixed frame (heading 0) instead of the leader robot's heading
+    fixed = mr.leader_robot_target_error(log, frame_heading=0.0)
+    assert fixed[0, 1] == pytest.approx(np.hypot(-0.5 - rel[1, 0], -1.0 - rel[1, 1]))
+    assert fixed[1, 1] == pytest.approx(0.3)
 
 
 def test_collisions_per_robot_counts_contact_onsets_with_each_kind():

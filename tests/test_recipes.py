@@ -185,3 +185,57 @@ def test_paper002_tables_put_the_papers_values_beside_the_logs_own(tmp_path):
         # 2 s is too short to reach the target: never reached, said so
         assert _cells(section, "Time to target")[3] == "—"
     assert {a.path for a in arts} == {"tables.md", *(f"fig_{n}.png" for n in rp.SCENARIOS)}
+
+
+def test_paper004_tables_put_the_papers_values_beside_the_logs_own(tmp_path):
+    from dfcoa_opt.bench import recipes_paper004 as rp
+
+    arts, store = _recipe_run(tmp_path, "paper004_tables", {"t_max": 1.0})
+    text = (tmp_path / "tables.md").read_text()
+    rows = store.rows()
+    assert len(rows) == 16 * 10
+    # Table 2, n = 5, leader: the paper's 10 runs and ours, mean [min, max]
+    t2 = text.split("## Table 2")[1].split("## Table 3")[0]
+    line = next(ln for ln in t2.splitlines() if ln.startswith("| 5 | Leader |"))
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    assert cells[2] == "38.19 [38.18, 38.20]"
+    runs = [rp.RunLog.load(store.root / r["log"]) for r in rows if r["scenario"] == "vs_n5_dyn0"]
+    lead = [rp.path_length_per_robot(log)[0] for log in runs]
+    assert float(cells[3].split(" [")[0]) == pytest.approx(np.mean(lead), abs=6e-3)
+    assert cells[4] == "10"
+    # Table 3 carries the paper's numbers; Table 4 has every n x obstacle count
+    t3 = text.split("## Table 3")[1].split("## Table 4")[0]
+    assert "| 20 | 6.52 |" in t3 and "827.66" in t3
+    t4 = text.split("## Table 4")[1]
+    assert sum(ln.startswith("| ") and "followers" in ln for ln in t4.splitlines()) == 4 * 3
+    assert {a.path for a in arts} >= {"tables.md", "fig6_trajectories_static.png",
+                                      "fig11_ideal_error_dynamic.png"}
+
+
+def test_paper004_scenarios_are_table_1_and_the_generators_output(tmp_path):
+    """The committed files equal generate.py's output and hold Table 1's numbers."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("gen004", SCENARIOS / "paper004/generate.py")
+    gen = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gen)
+    from dfcoa_opt.geometry import rotate
+    from dfcoa_opt.sim.loader import load_scenario
+
+    for n in (5, 10, 15, 20):
+        for k in range(4):
+            path = SCENARIOS / f"paper004/vs_n{n}_dyn{k}.toml"
+            assert path.read_text() == gen.scenario(n, k), path
+    sc = load_scenario(str(SCENARIOS / "paper004/vs_n20_dyn3.toml"))
+    assert sc.n == 20
+    starts = np.array([p[:2] for p in sc.spec.team.poses])
+    np.testing.assert_allclose(starts[:5], [[1, 1], [0.5, 2], [2.3, 0.2], [1.2, 1.8], [1.3, 1.2]])
+    np.testing.assert_allclose(starts[-5:], [[1, 2], [2.8, 0.2], [1.7, 1.8], [1.8, 1.2], [1.5, 1]])
+    world_e = rotate(sc.offsets, sc.leader_heading)  # Table 1's errors E_i, world frame
+    np.testing.assert_allclose(world_e[:5], [[0, 0], [-1.5, 1.5], [-3, 1.5], [-1.5, -1.5],
+                                             [-3, -1.5]], atol=1e-9)
+    np.testing.assert_allclose(world_e[5:10], [[-0.5, 2.5], [-2, 2.5], [-0.5, -0.5], [-2, -0.5],
+                                               [1, 1]], atol=1e-9)
+    centres = sorted(tuple(c.center) for c in sc.world.circles)
+    assert centres == sorted([(9, 10), (11, 9), (10, 12), (14, 17), (15, 13), (15, 16), (20, 19)])
+    assert len(sc.spec.world.dynamic_obstacles) == 3

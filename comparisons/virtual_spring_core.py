@@ -1,0 +1,368 @@
+"""Equations of paper 004 used by the ``virtual_spring`` controller (pure, vectorised numpy).
+
+Shapes: ``N`` robots (rows), ``K`` neighbours or sources per robot. Every
+function works row by row: row ``i`` of each output depends on row ``i`` of the
+inputs only. Equation numbers are the paper's (``docs/methods/virtual_spring.md``).
+
+* :func:`fig1_adjacency`, :func:`laplacian` -- eq 1-2 with Fig 1's topology.
+* :func:`consensus_input` -- eq 4.
+* :func:`leader_velocity` -- eq 6.
+* :func:`spring_force` -- eq 7; :func:`disc_normals` and :func:`polygon_normals`
+  turn discs and polygons into eq 7's source points.
+* :func:`leader_avoidance_velocity`, :func:`follower_avoidance_velocity` -- eq 8, eq 9.
+* :func:`consistency_velocity` -- eq 10-11.
+* :func:`error_trend` and :func:`dynamic_speed_limit` -- eq 12-13.
+* :func:`ideal_positions`, :func:`ideal_position_error` -- eq 14.
+* :func:`vo_conflict` -- eq 15-16; :func:`conflict_resolution` -- eq 17.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from dfcoa_opt.geometry import points_in_polygon
+
+FloatArray = NDArray[np.float64]
+
+#: Below this norm a vector has no direction (m or m/s).
+TINY = 1e-12
+
+
+def _unit(v: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Unit vectors of ``(..., 2)`` ``v`` (0 where ``|v| <= TINY``) and the norms."""
+    norm = np.linalg.norm(v, axis=-1)
+    safe = np.where(norm > TINY, norm, 1.0)
+    return np.where((norm > TINY)[..., None], v / safe[..., None], 0.0), norm
+
+
+def fig1_adjacency(n: int, leader_index: int) -> FloatArray:
+    """Eq 1 for Fig 1's topology: every follower hears the leader and its adjacent followers.
+
+    The followers are the robots other than ``leader_index`` in index order;
+    follower ``f_k`` has ``a = 1`` towards the leader, ``f_{k-1}`` and
+    ``f_{k+1}``. The leader's row is zero (it does not follow anybody).
+
+    Args:
+        n: Number of robots.
+        leader_index: Index of the leader robot.
+
+    Returns:
+        ``(n, n)`` adjacency matrix ``A`` (``a_ij = 1`` when i uses j's state).
+    """
+    a = np.zeros((n, n))
+    followers = [i for i in range(n) if i != leader_index]
+    for k, f in enumerate(followers):
+        a[f, leader_index] = 1.0
+        if k > 0:
+            a[f, followers[k - 1]] = 1.0
+        if k + 1 < len(followers):
+            a[f, followers[k + 1]] = 1.0
+    return a
+
+
+def laplacian(a: ArrayLike) -> FloatArray:
+    """Eq 2: ``L = D - A`` with ``l_ii = sum_j a_ij`` (row sums) and ``l_ij = -a_ij``.
+
+    Args:
+        a: ``(n, n)`` adjacency matrix.
+
+    Returns:
+        ``(n, n)`` Laplacian; ``(L x)_i = sum_j a_ij (x_i - x_j)``.
+    """
+    a = np.asarray(a, dtype=float)
+    return np.diag(a.sum(axis=1)) - a
+
+
+def consensus_input(p_i: ArrayLike, v_i: ArrayLike, e_i: ArrayLike, p_j: ArrayLike,
+                    v_j: ArrayLike, e_j: ArrayLike, a: ArrayLike,
+                    velocity_weight: float = 1.0) -> FloatArray:
+    """Eq 4: ``u_i = -sum_j a_ij [(p_i - p_j) - (E_i - E_j) + k_v (v_i - v_j)]``.
+
+    Row i of ``-(L (x) I_2)`` applied to the stacked positions and velocities;
+    the paper prints ``k_v = 1`` (position and velocity differences added as
+    they are).
+
+    Args:
+        p_i: ``(N, 2)`` own positions, m.
+        v_i: ``(N, 2)`` own velocities, m/s.
+        e_i: ``(N, 2)`` own desired offsets from the leader E_i, m.
+        p_j: ``(N, K, 2)`` neighbours' positions, m.
+        v_j: ``(N, K, 2)`` neighbours' velocities, m/s.
+        e_j: ``(N, K, 2)`` neighbours' desired offsets E_j, m.
+        a: ``(N, K)`` weights a_ij (0 for padding).
+        velocity_weight: ``k_v``, s.
+
+    Returns:
+        ``(N, 2)`` consensus inputs ``u_i`` (m, with velocities weighted by k_v).
+    """
+    p_i, v_i, e_i = (np.asarray(x, dtype=float)[:, None, :] for x in (p_i, v_i, e_i))
+    diff = (p_i - np.asarray(p_j, dtype=float)) - (e_i - np.asarray(e_j, dtype=float)) \
+        + velocity_weight * (v_i - np.asarray(v_j, dtype=float))
+    return -(np.asarray(a, dtype=float)[..., None] * diff).sum(axis=1)
+
+
+def leader_velocity(p: ArrayLike, target: ArrayLike, alpha: float, v_max: float) -> FloatArray:
+    """Eq 6: ``v = alpha d (cos theta, sin theta)`` towards the target, capped at ``v_max``.
+
+    ``d`` is the distance to the target and ``theta`` its direction; the speed
+    is ``min(alpha d, v_max)`` (at the start, far from the target, it is
+    ``v_max``: "v_l(0) = v_max").
+
+    Args:
+        p: ``(N, 2)`` positions, m.
+        target: ``(2,)`` or ``(N, 2)`` target, m.
+        alpha: Coefficient alpha, 1/s.
+        v_max: Largest speed, m/s.
+
+    Returns:
+        ``(N, 2)`` velocities, m/s (0 at the target).
+    """
+    vec = np.asarray(target, dtype=float) - np.asarray(p, dtype=float)
+    d = np.hypot(vec[..., 0], vec[..., 1])
+    theta = np.arctan2(vec[..., 1], vec[..., 0])
+    speed = np.minimum(alpha * d, v_max)
+    return np.stack((speed * np.cos(theta), speed * np.sin(theta)), axis=-1)
+
+
+def spring_force(delta: ArrayLike, mask: ArrayLike, gain: float = 1.0) -> FloatArray:
+    """Eq 7: ``f = gain sum_k (p_i - p_k) / d_k^3`` (inverse cube, pointing away from k).
+
+    ``delta[i, k] = p_i - p_k`` is the vector from source k (an obstacle point
+    or another robot) to robot i and ``d_k = |delta|``, so each term has the
+    magnitude ``gain / d_k^2``.
+
+    Args:
+        delta: ``(N, K, 2)`` vectors from the sources to the robot, m.
+        mask: ``(N, K)`` True where the source counts.
+        gain: Spring gain (the paper's 1), m^3/s so that ``f`` is a velocity.
+
+    Returns:
+        ``(N, 2)`` spring force ``(f^x, f^y)``, m/s.
+    """
+    delta = np.asarray(delta, dtype=float)
+    d = np.linalg.norm(delta, axis=-1)
+    use = np.asarray(mask, dtype=bool) & (d > TINY)
+    w = np.where(use, 1.0 / np.where(use, d, 1.0) ** 3, 0.0)
+    return gain * (w[..., None] * delta).sum(axis=1)
+
+
+def disc_normals(p: ArrayLike, centres: ArrayLike,
+                 radii: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Outward unit normals and surface distances from discs to robots.
+
+    Args:
+        p: ``(N, 2)`` robot positions, m.
+        centres: ``(N, K, 2)`` or ``(K, 2)`` disc centres, m.
+        radii: ``(N, K)`` or ``(K,)`` disc radii, m.
+
+    Returns:
+        ``(n_hat (N, K, 2), s (N, K))``: the direction from the disc to the robot
+        and the signed distance from the robot's centre to the disc's surface, m
+        (negative inside).
+    """
+    rel = np.asarray(p, dtype=float)[:, None, :] - np.asarray(centres, dtype=float)
+    n_hat, dist = _unit(rel)
+    return n_hat, dist - np.asarray(radii, dtype=float)
+
+
+def polygon_normals(p: ArrayLike,
+                    polygons: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
+    """Outward unit normals and signed distances from polygons to robots.
+
+    The normal points from the polygon's nearest boundary point to the robot
+    (away from the polygon when the robot is inside).
+
+    Args:
+        p: ``(N, 2)`` robot positions, m.
+        polygons: ``Q`` vertex arrays ``(V, 2)``, m.
+
+    Returns:
+        ``(n_hat (N, Q, 2), s (N, Q))``, s in m, negative inside a polygon.
+    """
+    p = np.asarray(p, dtype=float)
+    n_hat = np.zeros((len(p), len(polygons), 2))
+    s = np.zeros((len(p), len(polygons)))
+    for q, verts in enumerate(polygons):
+        a = np.asarray(verts, dtype=float)
+        ab = np.roll(a, -1, axis=0) - a
+        denom = np.where((ab**2).sum(-1) > 0.0, (ab**2).sum(-1), 1.0)
+        t = np.clip(np.einsum("nvi,vi->nv", p[:, None, :] - a, ab) / denom, 0.0, 1.0)
+        closest = a + t[..., None] * ab  # (N, V, 2)
+        dist = np.linalg.norm(p[:, None, :] - closest, axis=-1)
+        k = np.argmin(dist, axis=1)
+        rows = np.arange(len(p))
+        inside = points_in_polygon(p, a)
+        unit, d = _unit(p - closest[rows, k])
+        n_hat[:, q] = np.where(inside[:, None], -unit, unit)
+        s[:, q] = np.where(inside, -d, d)
+    return n_hat, s
+
+
+def leader_avoidance_velocity(v_l: ArrayLike, f: ArrayLike) -> FloatArray:
+    """Eq 8: ``v_l_a(t+1) = v_l + f``: the leader's eq 6 velocity plus its spring force, m/s."""
+    return np.asarray(v_l, dtype=float) + np.asarray(f, dtype=float)
+
+
+def follower_avoidance_velocity(v_l_a: ArrayLike, v_f: ArrayLike, f: ArrayLike) -> FloatArray:
+    """Eq 9: ``v_fi_a(t+1) = v_l_a(t+1) + v_fi(t+1) + f``, m/s.
+
+    Args:
+        v_l_a: ``(N, 2)`` the leader's avoidance velocity (eq 8) as the follower knows it.
+        v_f: ``(N, 2)`` the follower's consistency velocity (eq 10).
+        f: ``(N, 2)`` the follower's spring force (eq 7).
+    """
+    return np.asarray(v_l_a, dtype=float) + np.asarray(v_f, dtype=float) \
+        + np.asarray(f, dtype=float)
+
+
+def consistency_velocity(u: ArrayLike, beta: float) -> FloatArray:
+    """Eq 10-11: ``v_fi = beta E_s (cos phi, sin phi)``.
+
+    ``E_s = sqrt((sum u_x)^2 + (sum u_y)^2)`` (eq 11) is the norm of the eq 4
+    input ``u_i`` (whose sum over the neighbours is already taken) and ``phi`` is
+    its direction, so ``v_fi = beta u_i``.
+
+    Args:
+        u: ``(N, 2)`` eq 4 inputs, m.
+        beta: Adjustment coefficient beta, 1/s.
+
+    Returns:
+        ``(N, 2)`` consistency velocities, m/s.
+    """
+    u = np.asarray(u, dtype=float)
+    e_s = np.hypot(u[..., 0], u[..., 1])
+    phi = np.arctan2(u[..., 1], u[..., 0])
+    return beta * e_s[..., None] * np.stack((np.cos(phi), np.sin(phi)), axis=-1)
+
+
+def error_trend(e_now: ArrayLike, e_prev: ArrayLike, floor: float = 0.0) -> FloatArray:
+    """Eq 12's ``epsilon = (E_i(t) - E_i(t-1)) / E_i(t)``.
+
+    Args:
+        e_now: ``(N,)`` distance errors from the ideal position now, m.
+        e_prev: ``(N,)`` the same one step earlier, m.
+        floor: The denominator is ``max(E_i(t), floor)`` (0: as printed), m.
+
+    Returns:
+        ``(N,)`` epsilon (0 where the denominator is 0).
+    """
+    e_now = np.asarray(e_now, dtype=float)
+    den = np.maximum(e_now, floor)
+    return np.where(den > 0.0, (e_now - np.asarray(e_prev, dtype=float))
+                    / np.where(den > 0.0, den, 1.0), 0.0)
+
+
+def dynamic_speed_limit(speed: ArrayLike, epsilon: ArrayLike, v_max: float,
+                        floor: float = 0.0) -> FloatArray:
+    """Eq 12-13: ``v(t+1) = min(v(t) + epsilon v_max, v_max)``, at least ``floor``.
+
+    Args:
+        speed: ``(N,)`` current speeds ``|v_i(t)|``, m/s.
+        epsilon: ``(N,)`` eq 12's error trend.
+        v_max: Largest speed, m/s.
+        floor: Smallest limit (0 = a speed cannot be negative), m/s.
+
+    Returns:
+        ``(N,)`` speed limits, m/s.
+    """
+    raw = np.asarray(speed, dtype=float) + np.asarray(epsilon, dtype=float) * v_max
+    return np.clip(raw, min(floor, v_max), v_max)
+
+
+def cap_speed(v: ArrayLike, limit: ArrayLike) -> FloatArray:
+    """Scale ``(N, 2)`` velocities down to ``|v| <= limit`` (``(N,)``, m/s), keeping directions."""
+    v = np.asarray(v, dtype=float)
+    norm = np.hypot(v[:, 0], v[:, 1])
+    lim = np.asarray(limit, dtype=float)
+    return v * np.where(norm > lim, lim / np.where(norm > 0.0, norm, 1.0), 1.0)[:, None]
+
+
+def ideal_positions(leader_position: ArrayLike, offsets: ArrayLike) -> FloatArray:
+    """Eq 14's ideal positions ``p_i-idea = p_l + E_i`` (the consistency criterion alone).
+
+    Args:
+        leader_position: ``(..., 2)`` the leader robot's position, m.
+        offsets: ``(..., N, 2)`` desired offsets ``E_i`` from the leader, m.
+
+    Returns:
+        ``(..., N, 2)`` ideal positions, m.
+    """
+    return np.asarray(leader_position, dtype=float)[..., None, :] + np.asarray(offsets,
+                                                                                dtype=float)
+
+
+def ideal_position_error(position: ArrayLike, ideal: ArrayLike) -> FloatArray:
+    """Eq 14: ``MSE_i(t) = (x_i-idea - x_i)^2 + (y_i-idea - y_i)^2``.
+
+    Args:
+        position: ``(..., 2)`` actual positions, m.
+        ideal: ``(..., 2)`` ideal positions (:func:`ideal_positions`), m.
+
+    Returns:
+        ``(...)`` squared distances, m^2.
+    """
+    d = np.asarray(ideal, dtype=float) - np.asarray(position, dtype=float)
+    return d[..., 0] ** 2 + d[..., 1] ** 2
+
+
+def vo_conflict(rel_pos: ArrayLike, rel_vel: ArrayLike, radius: ArrayLike,
+                horizon: float = np.inf) -> NDArray[np.bool_]:
+    """Eq 15-16: whether ``v_i`` lies in the velocity obstacle ``VO^i_ck(v_ck)``.
+
+    The ray ``gamma = {p_i + tau (v_i - v_ck) | 0 <= tau <= horizon}`` (eq 15,
+    infinite with ``horizon = inf``) meets the disc ``c_k (+) i`` of radius
+    ``radius`` centred on ``p_ck`` (eq 16). A robot already inside that disc is
+    in conflict.
+
+    Args:
+        rel_pos: ``(..., 2)`` ``p_ck - p_i``, m.
+        rel_vel: ``(..., 2)`` ``v_i - v_ck``, m/s.
+        radius: ``(...)`` radius of the Minkowski sum (``r_i + r_ck`` + margin), m.
+        horizon: Largest ``tau``, s.
+
+    Returns:
+        ``(...)`` True where there is a conflict.
+    """
+    d = np.asarray(rel_pos, dtype=float)
+    w = np.asarray(rel_vel, dtype=float)
+    ww = (w**2).sum(-1)
+    tau = np.clip((d * w).sum(-1) / np.where(ww > 0.0, ww, 1.0), 0.0, horizon)
+    tau = np.where(ww > 0.0, tau, 0.0)
+    miss = np.linalg.norm(d - tau[..., None] * w, axis=-1)
+    return miss <= np.asarray(radius, dtype=float)
+
+
+def conflict_resolution(p_i: ArrayLike, v_i: ArrayLike, p_k: ArrayLike, v_k: ArrayLike,
+                        conflict: ArrayLike, share: ArrayLike = 1.0) -> FloatArray:
+    """Eq 17: the robot in front speeds up by ``|v_i - v_ck|/2``, the one behind slows down.
+
+    ``v_i-c = v_i -+ |v_i - v_ck|/2`` along the pair's common direction of
+    motion ``a = (v_i + v_ck)/|v_i + v_ck|`` (``v_i``'s direction when the two
+    cancel, then ``v_ck``'s). Robot i is in front when ``(p_i - p_ck) . a > 0``
+    and gets ``+``; otherwise ``-``. The changes of all conflicts add up.
+
+    Args:
+        p_i: ``(N, 2)`` own positions, m.
+        v_i: ``(N, 2)`` own (planned) velocities, m/s.
+        p_k: ``(N, K, 2)`` the other robots' positions, m.
+        v_k: ``(N, K, 2)`` their velocities, m/s.
+        conflict: ``(N, K)`` True where eq 15-16 found a conflict.
+        share: ``(N, K)`` or scalar factor on the change (1 = eq 17's half).
+
+    Returns:
+        ``(N, 2)`` velocity changes ``v_i-c - v_i``, m/s.
+    """
+    p_i = np.asarray(p_i, dtype=float)[:, None, :]
+    v_i = np.asarray(v_i, dtype=float)[:, None, :]
+    p_k, v_k = np.asarray(p_k, dtype=float), np.asarray(v_k, dtype=float)
+    axis, _ = _unit(v_i + v_k)
+    own, _ = _unit(np.broadcast_to(v_i, v_k.shape))
+    other, _ = _unit(v_k)
+    for fallback in (own, other):
+        none = np.linalg.norm(axis, axis=-1) == 0.0
+        axis = np.where(none[..., None], fallback, axis)
+    front = ((p_i - p_k) * axis).sum(-1) > 0.0
+    half = 0.5 * np.linalg.norm(v_i - v_k, axis=-1) * np.asarray(share, dtype=float)
+    step = np.where(front, half, -half) * np.asarray(conflict, dtype=bool)
+    return (step[..., None] * axis).sum(axis=1)
