@@ -29,6 +29,13 @@ runs the same law on its own observation row:
    ``"stop"`` applies (0, 0). ``last_fallbacks`` counts the robots that fell
    back at the latest step (the simulator does not log it).
 
+Speed: ``kernel = "numba"`` (default) computes step 3 with
+:func:`comparisons.lf_vo_kernel.vo_clearance` (one pass per robot, exact
+clearances with culling of obstacles that cannot be the nearest) and the costs
+once per turn rate of the grid; ``kernel = "numpy"`` is the dense reference
+(:func:`comparisons.lf_vo_core.rollout`, :func:`~comparisons.lf_vo_core.path_clearance`,
+:func:`~comparisons.lf_vo_core.vo_cost`). Both give the same commands.
+
 Decisions (the paper's words, the choice and the reason; also in
 ``docs/methods/lf_vo.md``):
 
@@ -80,6 +87,7 @@ from comparisons.lf_vo_core import (
     target_error,
     vo_cost,
 )
+from comparisons.lf_vo_kernel import vo_clearance
 from dfcoa_opt.control.base import Observation
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.params import param
@@ -131,6 +139,9 @@ class LeaderFollowerVO:
                                                "target direction.", unit="s/m", ge=0.0)
         fallback: Literal["least_penetration", "stop"] = param(
             "least_penetration", doc="Command when every sample is rejected.")
+        kernel: Literal["numba", "numpy"] = param(
+            "numba", doc="Clearance code: the numba kernel (comparisons.lf_vo_kernel) or the "
+                         "numpy reference (rollout + path_clearance); same decisions.")
 
     def __init__(self, params: Params) -> None:
         self.p = params
@@ -141,6 +152,8 @@ class LeaderFollowerVO:
         self._lead_offset = np.zeros(2)
         self._circles = np.zeros((0, 2))
         self._circle_r = np.zeros(0)
+        self._circle_reach = np.zeros(0)
+        self._grid: tuple[float, np.ndarray, np.ndarray] = (np.nan, np.zeros(0), np.zeros(0))
 
     def reset(self, scenario, rng: np.random.Generator) -> None:
         """Keep the robot radius, speed limits, the leader's offset and the static discs.
@@ -160,6 +173,7 @@ class LeaderFollowerVO:
         circles = scenario.world.circles
         self._circles = np.array([c.center for c in circles], dtype=float).reshape(-1, 2)
         self._circle_r = np.array([c.radius for c in circles], dtype=float)
+        self._circle_reach = self._circle_r + (self._radius + p.safety_margin)
         self.last_fallbacks = 0
 
     def targets(self, obs: Observation) -> np.ndarray:
@@ -198,13 +212,44 @@ class LeaderFollowerVO:
         return tuple(np.concatenate([np.asarray(part[j]) for part in parts], axis=1)
                      for j in range(4))
 
+    def _moving(self, obs: Observation) -> tuple[np.ndarray, ...]:
+        """Neighbours (if avoided) and sensed humans: ``(N, Q, ...)`` as in :meth:`_obstacles`."""
+        r = self._radius + self.p.safety_margin
+        mo = obs.obstacles
+        if not self.p.avoid_robots:
+            return mo.position, mo.velocity, mo.radius + r, mo.mask
+        nb = obs.neighbours
+        return (np.concatenate((nb.position, mo.position), axis=1),
+                np.concatenate((nb.velocity, mo.velocity), axis=1),
+                np.concatenate((np.full(nb.index.shape, self._radius + r), mo.radius + r), axis=1),
+                np.concatenate((nb.mask, mo.mask), axis=1))
+
     def samples(self, v_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(N, S)`` grid of (v, omega) samples for per-robot speed limits ``v_max`` (m/s)."""
-        frac = np.linspace(0.0, 1.0, self.p.v_samples)
-        ws = np.linspace(-self._w_max, self._w_max, self.p.w_samples)
+        if self._grid[0] != self._w_max:  # the grid only changes with w_max (reset)
+            self._grid = (self._w_max, np.linspace(0.0, 1.0, self.p.v_samples),
+                          np.tile(np.linspace(-self._w_max, self._w_max, self.p.w_samples),
+                                  self.p.v_samples))
+        _, frac, w_row = self._grid
         v = np.repeat(v_max[:, None] * frac, self.p.w_samples, axis=1)
-        w = np.broadcast_to(np.tile(ws, self.p.v_samples), v.shape).copy()
+        w = np.broadcast_to(w_row, v.shape).copy()
         return v, w
+
+    def _grid_cost(self, theta: np.ndarray, v: np.ndarray, w: np.ndarray, v_ref: np.ndarray,
+                   w_ref: np.ndarray, theta_t: np.ndarray) -> np.ndarray:
+        """:func:`vo_cost` of the samples of :meth:`samples` (+ the preferred column), ``(N, S)``.
+
+        The same values as the flat call; the grid's turn rates are passed once
+        (``(1, 1, W)``), so the trigonometry is done per turn rate, not per sample.
+        """
+        p, n = self.p, len(v)
+        nv, nw = p.v_samples, p.w_samples
+        args = (v_ref, w_ref, theta_t, p.turn_time, p.pref_weight, p.heading_weight)
+        grid = v[:, :nv * nw].reshape(n, nv, nw)
+        cost = vo_cost(theta, grid, self._grid[2][:nw].reshape(1, 1, nw), *args).reshape(n, -1)
+        if v.shape[1] == nv * nw:
+            return cost
+        return np.column_stack((cost, vo_cost(theta, v[:, nv * nw:], w[:, nv * nw:], *args)))
 
     def act(self, obs: Observation) -> np.ndarray:
         """Row i uses robot i's pose, neighbours, sensed humans, slot and the broadcast leader."""
@@ -220,10 +265,16 @@ class LeaderFollowerVO:
             v = np.column_stack((v, v_ref))
             w = np.column_stack((w, w_ref))
         step = p.horizon / p.horizon_steps
-        pts = rollout(pose, v, w, step, p.horizon_steps, p.turn_time)
-        clear = path_clearance(pts, step, *self._obstacles(obs))
-        cost = vo_cost(pose[:, 2], v, w, v_ref, w_ref, theta_t, p.turn_time, p.pref_weight,
-                       p.heading_weight)
+        if p.kernel == "numba":
+            clear = vo_clearance(pose, v, w, step, p.horizon_steps, p.turn_time,
+                                 *self._moving(obs), self._circles, self._circle_reach,
+                                 w_stride=p.w_samples)
+            cost = self._grid_cost(pose[:, 2], v, w, v_ref, w_ref, theta_t)
+        else:  # the numpy reference
+            pts = rollout(pose, v, w, step, p.horizon_steps, p.turn_time)
+            clear = path_clearance(pts, step, *self._obstacles(obs))
+            cost = vo_cost(pose[:, 2], v, w, v_ref, w_ref, theta_t, p.turn_time, p.pref_weight,
+                           p.heading_weight)
         safe = clear >= 0.0
         best = np.argmin(np.where(safe, cost, np.inf), axis=1)
         fell = ~safe.any(axis=1)

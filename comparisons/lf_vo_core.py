@@ -193,8 +193,10 @@ def vo_cost(theta: ArrayLike, v: ArrayLike, w: ArrayLike, v_ref: ArrayLike, w_re
 
     Args:
         theta: ``(N,)`` current headings, rad.
-        v: ``(N, S)`` sampled speeds, m/s.
-        w: ``(N, S)`` sampled turn rates, rad/s.
+        v: ``(N, S)`` sampled speeds, m/s (or ``(N, ...)``, with ``w`` broadcastable).
+        w: ``(N, S)`` sampled turn rates, rad/s (or broadcastable to ``v``, e.g. a
+            speed-major grid as ``v (N, V, W)`` and ``w (1, 1, W)``: the same values
+            as the flat call, with the trigonometry done once per turn rate).
         v_ref: ``(N,)`` preferred speeds (eq 4), m/s.
         w_ref: ``(N,)`` preferred turn rates (eq 4), rad/s.
         theta_t: ``(N,)`` target directions (eq 10), rad.
@@ -203,14 +205,19 @@ def vo_cost(theta: ArrayLike, v: ArrayLike, w: ArrayLike, v_ref: ArrayLike, w_re
         heading_weight: Weight of the progress shortfall, s/m.
 
     Returns:
-        ``(N, S)`` costs (dimensionless).
+        ``(N, S)`` costs (dimensionless), or the broadcast shape of ``v`` and ``w``.
     """
-    th = np.asarray(theta, dtype=float)[:, None]
     v, w = np.asarray(v, dtype=float), np.asarray(w, dtype=float)
+    shape = (-1,) + (1,) * (max(v.ndim, w.ndim) - 1)  # (N, 1, ...): one value per robot
+
+    def per_robot(a: ArrayLike) -> FloatArray:
+        return np.asarray(a, dtype=float).reshape(shape)
+
+    th = per_robot(theta)
     psi = th + w * tau
-    psi_ref = th + np.asarray(w_ref, dtype=float)[:, None] * tau
-    vr = np.asarray(v_ref, dtype=float)[:, None]
+    psi_ref = th + per_robot(w_ref) * tau
+    vr = per_robot(v_ref)
     dvx = v * np.cos(psi) - vr * np.cos(psi_ref)
     dvy = v * np.sin(psi) - vr * np.sin(psi_ref)
-    progress = v * np.cos(psi - np.asarray(theta_t, dtype=float)[:, None])
+    progress = v * np.cos(psi - per_robot(theta_t))
     return pref_weight * np.hypot(dvx, dvy) + heading_weight * np.maximum(vr - progress, 0.0)

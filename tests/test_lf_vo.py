@@ -14,6 +14,7 @@ from comparisons.lf_vo_core import (
     target_error,
     vo_cost,
 )
+from comparisons.lf_vo_kernel import vo_clearance
 from dfcoa_opt.control.base import MovingObstacles, Neighbours, Observation
 from dfcoa_opt.control.registry import available, make_controller
 from dfcoa_opt.errors import ScenarioError
@@ -223,3 +224,92 @@ def test_bad_params_raise_clear_errors():
         make_controller("lf_vo", {"fallback": "panic"})
     with pytest.raises(ValueError, match="leader_index = 5"):
         ctrl(leader_index=5)
+
+
+def random_world(rng, n, q=10, c=12, size=8.0):
+    """Random poses, static discs and per-robot moving discs with padding, (N, Q) rows."""
+    pose = np.column_stack((rng.uniform(0, size, (n, 2)), rng.uniform(-4.0, 4.0, n)))
+    circles = rng.uniform(0, size, (c, 2))
+    circle_reach = rng.uniform(0.2, 1.0, c) + 0.5
+    pos = pose[:, None, :2] + rng.normal(0.0, 1.5, (n, q, 2))
+    vel = rng.normal(0.0, 0.4, (n, q, 2))
+    reach = rng.uniform(0.4, 0.9, (n, q))
+    mask = rng.random((n, q)) < 0.6
+    mask[:7] = False  # robots whose per-robot rows are all padding
+    return pose, circles, circle_reach, pos, vel, reach, mask
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fast_clearance_equals_the_numpy_reference(seed):
+    rng = np.random.default_rng(seed)
+    n, nv, nw, h = 120, 11, 21, 30
+    pose, circles, circle_reach, pos, vel, reach, mask = random_world(rng, n)
+    v_max = rng.uniform(0.2, 0.7, n)
+    v = np.repeat(v_max[:, None] * np.linspace(0.0, 1.0, nv), nw, axis=1)
+    w = np.tile(np.linspace(-1.0, 1.0, nw), (n, nv))
+    v = np.column_stack((v, rng.uniform(0.0, 0.5, n)))  # a preferred command per robot
+    w = np.column_stack((w, rng.uniform(-1.0, 1.0, n)))
+    pts = rollout(pose, v, w, 0.1, h, 1.0)
+    ref = path_clearance(pts, 0.1, np.concatenate((np.broadcast_to(circles, (n, 12, 2)), pos), 1),
+                         np.concatenate((np.zeros((n, 12, 2)), vel), 1),
+                         np.concatenate((np.broadcast_to(circle_reach, (n, 12)), reach), 1),
+                         np.concatenate((np.ones((n, 12), dtype=bool), mask), 1))
+    for stride in (nw, 0, 5):  # the trig reuse is only a speed-up
+        fast = vo_clearance(pose, v, w, 0.1, h, 1.0, pos, vel, reach, mask, circles,
+                            circle_reach, w_stride=stride)
+        assert np.isfinite(ref).all()
+        np.testing.assert_allclose(fast, ref, rtol=0.0, atol=1e-12)
+    assert (ref < 0.0).any() and (ref > 0.0).any()
+    # moving discs only: robots with nothing but padding get inf, as in the reference
+    ref = path_clearance(pts, 0.1, pos, vel, reach, mask)
+    fast = vo_clearance(pose, v, w, 0.1, h, 1.0, pos, vel, reach, mask, w_stride=nw)
+    assert np.isinf(ref[:7]).all() and np.isfinite(ref[7:]).all()
+    np.testing.assert_array_equal(np.isinf(fast), np.isinf(ref))
+    np.testing.assert_allclose(fast[7:], ref[7:], rtol=0.0, atol=1e-12)
+    # no obstacle columns at all
+    empty = np.zeros((n, 0, 2))
+    assert np.isinf(vo_clearance(pose, v, w, 0.1, h, 1.0, empty, empty, np.zeros((n, 0)),
+                                 np.zeros((n, 0), dtype=bool))).all()
+
+
+def random_observation(rng, n, k=8, m=3, size=8.0):
+    """A crowd of ``n`` robots with random per-robot neighbours and humans (padded)."""
+    pose, *_ = random_world(rng, n, q=1, size=size)
+    idx = rng.integers(0, n, (n, k))
+    idx[rng.random((n, k)) < 0.3] = -1
+    idx[:3] = -1
+    pos = np.where((idx >= 0)[..., None], pose[:, None, :2] + rng.normal(0, 1.2, (n, k, 2)), 0.0)
+    vel = np.where((idx >= 0)[..., None], rng.normal(0, 0.3, (n, k, 2)), 0.0)
+    dist = np.where(idx >= 0, np.linalg.norm(pos - pose[:, None, :2], axis=-1), np.inf)
+    hm = rng.random((n, m)) < 0.5
+    hp = np.where(hm[..., None], pose[:, None, :2] + rng.normal(0, 2.0, (n, m, 2)), 0.0)
+    hv = np.where(hm[..., None], rng.normal(0, 0.5, (n, m, 2)), 0.0)
+    hr = np.where(hm, rng.uniform(0.2, 0.4, (n, m)), 0.0)
+    slot = pose[:, :2] + rng.normal(0, 3.0, (n, 2))
+    leader = np.array([size / 2, size / 2, 0.3, 0.4, 0.0])
+    return Observation(0.0, 0.1, np.arange(n), pose, np.zeros((n, 2)), np.zeros((n, 2)), None,
+                       Neighbours(idx, pos, vel, dist), MovingObstacles(hp, hv, hr, hm), leader,
+                       np.zeros(2), rng.normal(0, 1.0, (n, 2)), slot)
+
+
+@pytest.mark.parametrize("params", [{}, {"fallback": "stop", "follow": "virtual"},
+                                    {"avoid_robots": False, "include_preferred": False}])
+def test_numba_and_numpy_kernels_give_the_same_commands(params):
+    rng = np.random.default_rng(11)
+    circles = [(tuple(rng.uniform(0, 8, 2)), float(rng.uniform(0.2, 0.6))) for _ in range(10)]
+    sc = v_scenario(circles=circles)
+    fast, ref = ctrl(sc, **params), ctrl(sc, kernel="numpy", **params)
+    fell = 0
+    for _ in range(3):
+        obs = random_observation(rng, 150)
+        np.testing.assert_array_equal(fast.act(obs), ref.act(obs))
+        assert fast.last_fallbacks == ref.last_fallbacks
+        fell += fast.last_fallbacks
+    assert 0 < fell < 3 * 150  # both branches (safe argmin, fallback argmax) are exercised
+
+
+def test_numba_and_numpy_kernels_give_the_same_run():
+    sc = v_scenario(circles=[((6.0, 5.3), 0.3)], humans=[HEAD_ON], t_max=15.0)
+    fast = run_scenario(sc, "lf_vo")
+    ref = Simulator(sc, ctrl(sc, kernel="numpy")).run()
+    assert fast.digest() == ref.digest()
