@@ -115,6 +115,10 @@ class LeaderFollowerVO:
         w_max: float = param(1.0, doc="Largest turn rate (Table I).", unit="rad/s", gt=0.0)
         reach_time: float = param(0.5, doc="Time interval t of eq 4, v = min(l/t, v_max) "
                                            "(not given by the paper).", unit="s", gt=0.0)
+        arrival_radius: float = param(0.1, doc="Within this distance of its target a robot "
+                                               "prefers (0, 0) and holds its place: it does not "
+                                               "give way to other robots (not in the paper).",
+                                      unit="m", ge=0.0)
         turn_when_behind: bool = param(True, doc="Turn in place (v = 0, |omega| = w_max) "
                                                  "towards a target behind the robot.")
         follow: Literal["robot", "virtual"] = param(
@@ -124,12 +128,14 @@ class LeaderFollowerVO:
         w_samples: int = param(21, doc="Turn-rate samples in [-w_max, w_max] (odd: includes "
                                        "0).", ge=2)
         include_preferred: bool = param(True, doc="Add the eq 4 preferred command as a sample.")
-        horizon: float = param(3.0, doc="Prediction horizon of the velocity obstacle.",
-                               unit="s", gt=0.0)
+        horizon: float = param(5.0, doc="Prediction horizon of the velocity obstacle "
+                                        "against static discs and humans.", unit="s", gt=0.0)
         turn_time: float = param(1.0, doc="A sample turns at omega for this long, then goes "
                                            "straight (rollout and heading penalty).", unit="s",
                                  gt=0.0)
-        horizon_steps: int = param(30, doc="Prediction steps over the horizon.", ge=1)
+        robot_horizon: float = param(2.0, doc="Prediction horizon against the other robots "
+                                              "(at most horizon).", unit="s", gt=0.0)
+        horizon_steps: int = param(50, doc="Prediction steps over the horizon.", ge=1)
         safety_margin: float = param(0.05, doc="Clearance added to robot + obstacle radii.",
                                      unit="m", ge=0.0)
         avoid_robots: bool = param(True, doc="Treat neighbours as constant-velocity obstacles.")
@@ -137,6 +143,9 @@ class LeaderFollowerVO:
                                             "velocity.", unit="s/m", ge=0.0)
         heading_weight: float = param(1.0, doc="Weight of the progress shortfall towards the "
                                                "target direction.", unit="s/m", ge=0.0)
+        turn_weight: float = param(0.01, doc="Weight of the turn-rate distance to eq 4's "
+                                             "(breaks ties: a stopped robot does not spin).",
+                                   unit="s/rad", ge=0.0)
         fallback: Literal["least_penetration", "stop"] = param(
             "least_penetration", doc="Command when every sample is rejected.")
         kernel: Literal["numba", "numpy"] = param(
@@ -196,33 +205,55 @@ class LeaderFollowerVO:
         around = formation_target(lead_pose, obs.slot_offset - self._lead_offset)
         return np.where(seen[:, None], around, target)
 
-    def _obstacles(self, obs: Observation) -> tuple[np.ndarray, ...]:
-        """Centres, velocities, collision distances and mask, ``(N, Q, ...)``."""
-        n, r = obs.n, self._radius + self.p.safety_margin
-        parts = [(np.broadcast_to(self._circles, (n, *self._circles.shape)),
-                  np.zeros((n, *self._circles.shape)),
-                  np.broadcast_to(self._circle_r + r, (n, len(self._circle_r))),
-                  np.ones((n, len(self._circle_r)), dtype=bool))]
-        if self.p.avoid_robots:
-            nb = obs.neighbours
-            parts.append((nb.position, nb.velocity, np.full(nb.index.shape, self._radius + r),
-                          nb.mask))
-        mo = obs.obstacles
-        parts.append((mo.position, mo.velocity, mo.radius + r, mo.mask))
-        return tuple(np.concatenate([np.asarray(part[j]) for part in parts], axis=1)
-                     for j in range(4))
+    def _robots(self, obs: Observation) -> tuple[np.ndarray, ...]:
+        """Neighbours as obstacles: ``(N, K, ...)`` centres, velocities, reach and mask.
 
-    def _moving(self, obs: Observation) -> tuple[np.ndarray, ...]:
-        """Neighbours (if avoided) and sensed humans: ``(N, Q, ...)`` as in :meth:`_obstacles`."""
-        r = self._radius + self.p.safety_margin
+        The mask is all False unless ``avoid_robots``.
+        """
+        nb, r = obs.neighbours, 2.0 * self._radius + self.p.safety_margin
+        mask = nb.mask if self.p.avoid_robots else np.zeros_like(nb.mask)
+
+        return nb.position, nb.velocity, np.full(nb.index.shape, r), mask
+
+    def _humans(self, obs: Observation) -> tuple[np.ndarray, ...]:
+        """Sensed moving obstacles: ``(N, M, ...)`` as in :meth:`_robots`."""
         mo = obs.obstacles
-        if not self.p.avoid_robots:
-            return mo.position, mo.velocity, mo.radius + r, mo.mask
-        nb = obs.neighbours
-        return (np.concatenate((nb.position, mo.position), axis=1),
-                np.concatenate((nb.velocity, mo.velocity), axis=1),
-                np.concatenate((np.full(nb.index.shape, self._radius + r), mo.radius + r), axis=1),
-                np.concatenate((nb.mask, mo.mask), axis=1))
+        return mo.position, mo.velocity, mo.radius + self._radius + self.p.safety_margin, mo.mask
+
+    def _static(self, n: int) -> tuple[np.ndarray, ...]:
+        """The static discs for every row: ``(N, C, ...)`` as in :meth:`_robots`."""
+        return (np.broadcast_to(self._circles, (n, *self._circles.shape)),
+                np.zeros((n, *self._circles.shape)),
+                np.broadcast_to(self._circle_reach, (n, len(self._circle_reach))),
+                np.ones((n, len(self._circle_reach)), dtype=bool))
+
+    def clearance(self, obs: Observation, v: np.ndarray, w: np.ndarray,
+                  hold: np.ndarray | None = None) -> np.ndarray:
+        """``(N, S)`` clearance of each sample, m (< 0: inside the velocity obstacle).
+
+        Static discs and humans are checked over ``horizon``, the other robots
+        over ``robot_horizon`` (the first steps of the same rollout). Rows where
+        ``hold`` is True (robots at their target) do not check the other robots:
+        an arrived robot holds its place and the moving ones give way.
+        """
+        p, pose = self.p, obs.pose
+        step = p.horizon / p.horizon_steps
+        steps_r = min(p.horizon_steps, max(1, round(p.robot_horizon / step)))
+        robots = self._robots(obs)
+        if hold is not None:
+            robots = (*robots[:3], robots[3] & ~np.asarray(hold, dtype=bool)[:, None])
+        if p.kernel == "numba":
+            common = (pose, v, w, step)
+            far = vo_clearance(*common, p.horizon_steps, p.turn_time, *self._humans(obs),
+                               self._circles, self._circle_reach, w_stride=p.w_samples)
+            near = vo_clearance(*common, steps_r, p.turn_time, *robots, w_stride=p.w_samples)
+        else:  # the numpy reference
+            pts = rollout(pose, v, w, step, p.horizon_steps, p.turn_time)
+            parts = [np.concatenate(pair, axis=1) for pair in zip(self._static(obs.n),
+                                                                  self._humans(obs), strict=True)]
+            far = path_clearance(pts, step, *parts)
+            near = path_clearance(pts[:, :, :steps_r], step, *robots)
+        return np.minimum(far, near)
 
     def samples(self, v_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(N, S)`` grid of (v, omega) samples for per-robot speed limits ``v_max`` (m/s)."""
@@ -244,7 +275,8 @@ class LeaderFollowerVO:
         """
         p, n = self.p, len(v)
         nv, nw = p.v_samples, p.w_samples
-        args = (v_ref, w_ref, theta_t, p.turn_time, p.pref_weight, p.heading_weight)
+        args = (v_ref, w_ref, theta_t, p.turn_time, p.pref_weight, p.heading_weight,
+                p.turn_weight)
         grid = v[:, :nv * nw].reshape(n, nv, nw)
         cost = vo_cost(theta, grid, self._grid[2][:nw].reshape(1, 1, nw), *args).reshape(n, -1)
         if v.shape[1] == nv * nw:
@@ -259,22 +291,17 @@ class LeaderFollowerVO:
         v_max = np.where(lead, self._v_lead, self._v_fol)
         dist, theta_t, alpha = target_error(pose, self.targets(obs))
         v_ref, w_ref = reference_command(dist, alpha, v_max, self._w_max, p.reach_time,
-                                         p.turn_when_behind)
+                                         p.turn_when_behind, p.arrival_radius)
         v, w = self.samples(v_max)
         if p.include_preferred:
             v = np.column_stack((v, v_ref))
             w = np.column_stack((w, w_ref))
-        step = p.horizon / p.horizon_steps
+        clear = self.clearance(obs, v, w, hold=dist <= p.arrival_radius)
         if p.kernel == "numba":
-            clear = vo_clearance(pose, v, w, step, p.horizon_steps, p.turn_time,
-                                 *self._moving(obs), self._circles, self._circle_reach,
-                                 w_stride=p.w_samples)
             cost = self._grid_cost(pose[:, 2], v, w, v_ref, w_ref, theta_t)
         else:  # the numpy reference
-            pts = rollout(pose, v, w, step, p.horizon_steps, p.turn_time)
-            clear = path_clearance(pts, step, *self._obstacles(obs))
             cost = vo_cost(pose[:, 2], v, w, v_ref, w_ref, theta_t, p.turn_time, p.pref_weight,
-                           p.heading_weight)
+                           p.heading_weight, p.turn_weight)
         safe = clear >= 0.0
         best = np.argmin(np.where(safe, cost, np.inf), axis=1)
         fell = ~safe.any(axis=1)

@@ -68,15 +68,18 @@ def target_error(pose: ArrayLike, target: ArrayLike) -> tuple[FloatArray, FloatA
 
 
 def reference_command(dist: ArrayLike, alpha: ArrayLike, v_max: ArrayLike, w_max: float,
-                      reach_time: float,
-                      turn_when_behind: bool = True) -> tuple[FloatArray, FloatArray]:
+                      reach_time: float, turn_when_behind: bool = True,
+                      arrival_radius: float = 0.0) -> tuple[FloatArray, FloatArray]:
     """Eq 4 with eq 11's angle: the preferred (v, omega) towards the target.
 
     ``v = min(l / t, v_max)`` and pure pursuit ``omega = 2 v sin(a) / L_d`` with
     the look-ahead distance ``L_d = l`` (the target is the look-ahead point) and
     ``a = theta_T - theta = -alpha`` (eq 1 measures the bearing of the target
     from the heading; eq 11 measures the opposite difference). ``omega`` is
-    clipped to ``[-w_max, w_max]``; it is 0 at the target (``l = 0``).
+    clipped to ``[-w_max, w_max]``. Within ``arrival_radius`` of the target
+    (a decision, not in the paper) the command is (0, 0): a unicycle cannot
+    turn onto a point it has reached, and pure pursuit's turn rate
+    ``2 v sin(a) / l`` grows without bound as ``l -> 0``.
 
     With ``turn_when_behind`` (a decision, not in the paper), a target behind
     the robot (``cos(alpha) < 0``) gives ``v = 0`` and ``omega = w_max`` towards it
@@ -90,18 +93,20 @@ def reference_command(dist: ArrayLike, alpha: ArrayLike, v_max: ArrayLike, w_max
         w_max: Largest turn rate, rad/s.
         reach_time: Time interval t of eq 4, s.
         turn_when_behind: Turn in place towards a target behind the robot.
+        arrival_radius: Stop within this distance of the target, m (at least 1e-12).
 
     Returns:
         ``(v m/s, omega rad/s)``.
     """
     dist = np.asarray(dist, dtype=float)
     alpha = np.asarray(alpha, dtype=float)
-    v = np.minimum(dist / reach_time, v_max)
-    safe = np.where(dist > 1e-12, dist, 1.0)
-    w = np.where(dist > 1e-12, 2.0 * v * np.sin(-alpha) / safe, 0.0)
+    away = dist > max(arrival_radius, 1e-12)
+    v = np.where(away, np.minimum(dist / reach_time, v_max), 0.0)
+    safe = np.where(away, dist, 1.0)
+    w = np.where(away, 2.0 * v * np.sin(-alpha) / safe, 0.0)
     w = np.clip(w, -w_max, w_max)
     if turn_when_behind:
-        behind = (np.cos(alpha) < 0.0) & (dist > 1e-12)
+        behind = (np.cos(alpha) < 0.0) & away
         v = np.where(behind, 0.0, v)
         w = np.where(behind, np.where(np.sin(-alpha) < 0.0, -w_max, w_max), w)
     return v, w
@@ -175,7 +180,7 @@ def path_clearance(points: ArrayLike, step: float, centres: ArrayLike, velocitie
 
 def vo_cost(theta: ArrayLike, v: ArrayLike, w: ArrayLike, v_ref: ArrayLike, w_ref: ArrayLike,
             theta_t: ArrayLike, tau: float, pref_weight: float,
-            heading_weight: float) -> FloatArray:
+            heading_weight: float, turn_weight: float = 0.0) -> FloatArray:
     """Penalty of each sample: distance to the preferred velocity + target-direction consistency.
 
     A sample (v, w) stands for the world velocity ``V(v, w) = v (cos psi, sin psi)``
@@ -184,12 +189,15 @@ def vo_cost(theta: ArrayLike, v: ArrayLike, w: ArrayLike, v_ref: ArrayLike, w_re
 
         J = pref_weight * |V(v, w) - V(v_ref, w_ref)|
             + heading_weight * max(0, v_ref - V(v, w) . e_T)
+            + turn_weight * |w - w_ref|
 
     The second term is the shortfall of the progress towards the target below
     the preferred speed: 0 for a sample that moves towards the target at least
     as fast as preferred, ``v_ref`` for stopping. (An angle penalty
     ``|psi - theta_T|`` makes stopping in front of a disc cheaper than going
-    round it: the robots deadlock.)
+    round it: the robots deadlock.) The third term, small, breaks ties: every
+    sample with ``v = 0`` has the same first two terms, and without it a robot
+    that stands still turns at the grid's first turn rate, ``-w_max``.
 
     Args:
         theta: ``(N,)`` current headings, rad.
@@ -203,6 +211,7 @@ def vo_cost(theta: ArrayLike, v: ArrayLike, w: ArrayLike, v_ref: ArrayLike, w_re
         tau: Time over which the heading turns, s.
         pref_weight: Weight of the velocity distance, s/m.
         heading_weight: Weight of the progress shortfall, s/m.
+        turn_weight: Weight of the turn-rate distance to ``w_ref``, s/rad.
 
     Returns:
         ``(N, S)`` costs (dimensionless), or the broadcast shape of ``v`` and ``w``.
@@ -220,4 +229,5 @@ def vo_cost(theta: ArrayLike, v: ArrayLike, w: ArrayLike, v_ref: ArrayLike, w_re
     dvx = v * np.cos(psi) - vr * np.cos(psi_ref)
     dvy = v * np.sin(psi) - vr * np.sin(psi_ref)
     progress = v * np.cos(psi - per_robot(theta_t))
-    return pref_weight * np.hypot(dvx, dvy) + heading_weight * np.maximum(vr - progress, 0.0)
+    return (pref_weight * np.hypot(dvx, dvy) + heading_weight * np.maximum(vr - progress, 0.0)
+            + turn_weight * np.abs(w - per_robot(w_ref)))

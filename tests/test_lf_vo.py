@@ -179,8 +179,36 @@ def test_distributed_rows():
         assert_distributed(c, cap.obs[k])
 
 
+def test_robots_are_checked_over_robot_horizon_humans_over_horizon():
+    """The same approaching disc is in the VO as a human (5 s), not yet as a robot (2 s)."""
+    c = ctrl()
+    pose = [[0.0, 0.0, 0.0]]
+    v, w = np.array([[0.5]]), np.array([[0.0]])  # straight on at 0.5 m/s
+    # the other disc at (4, 0) comes at 0.5 m/s: contact (reach 0.55 m) after 3.45 s
+    as_robot = observation(pose, [[9.0, 0.0]], nb=[(1, [4.0, 0.0], [-0.5, 0.0])])
+    as_human = observation(pose, [[9.0, 0.0]], humans=[((4.0, 0.0), (-0.5, 0.0), R)])
+    assert c.clearance(as_robot, v, w)[0, 0] == pytest.approx(4.0 - 2.0 - 0.55)
+    assert c.clearance(as_human, v, w)[0, 0] < 0.0
+    # a robot at its target holds its place: the other robots are not checked
+    assert c.clearance(as_robot, v, w, hold=np.array([True]))[0, 0] == np.inf
+
+
+def test_a_robot_at_its_target_stops_and_holds_its_place():
+    v, w = reference_command([0.05, 0.5], [1.0, 1.0], 0.5, 1.0, 0.5, arrival_radius=0.1)
+    np.testing.assert_array_equal(v[:1], [0.0])
+    np.testing.assert_array_equal(w[:1], [0.0])
+    assert v[1] == pytest.approx(0.5) and w[1] != 0.0
+    # a neighbour heading straight at it: a robot at its target stays, one short of it yields
+    nb = [(1, [1.0, 0.0], [-0.5, 0.0])]
+    at = observation([[0.0, 0.0, 0.0]], [[0.05, 0.0]], nb=nb)
+    short = observation([[0.0, 0.0, 0.0]], [[0.5, 0.0]], nb=nb)
+    c = ctrl()
+    np.testing.assert_array_equal(c.act(at), [[0.0, 0.0]])
+    assert not np.array_equal(c.act(short), [[0.0, 0.0]])
+
+
 def test_head_on_human_is_avoided_where_goto_slot_hits_it():
-    sc = v_scenario(humans=[HEAD_ON])
+    sc = v_scenario(humans=[HEAD_ON], t_max=60.0)
     log = run_scenario(sc, "lf_vo")
     assert log.collision_events.sum() == 0
     gap = np.linalg.norm(log.pose[:, :, None, :2] - log.dyn_pos[:, None], axis=-1)
@@ -293,7 +321,8 @@ def random_observation(rng, n, k=8, m=3, size=8.0):
 
 
 @pytest.mark.parametrize("params", [{}, {"fallback": "stop", "follow": "virtual"},
-                                    {"avoid_robots": False, "include_preferred": False}])
+                                    {"avoid_robots": False, "include_preferred": False},
+                                    {"arrival_radius": 2.0, "robot_horizon": 5.0}])
 def test_numba_and_numpy_kernels_give_the_same_commands(params):
     rng = np.random.default_rng(11)
     circles = [(tuple(rng.uniform(0, 8, 2)), float(rng.uniform(0.2, 0.6))) for _ in range(10)]

@@ -29,8 +29,10 @@ from dfcoa_opt.metrics_robots import (
 )
 from dfcoa_opt.sim.log import RunLog
 
-#: The leader robot (the paper's Robot 1) has reached its target within this distance, m.
-TARGET_TOL = 0.1
+#: The leader robot (the paper's Robot 1) has reached its target within this distance, m:
+#: the scenarios' virtual leader stops 0.05 m from the goal and ``lf_vo`` holds a robot
+#: within its ``arrival_radius`` (0.1 m) of its target.
+TARGET_TOL = 0.15
 #: Scenario name -> (paper table, approach angle in degrees).
 SCENARIOS = {"lf_vo_0deg": ("II", 0), "lf_vo_m45deg": ("III", -45), "lf_vo_m90deg": ("IV", -90)}
 #: Rows of Tables II-IV: key, label, unit, number format.
