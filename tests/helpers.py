@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dfcoa_opt.control.base import Observation
+from dfcoa_opt.control.base import Neighbours, Observation
 
 
 def assert_distributed(controller, obs: Observation) -> None:
@@ -32,3 +32,25 @@ class Capture:
     def act(self, obs):
         self.obs.append(obs)
         return self.inner.act(obs)
+
+
+def neighbours_from_lists(pos, vel, lists, k: int | None = None) -> Neighbours:
+    """A hand-made neighbour table: ``lists[i]`` = robot i's neighbour indices (rows of pos).
+
+    Args:
+        pos: ``(N, 2)`` robot positions, m.
+        vel: ``(N, 2)`` robot velocities, m/s.
+        lists: Per robot, the indices of its neighbours.
+        k: Table width; default the longest list (at least 1).
+    """
+    pos, vel = np.asarray(pos, dtype=float), np.asarray(vel, dtype=float)
+    n = len(pos)
+    k = k or max(1, max((len(js) for js in lists), default=0))
+    idx = -np.ones((n, k), np.intp)
+    for i, js in enumerate(lists):
+        idx[i, :len(js)] = js
+    pad = idx < 0
+    safe = np.where(pad, 0, idx)
+    return Neighbours(idx, np.where(pad[..., None], 0.0, pos[safe]),
+                      np.where(pad[..., None], 0.0, vel[safe]),
+                      np.where(pad, np.inf, np.linalg.norm(pos[safe] - pos[:, None], axis=-1)))

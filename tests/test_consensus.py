@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from comparisons.consensus import Consensus, ConsensusIvo
-from dfcoa_opt.control.base import MovingObstacles, Neighbours, Observation, slot_velocity
+from dfcoa_opt.control.base import MovingObstacles, Observation, slot_velocity
 from dfcoa_opt.control.registry import build_controller, make_controller
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.robots.models import integrate_unicycle
 from dfcoa_opt.sim.loader import scenario_from_dict
 from dfcoa_opt.sim.log import STATUS_OK
 from dfcoa_opt.sim.simulator import Simulator, run_scenario
-from tests.helpers import Capture, assert_distributed
+from tests.helpers import Capture, assert_distributed, neighbours_from_lists
 
 K1, K2, K3 = 0.25, 0.45, 37.5  # paper 001, section V.B
 DT = 0.01  # s; explicit Euler needs K3 * DT < 2
@@ -108,15 +108,8 @@ def oscillator_rate(e, de, t, lam, window):
 
 def hand_observation(pos, vel, leader, slot_offsets, neighbours):
     """A 3-robot observation; ``neighbours[i]`` = robot i's neighbour indices."""
-    n, k = len(pos), 2
-    idx = -np.ones((n, k), np.intp)
-    for i, js in enumerate(neighbours):
-        idx[i, :len(js)] = js
-    pad = idx < 0
-    safe = np.where(pad, 0, idx)
-    nb = Neighbours(idx, np.where(pad[..., None], 0.0, pos[safe]),
-                    np.where(pad[..., None], 0.0, vel[safe]),
-                    np.where(pad, np.inf, np.linalg.norm(pos[safe] - pos[:, None], axis=-1)))
+    n = len(pos)
+    nb = neighbours_from_lists(pos, vel, neighbours, k=2)
     slots = leader[:2] + slot_offsets @ rot(leader[2]).T
     pose = np.column_stack((pos, np.zeros(n)))
     return Observation(0.0, DT, np.arange(n), pose, vel, np.zeros((n, 2)), None, nb,

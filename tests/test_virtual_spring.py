@@ -27,13 +27,13 @@ from comparisons.virtual_spring_core import (
     spring_force,
     vo_conflict,
 )
-from dfcoa_opt.control.base import MovingObstacles, Neighbours, Observation
+from dfcoa_opt.control.base import MovingObstacles, Observation
 from dfcoa_opt.control.registry import available, build_controller, make_controller
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.geometry import rotate
 from dfcoa_opt.sim.loader import scenario_from_dict
 from dfcoa_opt.sim.simulator import Simulator, run_scenario
-from tests.helpers import Capture, assert_distributed
+from tests.helpers import Capture, assert_distributed, neighbours_from_lists
 
 R = 0.15  # robot radius, m
 V_MAX = 0.5  # m/s
@@ -83,15 +83,8 @@ def observation(pos, vel, nb, leader=(0.0, 0.0, 0.0, 0.0, 0.0), goal=(10.0, 0.0)
                 t=0.0):
     """A hand-made full observation; ``nb[i]`` = robot i's neighbour indices (rows of pos)."""
     pos, vel = np.asarray(pos, dtype=float), np.asarray(vel, dtype=float)
-    n, k = len(pos), max(1, max(len(js) for js in nb))
-    idx = -np.ones((n, k), np.intp)
-    for i, js in enumerate(nb):
-        idx[i, :len(js)] = js
-    pad = idx < 0
-    safe = np.where(pad, 0, idx)
-    nbs = Neighbours(idx, np.where(pad[..., None], 0.0, pos[safe]),
-                     np.where(pad[..., None], 0.0, vel[safe]),
-                     np.where(pad, np.inf, np.linalg.norm(pos[safe] - pos[:, None], axis=-1)))
+    n = len(pos)
+    nbs = neighbours_from_lists(pos, vel, nb)
     m = max(len(humans), 1)
     hp, hv, hr = np.zeros((n, m, 2)), np.zeros((n, m, 2)), np.zeros((n, m))
     hm = np.zeros((n, m), dtype=bool)
