@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dfcoa_opt.geometry import points_in_polygon
+from dfcoa_opt.geometry import closest_point_on_segment, points_in_polygon
 
 FloatArray = NDArray[np.float64]
 
@@ -185,10 +185,7 @@ def polygon_normals(p: ArrayLike,
     s = np.zeros((len(p), len(polygons)))
     for q, verts in enumerate(polygons):
         a = np.asarray(verts, dtype=float)
-        ab = np.roll(a, -1, axis=0) - a
-        denom = np.where((ab**2).sum(-1) > 0.0, (ab**2).sum(-1), 1.0)
-        t = np.clip(np.einsum("nvi,vi->nv", p[:, None, :] - a, ab) / denom, 0.0, 1.0)
-        closest = a + t[..., None] * ab  # (N, V, 2)
+        closest = closest_point_on_segment(p[:, None, :], a, np.roll(a, -1, axis=0))  # (N, V, 2)
         dist = np.linalg.norm(p[:, None, :] - closest, axis=-1)
         k = np.argmin(dist, axis=1)
         rows = np.arange(len(p))

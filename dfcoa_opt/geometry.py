@@ -103,6 +103,25 @@ def points_in_polygon(points: ArrayLike, vertices: ArrayLike) -> NDArray[np.bool
     return inside
 
 
+def closest_point_on_segment(points: ArrayLike, a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """The point of each segment ``[a, b]`` nearest to each point.
+
+    Args:
+        points: ``(..., 2)`` points in m.
+        a: Segment start ``(..., 2)`` in m, broadcastable to ``points``.
+        b: Segment end ``(..., 2)`` in m, broadcastable to ``points``.
+
+    Returns:
+        ``(..., 2)`` nearest points in m, the broadcast shape.
+    """
+    p = np.asarray(points, dtype=float)
+    a = np.asarray(a, dtype=float)
+    ab = np.asarray(b, dtype=float) - a
+    denom = np.einsum("...i,...i->...", ab, ab)
+    t = np.einsum("...i,...i->...", p - a, ab) / np.where(denom > 0.0, denom, 1.0)
+    return a + np.clip(t, 0.0, 1.0)[..., None] * ab
+
+
 def point_segment_distance(points: ArrayLike, a: ArrayLike, b: ArrayLike) -> FloatArray:
     """Euclidean distance from points to segments ``[a, b]``.
 
@@ -115,13 +134,7 @@ def point_segment_distance(points: ArrayLike, a: ArrayLike, b: ArrayLike) -> Flo
         Distances in m, the broadcast shape without the last axis.
     """
     p = np.asarray(points, dtype=float)
-    a = np.asarray(a, dtype=float)
-    ab = np.asarray(b, dtype=float) - a
-    denom = np.einsum("...i,...i->...", ab, ab)
-    t = np.einsum("...i,...i->...", p - a, ab) / np.where(denom > 0.0, denom, 1.0)
-    t = np.clip(t, 0.0, 1.0)
-    closest = a + t[..., None] * ab
-    return np.linalg.norm(p - closest, axis=-1)
+    return np.linalg.norm(p - closest_point_on_segment(p, a, b), axis=-1)
 
 
 def circle_polygon(center: ArrayLike, radius: float, n: int = 32) -> FloatArray:

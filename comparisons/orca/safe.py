@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from comparisons.orca.neighbours import knn_within
+from dfcoa_opt.geometry import closest_point_on_segment
 
 FloatArray = NDArray[np.float64]
 #: Most robots within one step's reach of a robot; disc packing allows at most
@@ -105,11 +106,7 @@ def segment_safety_lines(pos: FloatArray, radius: FloatArray, max_speed: FloatAr
     n = len(pos)
     if len(segments) == 0:
         return np.zeros((n, 0, 2)), np.zeros((n, 0, 2)), np.zeros(n, np.int64)
-    a, b = segments[:, 0], segments[:, 1]
-    ab = b - a
-    t = np.einsum("nej,ej->ne", pos[:, None, :] - a, ab) / np.maximum(
-        np.einsum("ej,ej->e", ab, ab), 1e-300)
-    q = a + np.clip(t, 0.0, 1.0)[..., None] * ab  # (N, E, 2) nearest points
+    q = closest_point_on_segment(pos[:, None, :], segments[:, 0], segments[:, 1])  # (N, E, 2)
     rel = pos[:, None, :] - q
     dist = np.linalg.norm(rel, axis=-1)
     reach = radius + max_speed * dt
