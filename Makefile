@@ -23,7 +23,12 @@ lint: $(STAMP)
 figures: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m dfcoa_opt figures --out paper_figures
 
-bench: $(STAMP)
+# `make bench` also installs the benchmark-only peer (ir-sim) once.
+$(VENV)/.bench-installed: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[dev,dask,bench]'
+	touch $(VENV)/.bench-installed
+
+bench: $(VENV)/.bench-installed
 	MPLBACKEND=Agg $(BIN)/python -m benchmarks.run
 
 clean:

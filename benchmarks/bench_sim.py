@@ -45,6 +45,55 @@ def _per_step_us(sim: Simulator) -> np.ndarray:
     return out
 
 
+#: ir-sim world of the peer row (issue 7 row d): 4 differential-drive robots with a
+#: 120-beam, 10 m, 360-degree lidar2d in a 35 m square with 6 discs, driving to goals.
+IRSIM_WORLD = {
+    "world": {"height": 35, "width": 35, "step_time": 0.1, "sample_time": 0.1,
+              "collision_mode": "unobstructed", "control_mode": "auto"},
+    "robot": [{"number": 4, "distribution": {"name": "manual"},
+               "kinematics": {"name": "diff"}, "shape": {"name": "circle", "radius": 0.2},
+               "state": [[2, 2, 0], [2, 4, 0], [4, 2, 0], [4, 4, 0]],
+               "goal": [[30, 30, 0], [30, 32, 0], [32, 30, 0], [32, 32, 0]],
+               "behavior": {"name": "dash"},
+               "sensors": [{"name": "lidar2d", "range_min": 0, "range_max": 10,
+                            "angle_range": 2 * np.pi, "number": 120}]}],
+    "obstacle": [{"number": 6, "distribution": {"name": "manual"},
+                  "shape": [{"name": "circle", "radius": 0.5}],
+                  "state": [[10, 10, 0], [12, 20, 0], [20, 12, 0], [25, 25, 0], [8, 25, 0],
+                            [25, 8, 0]]}],
+}
+
+
+def irsim_step_us(steps: int = 200) -> np.ndarray | None:
+    """Per-step times (us) of ir-sim's headless ``env.step()``; None if ir-sim is missing.
+
+    ir-sim is the peer of issue 7 row (d) (``pip install ir-sim``, or the
+    ``bench`` extra that ``make bench`` installs). Its world is not ours (discs
+    instead of an occupancy grid), but the work per step is the same: 4 robots
+    moved and 4 x 120 beams cast.
+    """
+    try:
+        import irsim
+        import yaml
+    except ImportError:
+        print("ir-sim is not installed: its peer row is left out (pip install ir-sim)")
+        return None
+    import logging
+    import tempfile
+    from pathlib import Path
+
+    logging.disable(logging.WARNING)
+    with tempfile.TemporaryDirectory() as tmp:
+        world = Path(tmp) / "bench_world.yaml"
+        world.write_text(yaml.safe_dump(IRSIM_WORLD))
+        env = irsim.make(str(world), headless=True, log_level="ERROR")
+        for _ in range(20):
+            env.step()
+        out = time_calls(lambda k: env.step(), steps)
+    logging.disable(logging.NOTSET)
+    return out
+
+
 def run() -> list[dict]:
     """Time the simulator step and the neighbour query; one dict per row."""
     sc = _scenario()
@@ -62,6 +111,10 @@ def run() -> list[dict]:
     ref = _per_step_us(ref_sim)
     rows = [row("simulator step, 4 unicycles with 120-beam LiDAR, 350x350 grid", ours,
                 "same step with numpy-sampling LiDAR", ref)]
+    peer = irsim_step_us()
+    if peer is not None:
+        rows.append(row("simulator step, 4 unicycles with 120-beam LiDAR, 350x350 grid", ours,
+                        "ir-sim headless step, 4 diff robots, 120-beam lidar2d, 6 discs", peer))
     rng = np.random.default_rng(0)
     for n in (16, 32, 48, 64, 128):
         pts = rng.uniform(0, np.sqrt(n) * 2.0, (n, 2))
