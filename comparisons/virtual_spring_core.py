@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dfcoa_opt.geometry import closest_point_on_segment, points_in_polygon
+from dfcoa_opt.geometry import closest_point_on_segment, points_in_polygons, polygon_edges
 
 FloatArray = NDArray[np.float64]
 
@@ -181,18 +181,16 @@ def polygon_normals(p: ArrayLike,
         ``(n_hat (N, Q, 2), s (N, Q))``, s in m, negative inside a polygon.
     """
     p = np.asarray(p, dtype=float)
-    n_hat = np.zeros((len(p), len(polygons), 2))
-    s = np.zeros((len(p), len(polygons)))
-    for q, verts in enumerate(polygons):
-        a = np.asarray(verts, dtype=float)
-        closest = closest_point_on_segment(p[:, None, :], a, np.roll(a, -1, axis=0))  # (N, V, 2)
-        dist = np.linalg.norm(p[:, None, :] - closest, axis=-1)
-        k = np.argmin(dist, axis=1)
-        rows = np.arange(len(p))
-        inside = points_in_polygon(p, a)
-        unit, d = _unit(p - closest[rows, k])
-        n_hat[:, q] = np.where(inside[:, None], -unit, unit)
-        s[:, q] = np.where(inside, -d, d)
+    if not len(polygons):
+        return np.zeros((len(p), 0, 2)), np.zeros((len(p), 0))
+    a, b = polygon_edges(polygons)
+    closest = closest_point_on_segment(p[:, None, None, :], a, b)  # (N, Q, V, 2)
+    k = np.argmin(np.linalg.norm(p[:, None, None, :] - closest, axis=-1), axis=-1)  # (N, Q)
+    nearest = np.take_along_axis(closest, k[..., None, None], axis=2)[:, :, 0]  # (N, Q, 2)
+    inside = points_in_polygons(p, a, b)
+    unit, d = _unit(p[:, None, :] - nearest)
+    n_hat = np.where(inside[..., None], -unit, unit)
+    s = np.where(inside, -d, d)
     return n_hat, s
 
 

@@ -87,18 +87,54 @@ def points_in_polygon(points: ArrayLike, vertices: ArrayLike) -> NDArray[np.bool
     Returns:
         ``(P,)`` boolean mask.
     """
-    p = np.asarray(points, dtype=float).reshape(-1, 2)
     v = np.asarray(vertices, dtype=float)
-    px, py = p[:, 0], p[:, 1]
-    inside = np.zeros(len(p), dtype=bool)
-    n = len(v)
-    for k in range(n):
-        x1, y1 = v[k]
-        x2, y2 = v[(k + 1) % n]
-        if y1 == y2:
-            continue
-        crosses = (y1 <= py) != (y2 <= py)
-        x_at = x1 + (py - y1) * (x2 - x1) / (y2 - y1)
+    return points_in_polygons(points, v[None], np.roll(v, -1, axis=0)[None])[:, 0]
+
+
+def polygon_edges(polygons: list[ArrayLike]) -> tuple[FloatArray, FloatArray]:
+    """Edges of several polygons as padded ``(Q, V, 2)`` start and end arrays.
+
+    Polygon ``q``'s edge ``k`` runs from vertex ``k`` to vertex ``k + 1``
+    (closing edge last). Shorter polygons are padded with zero-length edges
+    at their last vertex, which change neither nearest points nor the even-odd
+    test.
+
+    Args:
+        polygons: ``Q`` vertex arrays ``(V_q, 2)`` in m.
+
+    Returns:
+        ``(a, b)``, each ``(Q, max V_q, 2)`` in m.
+    """
+    verts = [np.asarray(v, dtype=float).reshape(-1, 2) for v in polygons]
+    width = max((len(v) for v in verts), default=0)
+    a = np.zeros((len(verts), width, 2))
+    b = np.zeros((len(verts), width, 2))
+    for q, v in enumerate(verts):
+        a[q, :len(v)], b[q, :len(v)] = v, np.roll(v, -1, axis=0)
+        a[q, len(v):] = b[q, len(v):] = v[-1]
+    return a, b
+
+
+def points_in_polygons(points: ArrayLike, a: ArrayLike, b: ArrayLike) -> NDArray[np.bool_]:
+    """Even-odd test of points against several polygons (the rule of :func:`points_in_polygon`).
+
+    Args:
+        points: ``(P, 2)`` query points in m.
+        a: ``(Q, V, 2)`` edge starts in m (:func:`polygon_edges`).
+        b: ``(Q, V, 2)`` edge ends in m.
+
+    Returns:
+        ``(P, Q)`` boolean mask.
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, 2)
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    px, py = p[:, :1], p[:, 1:]
+    inside = np.zeros((len(p), a.shape[0]), dtype=bool)
+    for k in range(a.shape[1]):  # per edge: (P, Q) at once, memory-light for large P
+        x1, y1, x2, y2 = a[:, k, 0], a[:, k, 1], b[:, k, 0], b[:, k, 1]
+        flat = y1 == y2  # horizontal (or padding) edges never cross
+        crosses = ((y1 <= py) != (y2 <= py)) & ~flat
+        x_at = x1 + (py - y1) * (x2 - x1) / np.where(flat, 1.0, y2 - y1)
         inside ^= crosses & (px < x_at)
     return inside
 
