@@ -76,7 +76,8 @@ def s1_grid() -> OccupancyGrid:
     path = sorted((ROOT / "scenarios").rglob("dfcoa_s1.toml"))[0]
     data = read_toml(path)
     data["world"]["resolution"] = 1
-    data["leader"] = {**data["leader"], "planner": "straight"}
+    leader = {k: v for k, v in data["leader"].items() if k != "planner_options"}
+    data["leader"] = {**leader, "planner": "straight"}  # only the map is needed
     return scenario_from_dict(data, str(path), path.parent).world.grid
 
 

@@ -1,0 +1,25 @@
+"""The benchmark scripts' set-ups still load (no timing here: `make bench` does that)."""
+
+import numpy as np
+
+from benchmarks.bench_astar import s1_grid
+from benchmarks.scaling_report import loglog_slope
+from benchmarks.scaling_scenario import model_of, open_scenario
+from dfcoa_opt.control.registry import available
+
+
+def test_astar_benchmark_map_is_s1_at_one_cell_per_metre():
+    grid = s1_grid()
+    assert grid.occupied.shape == (35, 35)
+    assert 0 < grid.occupied.sum() < 35 * 35
+
+
+def test_scaling_scenarios_build_for_every_controller():
+    for cid in available():
+        sc = open_scenario(16, model_of(cid), steps=5)
+        assert sc.n == 16
+
+
+def test_loglog_slope_recovers_a_power_law():
+    n = np.array([4.0, 16.0, 64.0, 256.0, 1000.0])
+    assert abs(loglog_slope(n, 3e-6 * n**1.3) - 1.3) < 1e-9
