@@ -257,8 +257,8 @@ def sensing_reference(sizes: Sequence[int], calls: int = 20) -> list[dict[str, f
     At each N (the scenario's start poses, ``goto_slot``'s unicycle scenario):
 
     * LiDAR scan with the library's candidate choice, with every robot-disc pair
-      tested in the kernel (``KDTREE_MIN_PAIRS`` set out of reach) and with the pair
-      threshold at 0 (``cKDTree`` candidates whenever the coverage condition allows),
+      tested in the kernel (``CANDIDATES_MIN_PAIRS`` set out of reach) and with the pair
+      threshold at 0 (bucket-grid candidates whenever the coverage condition allows),
       and the library's candidate-list step (``Lidar._discs``) alone;
     * the simulator's neighbour query ``proximity`` (K-nearest table, closest pair,
       contacts) against ``neighbour_table`` alone (the K-nearest table only).
@@ -283,7 +283,7 @@ def sensing_reference(sizes: Sequence[int], calls: int = 20) -> list[dict[str, f
         return float(np.median(ts)) * 1e3
 
     rows = []
-    saved = lidar_module.KDTREE_MIN_PAIRS
+    saved = lidar_module.CANDIDATES_MIN_PAIRS
     for n in sizes:
         sc = open_scenario(n, DEFAULT_MODEL, 1)
         spec = sc.spec
@@ -295,13 +295,13 @@ def sensing_reference(sizes: Sequence[int], calls: int = 20) -> list[dict[str, f
         try:
             for name, threshold in (("lidar_default", saved), ("lidar_all_pairs", 2**62),
                                     ("lidar_kdtree", 0)):
-                lidar_module.KDTREE_MIN_PAIRS = threshold
+                lidar_module.CANDIDATES_MIN_PAIRS = threshold
                 row[name] = med(lidar.scan, pose, pos, radii, owner)
-            lidar_module.KDTREE_MIN_PAIRS = saved
+            lidar_module.CANDIDATES_MIN_PAIRS = saved
             row["lidar_candidates"] = med(lidar._discs, pose, pos, radii, owner)
             row["lidar_kdtree_used"] = float(len(lidar._discs(pose, pos, radii, owner)[3]) > 0)
         finally:
-            lidar_module.KDTREE_MIN_PAIRS = saved
+            lidar_module.CANDIDATES_MIN_PAIRS = saved
         args = (pos, spec.sensors.comm_radius, spec.sensors.max_neighbors)
         row["proximity"] = med(sim_neighbours.proximity, *args, 2.0 * spec.robots.radius)
         row["neighbour_table"] = med(sim_neighbours.neighbour_table, *args)
@@ -374,7 +374,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     sensing = sensing_reference(sizes, SENSING_CALLS)
     for r in sensing:
         print(f"sensing N={r['n']:5d}: LiDAR as chosen {r['lidar_default']:.3f} ms, all pairs "
-              f"{r['lidar_all_pairs']:.3f}, cKDTree {r['lidar_kdtree']:.3f}; proximity "
+              f"{r['lidar_all_pairs']:.3f}, candidates {r['lidar_kdtree']:.3f}; proximity "
               f"{r['proximity']:.3f} ms, neighbour_table {r['neighbour_table']:.3f}")
     memory: dict[str, dict[str, float]] = {}
     ref_n = min(sizes)

@@ -83,7 +83,7 @@ def measured_summary(summary: Summary, controllers: Sequence[str], sizes: Sequen
         big = sensing[-1]
         upper = [r for r in sensing if r["n"] >= UPPER_FROM]
         lidar_up = loglog_slope([r["n"] for r in upper], [r["lidar_default"] for r in upper])
-        path = ("`cKDTree` candidate lists, whose construction alone takes "
+        path = ("bucket-grid candidate lists, whose construction alone takes "
                 f"{fmt(big['lidar_candidates'])} ms of the {fmt(big['lidar_default'])} ms "
                 f"scan (all pairs forced: {fmt(big['lidar_all_pairs'])} ms)"
                 if big["lidar_kdtree_used"] else
@@ -180,13 +180,13 @@ def markdown(summary: Summary, controllers: Sequence[str], sizes: Sequence[int],
         lines += ["## Sensing references (same process)", "",
                   f"{cfg['sensing_calls']} calls each at the scenario's start poses, median ms. "
                   "LiDAR: the library's choice of disc candidates (all pairs in the kernel "
-                  f"below {lidar_module.KDTREE_MIN_PAIRS:,} robot-disc pairs, `cKDTree` "
+                  f"below {lidar_module.CANDIDATES_MIN_PAIRS:,} robot-disc pairs, a bucket grid "
                   "above when one sensing disc covers less than "
-                  f"{lidar_module.KDTREE_MAX_FRACTION:g} of the team's bounding box), against "
+                  f"{lidar_module.CANDIDATES_MAX_FRACTION:g} of the team's bounding box), against "
                   "all pairs forced and the pair threshold set to 0 (the coverage condition "
                   "still applies, so this is all pairs too while the field is small: N <= 256 "
-                  "here); *candidates* = the candidate-list step (`Lidar._discs`: trees, "
-                  "`sparse_distance_matrix`, sort) alone, as chosen. The module constant is "
+                  "here); *candidates* = the candidate-list step (`Lidar._discs`: the "
+                  "bucket grid, `lidar.disc_candidates`) alone, as chosen. The module constant is "
                   "changed for these calls only. Neighbour query: the simulator's `proximity`"
                   " (K-nearest table + closest pair + contacts) against `neighbour_table` "
                   "alone.", "",
@@ -250,8 +250,8 @@ def markdown(summary: Summary, controllers: Sequence[str], sizes: Sequence[int],
 def findings() -> list[str]:
     """All-pairs and per-obstacle work found by reading the code (file:function), as text."""
     dense = sim_neighbours.DENSE_MAX
-    pairs = lidar_module.KDTREE_MIN_PAIRS
-    frac = lidar_module.KDTREE_MAX_FRACTION
+    pairs = lidar_module.CANDIDATES_MIN_PAIRS
+    frac = lidar_module.CANDIDATES_MAX_FRACTION
     return [
         f"`dfcoa_opt/sim/neighbours.py:neighbour_table` and `:proximity` -- a dense N x N "
         f"distance matrix (`geometry.pairwise_distances`, numpy) for N <= DENSE_MAX = {dense}, "
@@ -261,14 +261,12 @@ def findings() -> list[str]:
         "`query_pairs` for contacts): two tree builds and three queries per step (the "
         "'proximity / table' column of 'Sensing references').",
         "`dfcoa_opt/world/lidar.py:Lidar._discs` / `_scan_kernel` -- every robot tests every "
-        f"other robot's disc (all pairs, in numba) unless N * (N + M) >= KDTREE_MIN_PAIRS = "
-        f"{pairs:,} (N >= 708 with no moving obstacles) and one sensing disc covers less than "
-        f"{frac:g} of the discs' bounding box; then `cKDTree.sparse_distance_matrix` gives the "
-        "candidates. So every N up to 707 is O(N^2) (compiled, about a nanosecond per "
-        "rejected pair), and a dense team in a small field stays all-pairs at any N. The "
-        "`cKDTree` branch has a large constant (two trees, `sparse_distance_matrix`, an "
-        "argsort of the pairs): compare the columns of 'Sensing references' at the largest "
-        "N for where the switch-over really is on this machine.",
+        f"other robot's disc (all pairs, in numba) unless N * (N + M) >= CANDIDATES_MIN_PAIRS = "
+        f"{pairs:,} (N >= {math.ceil(math.sqrt(pairs))} with no moving obstacles) and one "
+        f"sensing disc covers less than {frac:g} of the discs' bounding box; then a bucket "
+        "grid (`lidar.disc_candidates`, numba, O(N + pairs)) gives the candidates. Below "
+        "that N the work is O(N^2), compiled, about a nanosecond per rejected pair; a dense "
+        "team in a small field stays all-pairs at any N.",
         "`dfcoa_opt/sim/simulator.py:Simulator.run` and `:_moving_obstacles` -- (N, M) "
         "robot-to-moving-obstacle distances and (N, M, 2) padded obstacle arrays every step: "
         "O(N M). Linear in N for a fixed crowd, O(N^2) if the crowd grows with the team "

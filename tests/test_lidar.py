@@ -288,10 +288,10 @@ def test_kdtree_candidates_match_direct(monkeypatch):
     xy = np.vstack([poses[:, :2], rng.uniform(-20, 150, (m - n, 2))])
     r = rng.uniform(0.2, 1.0, m)
     owner = np.r_[np.arange(n), np.full(m - n, -1)]
-    monkeypatch.setattr(lidar_mod, "KDTREE_MIN_PAIRS", 10**12)
+    monkeypatch.setattr(lidar_mod, "CANDIDATES_MIN_PAIRS", 10**12)
     direct = lidar.scan(poses, xy, r, owner).ranges
-    monkeypatch.setattr(lidar_mod, "KDTREE_MIN_PAIRS", 0)
-    monkeypatch.setattr(lidar_mod, "KDTREE_MAX_FRACTION", np.inf)
+    monkeypatch.setattr(lidar_mod, "CANDIDATES_MIN_PAIRS", 0)
+    monkeypatch.setattr(lidar_mod, "CANDIDATES_MAX_FRACTION", np.inf)
     tree = lidar.scan(poses, xy, r, owner).ranges
     np.testing.assert_array_equal(direct, tree)
     assert np.isfinite(direct).any()
@@ -413,3 +413,15 @@ def test_ranges_bounded_by_clearance_and_range_max(world, fx, fy, theta, rmax):
     ux, uy = beam_dirs(scan, pose)
     hits = np.c_[pose[0, 0] + r[fin] * ux[0, fin], pose[0, 1] + r[fin] * uy[0, fin]]
     assert np.all(grid.clearance(hits, cap=1e3) <= 1e-9)
+
+
+def test_disc_candidates_are_exactly_the_discs_within_reach():
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(-30.0, 70.0, (300, 2))
+    xy = np.vstack([pts[:100], rng.uniform(0.0, 40.0, (400, 2))])  # some points outside
+    reach = 4.2
+    ptr, idx = lidar_mod.disc_candidates(pts, xy, reach)
+    d = np.linalg.norm(pts[:, None] - xy[None], axis=-1)
+    for i in range(len(pts)):
+        np.testing.assert_array_equal(idx[ptr[i]:ptr[i + 1]], np.flatnonzero(d[i] <= reach))
+    assert ptr[-1] == (d <= reach).sum() > len(pts)
