@@ -36,3 +36,18 @@ def test_dense_and_tree_paths_agree_with_brute_force(n, monkeypatch):
 def test_single_robot_has_no_neighbours():
     p = proximity(np.zeros((1, 2)), 5.0, 4, 0.4)
     assert p.index.shape == (1, 0) and np.isinf(p.min_distance)
+
+
+@pytest.mark.parametrize("radius", [1e-3, 3.0, np.inf])  # 1e-3: nobody in range
+def test_proximity_closest_pair_matches_brute_force_on_the_tree_path(radius):
+    """The closest pair comes from the table when it can, else from a full query."""
+    rng = np.random.default_rng(9)
+    pts = rng.uniform(0.0, 60.0, (neighbours.DENSE_MAX + 40, 2))
+    d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
+    np.fill_diagonal(d, np.inf)
+    prox = neighbours.proximity(pts, radius, 5, 0.5)
+    assert prox.min_distance == pytest.approx(d.min(), rel=1e-12)
+    i, j = np.nonzero(np.triu(d < 0.5, 1))
+    np.testing.assert_array_equal(prox.contact_keys, np.sort(i * len(pts) + j))
+    assert len(i) >= 1
+    assert (radius < d.min()) == (not np.isfinite(prox.distance).any())

@@ -32,10 +32,18 @@ def neighbour_table(points: NDArray[np.float64], radius: float,
         ``(index (N, K), distance (N, K))`` with ``K = min(k_max, N - 1)``,
         sorted by distance (ties by index), padded with -1 / inf.
     """
+    idx, dist, _ = _table(points, radius, k_max)
+    return idx, dist
+
+
+def _table(points: NDArray[np.float64], radius: float,
+           k_max: int) -> tuple[NDArray[np.intp], NDArray[np.float64], cKDTree | None]:
+    """:func:`neighbour_table` and the k-d tree it built (None on the dense path)."""
     n = len(points)
     k = max(min(k_max, n - 1), 0)
     if k == 0:
-        return np.full((n, 0), -1, dtype=np.intp), np.zeros((n, 0))
+        return np.full((n, 0), -1, dtype=np.intp), np.zeros((n, 0)), None
+    tree = None
     if n <= DENSE_MAX:
         d = pairwise_distances(points)
         order = np.argsort(d, axis=1, kind="stable")[:, :k]
@@ -51,7 +59,7 @@ def neighbour_table(points: NDArray[np.float64], radius: float,
             dist, order = _fix_self(points, dist, order, k)
     inside = dist <= radius
     idx = np.where(inside, order, -1).astype(np.intp)
-    return idx, np.where(inside, dist, np.inf)
+    return idx, np.where(inside, dist, np.inf), tree
 
 
 def _fix_self(points, dist, order, k):  # pragma: no cover - coincident points only
@@ -106,9 +114,13 @@ def proximity(points: NDArray[np.float64], radius: float, k_max: int,
         inside = dist <= radius
         return Proximity(np.where(inside, order, -1).astype(np.intp),
                          np.where(inside, dist, np.inf), float(d.min()), keys)
-    idx, dist = neighbour_table(points, radius, k_max)
-    tree = cKDTree(points)
-    nearest = tree.query(points, k=2)[0][:, 1]
+    idx, dist, tree = _table(points, radius, k_max)
+    if tree is None:  # k_max = 0
+        tree = cKDTree(points)
+    # the closest pair: from the table when any robot has a neighbour in range (a robot
+    # without one is farther than that from everyone), else from an unbounded query
+    nearest = dist[:, 0] if dist.shape[1] and np.isfinite(dist[:, 0]).any() else \
+        tree.query(points, k=2)[0][:, 1]
     pairs = tree.query_pairs(contact, output_type="ndarray")
     pairs = pairs[np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1) < contact]
     keys = (pairs.min(1).astype(np.int64) * n + pairs.max(1)).astype(np.int64)
