@@ -77,12 +77,12 @@ def robot_safety_lines(pos: FloatArray, radius: FloatArray, max_speed: FloatArra
     if n and count.max(initial=0) >= MAX_PAIRS:
         raise ValueError(f"more than {MAX_PAIRS - 1} robots within {reach:.3g} m of one robot; "
                          "the safe mode needs a non-overlapping start")
-    rel = pos[:, None, :] - pos[idx]  # (N, K, 2), from the neighbour to me
+    rel = pos[:, None, :] - np.take(pos, idx, axis=0)  # (N, K, 2), from the neighbour to me
     dist = np.linalg.norm(rel, axis=-1)
     used = np.arange(MAX_PAIRS)[None, :] < count[:, None]
     safe_dist = np.where(used & (dist > 0.0), dist, 1.0)
     normal = np.where(used[..., None], rel / safe_dist[..., None], np.array([1.0, 0.0]))
-    need = radius[:, None] + radius[idx]
+    need = radius[:, None] + np.take(radius, idx)
     bound = np.where(used, (need - dist) / (2.0 * dt), -np.inf)
     points, directions = halfplane_lines(normal, np.where(used, bound, 0.0))
     return points, directions, count
