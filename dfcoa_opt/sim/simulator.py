@@ -134,8 +134,9 @@ class Simulator:
             idx = prox.index
             safe = np.where(idx >= 0, idx, 0)
             pad = (idx < 0)[..., None]
-            nb = Neighbours(idx, np.where(pad, 0.0, est[safe, :2]),
-                            np.where(pad, 0.0, state.velocity[safe]), prox.distance)
+            nb = Neighbours(idx, np.where(pad, 0.0, np.take(est[:, :2], safe, axis=0)),
+                            np.where(pad, 0.0, np.take(state.velocity, safe, axis=0)),
+                            prox.distance)  # np.take: pos[idx]'s values, faster
             moving = self._moving_obstacles(dyn_dist, dyn_pos, dyn_vel, dyn.radii)
             slots = slot_positions(lead[:3], sc.offsets)
             obs = Observation(t, dt, np.arange(n), est, state.velocity, state.twist, scan, nb,
