@@ -51,3 +51,21 @@ def test_proximity_closest_pair_matches_brute_force_on_the_tree_path(radius):
     np.testing.assert_array_equal(prox.contact_keys, np.sort(i * len(pts) + j))
     assert len(i) >= 1
     assert (radius < d.min()) == (not np.isfinite(prox.distance).any())
+
+
+@pytest.mark.parametrize("k_max", [0, 1, 4, 100])
+@pytest.mark.parametrize("layout", ["random", "grid"])  # grid: many equal distances (ties)
+def test_dense_kernel_matches_numpy_table_bit_for_bit(k_max, layout):
+    """The numba dense path gives the numpy path's table, distances and keys exactly."""
+    rng = np.random.default_rng(k_max)
+    pts = (rng.uniform(0.0, 8.0, (40, 2)) if layout == "random"
+           else np.stack(np.meshgrid(np.arange(6.0), np.arange(6.0)), -1).reshape(-1, 2))
+    prox = proximity(pts, 2.0, k_max, 1.01)
+    idx, dist, _ = neighbours._table(pts, 2.0, k_max)  # the numpy reference (dense matrix)
+    np.testing.assert_array_equal(prox.index, idx)
+    np.testing.assert_array_equal(prox.distance, dist)
+    d = neighbours.pairwise_distances(pts)
+    assert prox.min_distance == d.min()
+    i, j = np.nonzero(np.triu(d < 1.01, 1))
+    np.testing.assert_array_equal(prox.contact_keys, i * len(pts) + j)
+    assert layout == "random" or len(i) == 60  # the grid's 60 unit-distance pairs

@@ -9,6 +9,9 @@ monotonic: the closest-point search never goes back to an earlier segment.
 
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -55,14 +58,8 @@ class PurePursuit:
         """Arc length of the closest path point at or after the current progress."""
         if len(self.path) == 1:
             return 0.0
-        a, b = self.path[:-1], self.path[1:]
-        ab = b - a
-        t = np.clip(((p - a) * ab).sum(1) / self._seg_len**2, 0.0, 1.0)
-        s_all = self._cum[:-1] + t * self._seg_len
-        d = np.linalg.norm(a + t[:, None] * ab - p, axis=1)
-        d = np.where(self._cum[1:] >= self._s, d, np.inf)  # no going back
-        k = int(np.argmin(d))
-        return max(float(s_all[k]), self._s)
+        return _project_kernel(self.path, self._seg_len, self._cum, float(p[0]), float(p[1]),
+                               self._s)
 
     def command(self, pose: FloatArray) -> tuple[float, float, FloatArray]:
         """Speed, turn rate and look-ahead point for the current pose.
@@ -80,3 +77,25 @@ class PurePursuit:
         dist = max(float(np.hypot(dx, dy)), 1e-9)
         w = 2.0 * self.speed * np.sin(alpha) / max(dist, self.lookahead) if dist > 1e-9 else 0.0
         return self.speed, float(np.clip(w, -self.w_max, self.w_max)), target
+
+
+@numba.njit(cache=True)
+def _project_kernel(path, seg_len, cum, px, py, s_min):  # pragma: no cover - numba
+    """:meth:`PurePursuit._project` for a path of >= 2 points (one loop over segments).
+
+    For each segment ``[a, b]`` the clipped projection ``t``, its arc length
+    ``cum + t |ab|`` and distance ``|a + t ab - p|``; segments ending before
+    ``s_min`` are skipped (no going back); the first nearest wins.
+    """
+    best_d = np.inf
+    best_s = 0.0
+    for k in range(seg_len.shape[0]):
+        ax, ay = path[k, 0], path[k, 1]
+        abx, aby = path[k + 1, 0] - ax, path[k + 1, 1] - ay
+        t = ((px - ax) * abx + (py - ay) * aby) / (seg_len[k] * seg_len[k])
+        t = min(max(t, 0.0), 1.0)
+        dx, dy = ax + t * abx - px, ay + t * aby - py
+        d = math.sqrt(dx * dx + dy * dy) if cum[k + 1] >= s_min else np.inf
+        if d < best_d or k == 0:
+            best_d, best_s = d, cum[k] + t * seg_len[k]
+    return max(best_s, s_min)

@@ -7,8 +7,10 @@ switch-over size was chosen by measurement (``benchmarks/``).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
@@ -105,15 +107,10 @@ def proximity(points: NDArray[np.float64], radius: float, k_max: int,
         return Proximity(np.full((n, 0), -1, dtype=np.intp), np.zeros((n, 0)), np.inf,
                          np.zeros(0, dtype=np.int64))
     if n <= DENSE_MAX:
-        d = pairwise_distances(points)
-        i, j = np.nonzero(np.triu(d < contact, 1))
-        keys = (i * n + j).astype(np.int64)
-        k = min(k_max, n - 1)
-        order = np.argsort(d, axis=1, kind="stable")[:, :k]
-        dist = np.take_along_axis(d, order, axis=1)
-        inside = dist <= radius
-        return Proximity(np.where(inside, order, -1).astype(np.intp),
-                         np.where(inside, dist, np.inf), float(d.min()), keys)
+        idx, dist, closest, keys = _dense_proximity(np.ascontiguousarray(points, dtype=float),
+                                                    float(radius), min(k_max, n - 1),
+                                                    float(contact))
+        return Proximity(idx, dist, closest, keys)
     idx, dist, tree = _table(points, radius, k_max)
     if tree is None:  # k_max = 0
         tree = cKDTree(points)
@@ -125,3 +122,52 @@ def proximity(points: NDArray[np.float64], radius: float, k_max: int,
     pairs = pairs[np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1) < contact]
     keys = (pairs.min(1).astype(np.int64) * n + pairs.max(1)).astype(np.int64)
     return Proximity(idx, dist, float(nearest.min()), np.sort(keys))
+
+
+@numba.njit(cache=True)
+def _dense_proximity(points, radius, k, contact):  # pragma: no cover - numba
+    """:func:`proximity` of a small team in one loop (same numbers as the dense numpy path).
+
+    Distances are ``sqrt(dx * dx + dy * dy)`` as in
+    :func:`~dfcoa_opt.geometry.pairwise_distances`; each row keeps its ``k``
+    nearest by insertion (ties by index, as a stable argsort).
+    """
+    n = points.shape[0]
+    idx = np.full((n, k), -1, dtype=np.intp)
+    dist = np.full((n, k), np.inf)
+    keys = np.empty(n * (n - 1) // 2, dtype=np.int64)
+    n_keys = 0
+    closest = np.inf
+    row = np.empty(n)
+    for i in range(n):
+        for j in range(n):
+            if j == i:
+                row[j] = np.inf
+                continue
+            dx = points[i, 0] - points[j, 0]
+            dy = points[i, 1] - points[j, 1]
+            row[j] = math.sqrt(dx * dx + dy * dy)
+            if j > i and row[j] < contact:
+                keys[n_keys] = i * n + j
+                n_keys += 1
+        filled = 0
+        for j in range(n):
+            d = row[j]
+            if d < closest:
+                closest = d
+            if k == 0 or (filled == k and not d < dist[i, k - 1]):
+                continue
+            pos = filled if filled < k else k - 1
+            while pos > 0 and d < dist[i, pos - 1]:  # strict: equal distances keep index order
+                dist[i, pos] = dist[i, pos - 1]
+                idx[i, pos] = idx[i, pos - 1]
+                pos -= 1
+            dist[i, pos] = d
+            idx[i, pos] = j
+            if filled < k:
+                filled += 1
+        for m in range(k):
+            if not dist[i, m] <= radius:
+                idx[i, m] = -1
+                dist[i, m] = np.inf
+    return idx, dist, closest, keys[:n_keys]

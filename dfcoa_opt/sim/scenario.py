@@ -12,6 +12,7 @@ from dfcoa_opt.geometry import point_segment_distance, points_in_polygon
 from dfcoa_opt.sim.schema import ScenarioSpec
 from dfcoa_opt.world.dynamic import DynamicObstacles
 from dfcoa_opt.world.grid import OccupancyGrid
+from dfcoa_opt.world.shape_clearance import shape_clearance
 from dfcoa_opt.world.shapes import Circle, Shape
 
 
@@ -51,10 +52,38 @@ class World:
         return (np.array([v.min(axis=0) for v in self.polygons]).reshape(-1, 2),
                 np.array([v.max(axis=0) for v in self.polygons]).reshape(-1, 2))
 
+    @cached_property
+    def _kernel_args(self) -> tuple[NDArray, ...]:
+        """Flat polygon edges, their offsets, boxes and circles for :func:`shape_clearance`."""
+        a, b = self._edges
+        sizes = [len(v) for v in self.polygons]
+        start = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
+        lo, hi = self._boxes
+        circles = self.circles
+        centres = np.array([c.center for c in circles], dtype=float).reshape(-1, 2)
+        radii = np.array([c.radius for c in circles], dtype=float)
+        return (np.ascontiguousarray(a), np.ascontiguousarray(b), start,
+                np.ascontiguousarray(lo), np.ascontiguousarray(hi), centres, radii)
+
     def clearance(self, points: ArrayLike, cap: float = 10.0) -> NDArray[np.float64]:
         """Distance (m) from points to the nearest static obstacle; 0 inside one.
 
-        Exact for the shapes (polygon edges, circles) and for the map cells.
+        Exact for the shapes (polygon edges, circles) and for the map cells. The
+        shapes go through the numba kernel :func:`shape_clearance`, bit-identical
+        to the numpy formulas of :meth:`clearance_reference`.
+
+        Args:
+            points: ``(P, 2)`` world points, m.
+            cap: Larger distances are reported as ``cap``, m.
+        """
+        p = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 2))
+        out = shape_clearance(p, *self._kernel_args, float(cap))
+        if self.raster is not None:
+            out = np.minimum(out, self.raster.clearance(p, cap))
+        return out
+
+    def clearance_reference(self, points: ArrayLike, cap: float = 10.0) -> NDArray[np.float64]:
+        """:meth:`clearance` with vectorised numpy (the reference of the kernel's tests).
 
         Args:
             points: ``(P, 2)`` world points, m.
