@@ -130,6 +130,7 @@ class Consensus:
     """Paper 001 eq 14: second-order consensus formation control with a virtual leader."""
 
     command = "acceleration"
+    uses_scan = False
 
     @dataclass(frozen=True)
     class Params:
@@ -168,6 +169,7 @@ class ConsensusIvo:
     """
 
     command = "acceleration"
+    uses_scan = False
 
     @dataclass(frozen=True)
     class Params(Consensus.Params, OrcaFilter.Params):

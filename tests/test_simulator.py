@@ -173,3 +173,22 @@ def test_world_clearance_is_exact_against_shapely():
     # the rasterised grid differs by up to a cell diagonal: the old measure was not exact
     grid = world.grid.clearance(pts, cap=100.0)
     assert np.max(np.abs(grid - ref)) > 0.03
+
+
+class _NoScan(Capture):
+    uses_scan = False
+
+
+def test_lidar_runs_only_when_the_controller_or_estimator_reads_it():
+    sc = small(sensors={"lidar": {"beams": 36, "range_max": 5.0, "noise_std": 0.02}})
+    with_scan, without = Capture(GotoSlot(GotoSlot.Params())), _NoScan(GotoSlot(GotoSlot.Params()))
+    a, b = Simulator(sc, with_scan).run(), Simulator(sc, without).run()
+    assert all(o.scan is not None for o in with_scan.obs)
+    assert all(o.scan is None for o in without.obs)
+    # the scan (and its noise draws) fed nothing else: the runs are the same, bit for bit
+    assert a.digest() == b.digest()
+    # Monte Carlo localisation reads the scan, so the LiDAR runs for it anyway
+    mcl = small(localization={"mode": "mcl"})
+    probe = _NoScan(GotoSlot(GotoSlot.Params()))
+    Simulator(mcl, probe).run()
+    assert probe.obs[0].scan is not None

@@ -153,6 +153,11 @@ class Controller(Protocol):
         name: Registry id.
         command: Kind of the rows ``act`` returns: ``"unicycle"`` (v, omega),
             ``"velocity"`` (vx, vy) or ``"acceleration"`` (ax, ay).
+        uses_scan: Whether ``act`` reads ``obs.scan``. Optional: a controller
+            without the attribute gets the scan. When neither the controller
+            nor the pose estimator reads it, the simulator does not run the
+            LiDAR and ``obs.scan`` is None (a LiDAR scan of 4 robots costs
+            about as much as the rest of a simulation step).
     """
 
     name: str
@@ -229,6 +234,12 @@ class Filtered:
     def command(self) -> CommandKind:
         """The filter's command kind."""
         return self.safety.command
+
+    @property
+    def uses_scan(self) -> bool:
+        """Whether the controller or the filter reads ``obs.scan`` (True without the flag)."""
+        return (getattr(self.controller, "uses_scan", True)
+                or getattr(self.safety, "uses_scan", True))
 
     def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
         """Reset both parts."""

@@ -25,6 +25,7 @@ class GotoSlot:
     """
 
     command = "velocity"
+    uses_scan = False
 
     @dataclass(frozen=True)
     class Params:

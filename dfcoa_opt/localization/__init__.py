@@ -7,8 +7,9 @@ unless it is the ``truth`` estimator. Estimators are registered by name; the
 scenario picks one with ``[localization] mode``. An estimator with options
 has a ``Params`` dataclass; the scenario's ``[localization.options]`` table is
 validated against it at load time (:func:`estimator_options`) and the
-estimator reads it the same way. Modules that register estimators are listed
-in :data:`ESTIMATOR_MODULES`.
+estimator reads it the same way. An estimator that never reads the scan says
+so with ``uses_scan = False`` (the simulator then may skip the LiDAR).
+Modules that register estimators are listed in :data:`ESTIMATOR_MODULES`.
 """
 
 from __future__ import annotations
@@ -67,6 +68,8 @@ def make_estimator(name: str, scenario: Any) -> Any:
 @register_estimator("truth")
 class TruthEstimator:
     """Ground truth: the observation pose is the true pose."""
+
+    uses_scan = False
 
     def __init__(self, scenario: Any) -> None:
         self.scenario = scenario

@@ -107,6 +107,9 @@ class Simulator:
         estimator = make_estimator(spec.localization.mode, sc)
         estimator.reset(rng)
         self.controller.reset(sc, rng)
+        # the LiDAR runs only when the controller or the estimator reads the scan
+        scanning = self.lidar is not None and (getattr(self.controller, "uses_scan", True)
+                                               or getattr(estimator, "uses_scan", True))
         world, cap = sc.world, spec.metrics.clearance_cap
         sensors = spec.sensors
         owners = np.concatenate((np.arange(n), np.full(m, -1)))
@@ -127,7 +130,7 @@ class Simulator:
             lead = leader.state()
             # -- sensing, all from the same snapshot
             scan = None
-            if self.lidar is not None:
+            if scanning:
                 scan = self.lidar.scan(state.pose, np.vstack((pos, dyn_pos)), disc_r, owners, rng)
             est = estimator.estimate(state.pose, state.twist, scan, dt)
             prox = proximity(pos, sensors.comm_radius, sensors.max_neighbors, 2.0 * self.radius)
