@@ -15,7 +15,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.geometry import wrap_angle
+from dfcoa_opt.robots.unicycle_kernel import wrap
 
 FloatArray = NDArray[np.float64]
 
@@ -73,10 +73,10 @@ class PurePursuit:
         self._s = self._project(pose[:2])
         target = self.point_at(self._s + self.lookahead)
         dx, dy = target - pose[:2]
-        alpha = float(wrap_angle(np.arctan2(dy, dx) - pose[2]))
+        alpha = wrap(float(np.arctan2(dy, dx) - pose[2]))  # numpy's atan2 (SIMD), as before
         dist = max(float(np.hypot(dx, dy)), 1e-9)
-        w = 2.0 * self.speed * np.sin(alpha) / max(dist, self.lookahead) if dist > 1e-9 else 0.0
-        return self.speed, float(np.clip(w, -self.w_max, self.w_max)), target
+        w = 2.0 * self.speed * math.sin(alpha) / max(dist, self.lookahead) if dist > 1e-9 else 0.0
+        return self.speed, min(max(w, -self.w_max), self.w_max), target
 
 
 @numba.njit(cache=True)

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.geometry import wrap_angle
+from dfcoa_opt.robots.unicycle_kernel import unicycle_step
 from dfcoa_opt.sim.schema import RobotSpec
 
 FloatArray = NDArray[np.float64]
@@ -33,6 +34,7 @@ CommandKind = Literal["unicycle", "velocity", "acceleration"]
 
 #: Speeds below this (m/s) leave a holonomic robot's heading unchanged.
 HEADING_SPEED_EPS = 1e-9
+_NO_DISTURBANCE = np.zeros((0, 2))
 
 
 @dataclass(frozen=True)
@@ -150,6 +152,22 @@ class Unicycle:
 
         Returns:
             The new state.
+        """
+        s = self.spec
+        dist = _NO_DISTURBANCE if disturbance is None else \
+            np.ascontiguousarray(disturbance, dtype=float)
+        pose, vel, u = unicycle_step(np.ascontiguousarray(state.pose, dtype=float),
+                                     np.ascontiguousarray(command, dtype=float), float(dt),
+                                     float(s.v_lower), float(s.v_max), float(s.w_max),
+                                     float(s.wheel_speed_max), float(s.wheel_radius),
+                                     float(s.track_width), dist)
+        return RobotState(pose, vel, u)
+
+    def step_reference(self, state: RobotState, command: FloatArray, dt: float,
+                       disturbance: FloatArray | None = None) -> RobotState:
+        """:meth:`step` in vectorised numpy (:meth:`saturate`, :func:`integrate_unicycle`).
+
+        The reference the numba kernel of :meth:`step` is tested against, bit for bit.
         """
         u = self.saturate(command)
         v, w = u[:, 0], u[:, 1]

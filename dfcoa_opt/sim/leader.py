@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.planning.pure_pursuit import PurePursuit
-from dfcoa_opt.robots.models import integrate_unicycle
+from dfcoa_opt.robots.unicycle_kernel import unicycle_arc
 from dfcoa_opt.sim.scenario import Scenario
 
 FloatArray = NDArray[np.float64]
@@ -50,4 +50,4 @@ class VirtualLeader:
 
     def advance(self, dt: float) -> None:
         """Move for ``dt`` seconds with the command of :meth:`state`."""
-        self.pose = integrate_unicycle(self.pose, self.v, self.w, dt)
+        self.pose = unicycle_arc(self.pose, float(self.v), float(self.w), float(dt))
