@@ -113,4 +113,11 @@ def slot_positions(leader_pose: NDArray[np.float64],
         ``(N, 2)`` or ``(T, N, 2)`` positions in m.
     """
     lp = np.asarray(leader_pose, dtype=float)
+    if lp.shape == (3,):  # one pose (every simulation step): scalar trig, same numbers
+        off = np.asarray(offsets, dtype=float)
+        c, s = math.cos(lp[2]), math.sin(lp[2])
+        out = np.empty(off.shape)
+        out[..., 0] = lp[0] + (c * off[..., 0] - s * off[..., 1])
+        out[..., 1] = lp[1] + (s * off[..., 0] + c * off[..., 1])
+        return out
     return body_to_world(lp[..., None, :], offsets)

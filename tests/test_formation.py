@@ -47,3 +47,19 @@ def test_polar_spec_and_slots_rotate_with_leader():
     assert np.allclose(s, [[1.0, 3.0], [0.0, 1.0]])
     st = slot_positions(np.array([[0, 0, 0], [1.0, 1.0, math.pi / 2]]), off)
     assert st.shape == (2, 2, 2) and np.allclose(st[1], s)
+
+
+def test_single_pose_slots_and_slot_velocity_match_the_batched_formulas_bit_for_bit():
+    from dfcoa_opt.control.base import slot_velocity
+
+    rng = np.random.default_rng(5)
+    offsets = rng.normal(size=(7, 2))
+    for _ in range(200):
+        lead = np.concatenate((rng.normal(size=2) * 20.0, rng.uniform(-4.0, 4.0, 1),
+                               rng.normal(size=2)))
+        slots = slot_positions(lead[:3], offsets)
+        assert np.array_equal(slots, slot_positions(lead[None, :3], offsets)[0])
+        x, y, th, v, w = lead
+        rel = slots - np.array([x, y])
+        ref = v * np.array([np.cos(th), np.sin(th)]) + w * np.stack((-rel[:, 1], rel[:, 0]), -1)
+        assert np.array_equal(slot_velocity(lead, slots), ref)

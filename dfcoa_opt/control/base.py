@@ -11,6 +11,7 @@ observation only; :meth:`Observation.take` and the test helper
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
@@ -139,10 +140,12 @@ def slot_velocity(leader: FloatArray, slot: FloatArray) -> FloatArray:
     Returns:
         ``(..., 2)`` their world velocities, m/s.
     """
-    x, y, th, v, w = np.asarray(leader, dtype=float)
+    x, y, th, v, w = (float(c) for c in np.asarray(leader, dtype=float))
     rel = np.asarray(slot, dtype=float) - np.array([x, y])
-    return v * np.array([np.cos(th), np.sin(th)]) + w * np.stack((-rel[..., 1], rel[..., 0]),
-                                                                 axis=-1)
+    out = np.empty(rel.shape)
+    out[..., 0] = v * math.cos(th) - w * rel[..., 1]
+    out[..., 1] = v * math.sin(th) + w * rel[..., 0]
+    return out
 
 
 @runtime_checkable

@@ -117,6 +117,9 @@ class Simulator:
         prev_pairs: set[int] = set()
         prev_static = np.zeros(n, dtype=bool)
         prev_dyn = np.zeros((n, m), dtype=bool)
+        no_dyn = np.zeros((n, 0))  # without moving obstacles: the same empty arrays every step
+        no_moving = self._moving_obstacles(no_dyn, np.zeros((0, 2)), np.zeros((0, 2)),
+                                           np.zeros(0))
         goal = np.asarray(spec.leader.goal, dtype=float)
         reached, t_goal = False, math.nan
         wall0 = time.perf_counter()
@@ -126,7 +129,8 @@ class Simulator:
             pos = state.pose[:, :2]
             dyn_pos, dyn_vel = dyn.state(t)
             # centre distances robot -> moving obstacle, (N, M); used by sensing and contacts
-            dyn_dist = np.linalg.norm(pos[:, None, :] - dyn_pos[None, :, :], axis=2)
+            dyn_dist = np.linalg.norm(pos[:, None, :] - dyn_pos[None, :, :], axis=2) if m \
+                else no_dyn
             lead = leader.state()
             # -- sensing, all from the same snapshot
             scan = None
@@ -140,7 +144,8 @@ class Simulator:
             nb = Neighbours(idx, np.where(pad, 0.0, np.take(est[:, :2], safe, axis=0)),
                             np.where(pad, 0.0, np.take(state.velocity, safe, axis=0)),
                             prox.distance)  # np.take: pos[idx]'s values, faster
-            moving = self._moving_obstacles(dyn_dist, dyn_pos, dyn_vel, dyn.radii)
+            moving = self._moving_obstacles(dyn_dist, dyn_pos, dyn_vel, dyn.radii) if m \
+                else no_moving
             slots = slot_positions(lead[:3], sc.offsets)
             obs = Observation(t, dt, np.arange(n), est, state.velocity, state.twist, scan, nb,
                               moving, lead, goal, sc.offsets, slots)
