@@ -34,6 +34,7 @@ from dfcoa_opt.control.base import Filtered, FilterResult, Observation
 from dfcoa_opt.control.registry import register, register_filter
 from dfcoa_opt.params import param
 from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_MODIFIED, STATUS_OK, STATUS_SOLVER_FAIL
+from dfcoa_opt.world.shapes import Circle
 
 #: Commands closer than this to the nominal one count as unchanged, m/s.
 UNCHANGED_TOL = 1e-9
@@ -44,6 +45,7 @@ class OrcaFilter:
     """ORCA safety filter over nominal velocities (see the module docstring)."""
 
     command = "velocity"
+    uses_scan = False
 
     @dataclass(frozen=True)
     class Params:
@@ -61,9 +63,9 @@ class OrcaFilter:
         obstacles: Literal["orca", "ivo", "next_step", "none"] = param(
             "orca", doc="Static obstacles: 'orca': RVO2's obstacle ORCA lines (mode a, horizon "
                         "time_horizon_obst); 'ivo': paper 001's improved VO (mode b, eq 8-10, "
-                        "comparisons/orca/ivo.py); 'next_step': hard half-planes that keep the "
-                        "robot off every polygon edge at the next step (comparisons/orca/safe.py)"
-                        "; 'none': ignored.")
+                        "comparisons/orca/ivo.py; circles as exact discs); 'next_step': hard "
+                        "half-planes that keep the robot off every polygon edge at the next step "
+                        "(comparisons/orca/safe.py); 'none': ignored.")
         time_horizon_obst: float = param(2.0, doc="ORCA horizon of static obstacles (mode "
                                                   "'orca'); with v_max it also sets the 'ivo' "
                                                   "range.", unit="s", gt=0.0)
@@ -85,19 +87,31 @@ class OrcaFilter:
         self._obstacles: ObstacleSet | None = None
         self._polygons: list[np.ndarray] = []
         self._ivo_segments = np.zeros((0, 4))
+        self._ivo_discs = np.zeros((0, 3))
 
     def reset(self, scenario, rng: np.random.Generator) -> None:
-        """Read the robots' radius and speed limit and the static obstacle edges."""
+        """Read the robots' radius and speed limit and the static obstacles.
+
+        Modes 'orca' and 'next_step' (and the safe mode) see every shape as a
+        polygon (a circle as its circumscribed 32-gon); mode 'ivo' takes circles
+        as exact discs (one line each, :mod:`comparisons.orca.ivo_disc`) and the
+        other shapes as polygon edges.
+        """
         rob = scenario.spec.robots
         self._radius = rob.radius
         self._v_max = self.p.v_max if self.p.v_max is not None else rob.v_max
-        self._polygons = [shape.to_polygon().as_array() for shape in scenario.world.shapes]
+        shapes = scenario.world.shapes
+        self._polygons = [shape.to_polygon().as_array() for shape in shapes]
         edges = polygon_segments(self._polygons)
         self._segments = edges.reshape(-1, 2, 2)
         self._obstacles = (prepare_obstacles(self._polygons)
                            if self._polygons and self.p.obstacles == "orca" else None)
-        self._ivo_segments = (edges if self.p.ivo_max_segment is None
-                              else polygon_segments(self._polygons, self.p.ivo_max_segment))
+        circle = [isinstance(shape, Circle) for shape in shapes]
+        self._ivo_discs = np.array([(*shape.center, shape.radius) for shape in shapes
+                                    if isinstance(shape, Circle)], dtype=float).reshape(-1, 3)
+        self._ivo_segments = polygon_segments(
+            [poly for poly, disc in zip(self._polygons, circle, strict=True) if not disc],
+            self.p.ivo_max_segment)
 
     def _hard_lines(self, obs: Observation):
         """Hard lines of every robot: static obstacles and, in safe mode, next-step separation.
@@ -112,10 +126,11 @@ class OrcaFilter:
         if self.p.obstacles == "orca" and self._obstacles is not None:
             groups.append(obstacle_lines(obs.pose[:, :2], obs.velocity, radius, v_max,
                                          self.p.time_horizon_obst, self._obstacles))
-        if self.p.obstacles == "ivo" and len(self._ivo_segments):
+        if self.p.obstacles == "ivo" and len(self._ivo_segments) + len(self._ivo_discs):
             reach = v_max[0] * self.p.time_horizon_obst + self._radius
             groups.append(ivo_lines(obs.pose[:, :2], obs.velocity, radius, self._ivo_segments,
-                                    reach, tau=self.p.ivo_tau, tau_min=max(obs.dt, 0.1)))
+                                    reach, tau=self.p.ivo_tau, tau_min=max(obs.dt, 0.1),
+                                    discs=self._ivo_discs))
         if self.p.obstacles == "next_step" or self.p.safe_discrete:
             groups.append(safe.segment_safety_lines(obs.pose[:, :2], radius, v_max, obs.dt,
                                                     self._segments))
@@ -216,6 +231,7 @@ class _TowardsSlot:
 
     command = "velocity"
     name = "pref"
+    uses_scan = False
 
     def __init__(self, speed: float) -> None:
         self.speed = speed

@@ -1,5 +1,8 @@
 """The improved velocity obstacle (IVO) of paper 001, section III.B (eq 8-11), for polygons.
 
+Static discs take the closed form of :mod:`comparisons.orca.ivo_disc`, one line
+per disc (see "Circular obstacles" below); :func:`ivo_lines` merges both kinds.
+
 Each polygon edge (optionally split into pieces) is a segment ``l``; it is
 enclosed by an ellipse ``O'`` (eq 8); the velocity obstacle of ``O'`` for a
 horizon ``tau`` (eq 9) gives one half-plane of feasible velocities (eq 10) with
@@ -79,6 +82,15 @@ Decisions (the paper's words, then the reading taken here):
   ``v = 0`` feasible; a positive value pushes out but can make opposing hard
   lines infeasible).
 
+* **Circular obstacles** (not in the paper, whose obstacles are polygons). A
+  disc ``D(c, R)`` is its own enclosing ellipse: ``O' = D(c, R + m)``, i.e.
+  ``a = b = R + m`` with the clearance ``m`` above, so it is treated exactly, as
+  one disc, rather than as the 32 edges of its circumscribed polygon. Its VO is
+  the truncated cone of a disc and ``u`` has a closed form
+  (:func:`comparisons.orca.ivo_disc.disc_pair_line`); the horizon, ``alpha``
+  and the push-out line are those above, and the line equals :func:`ivo_line`'s
+  for ``a = b`` to ~1e-6 (``tests/test_ivo_disc.py``).
+
 Lines are in the convention of :mod:`comparisons.orca.lp`: a point ``p`` and a
 unit direction ``d``, the allowed side on the left, ``det(d, p - v) <= 0``;
 here ``d = (n_y, -n_x)`` so that the left normal of ``d`` is ``n``.
@@ -87,13 +99,21 @@ here ``d = (n_y, -n_x)`` so that the left normal of ``d`` is ``n``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from comparisons.orca.ellipse import Ellipse, ellipse_axes, polygon_segments
+from comparisons.orca.ivo_disc import (
+    TAU_CENTER,
+    IvoLine,
+    as_line,
+    disc_distances,
+    disc_pair_line,
+    eq9_horizon,
+    tau_rule,
+)
 from dfcoa_opt.geometry import point_segment_distance
 
 FloatArray = NDArray[np.float64]
@@ -107,32 +127,8 @@ GOLDEN_ITERS = 60
 #: Bisection iterations for the legs of the cone (pi * 2^-60 rad).
 BISECT_ITERS = 60
 
-#: Horizon rules of eq 9 (``TAU_FIXED``: the caller's constant).
-TAU_FIXED, TAU_CENTER, TAU_GAP = 0, 1, 2
-_TAU_RULES = {"center": TAU_CENTER, "gap": TAU_GAP}
 _GOLD = 0.6180339887498949
 _TWO_PI = 2.0 * math.pi
-
-
-@dataclass(frozen=True)
-class IvoLine:
-    """One IVO half-plane (eq 10) with its ingredients.
-
-    Attributes:
-        point: ``(2,)`` the point ``v_opt + alpha u`` of the line, m/s.
-        direction: ``(2,)`` unit direction; the allowed side is the left.
-        normal: ``(2,)`` unit normal ``n`` pointing into the allowed side.
-        u: ``(2,)`` smallest change of ``v_opt`` onto the VO boundary, m/s.
-        tau: Horizon used (eq 9), s; 0 when the robot is inside ``O' (+) D(r_A)``.
-        inside: Whether the robot's centre is inside ``O' (+) D(r_A)`` (push-out line).
-    """
-
-    point: FloatArray
-    direction: FloatArray
-    normal: FloatArray
-    u: FloatArray
-    tau: float
-    inside: bool
 
 
 # --------------------------------------------------------------------------- numba core
@@ -244,12 +240,8 @@ def _pair_line(cx, cy, ex, ey, a, b, r, vx, vy, tau_rule, tau_fixed, tau_min, ta
         tau = 0.0
         inside = 1.0
     else:
-        if tau_rule == TAU_FIXED:
-            tau = tau_fixed
-        else:
-            dist = -h_min + (r if tau_rule == TAU_CENTER else 0.0)  # eq 9's dist_{A|O'}
-            speed = math.sqrt(vx * vx + vy * vy)
-            tau = tau_max if speed * tau_max <= dist else max(dist / speed, tau_min)
+        dist = -h_min + (r if tau_rule == TAU_CENTER else 0.0)  # eq 9's dist_{A|O'}
+        tau = eq9_horizon(tau_rule, tau_fixed, dist, vx, vy, tau_min, tau_max)
         lo = _arc_end(th0, th0 - math.pi, cx, cy, ex, ey, a, b, r)  # the legs
         hi = _arc_end(th0, th0 + math.pi, cx, cy, ex, ey, a, b, r)
         th, _ = _argmin(lo, hi, False, cx, cy, ex, ey, a, b, r, 1.0 / tau, vx, vy, buf)
@@ -271,13 +263,23 @@ def _pair_line(cx, cy, ex, ey, a, b, r, vx, vy, tau_rule, tau_fixed, tau_min, ta
 
 
 @numba.njit(cache=True, parallel=True)
-def _kernel(pos, vel, radius, clearance, seg, order, count, stretch, tau_rule, tau_fixed,
-            tau_min, tau_max, alpha, push_speed, P, D):  # pragma: no cover - numba
+def _kernel(pos, vel, radius, clearance, seg, discs, order, count, stretch, tau_rule,
+            tau_fixed, tau_min, tau_max, alpha, push_speed, P, D):  # pragma: no cover - numba
+    """Lines of robot ``i`` against items ``order[i, :count[i]]``: segments, then discs."""
+    n_seg = seg.shape[0]
     for i in numba.prange(pos.shape[0]):
         buf = np.empty(N_SAMPLES + 1)
         out = np.empty(10)
         for k in range(count[i]):
             s = order[i, k]
+            if s >= n_seg:  # a disc: closed form (ivo_disc)
+                c = s - n_seg
+                disc_pair_line(discs[c, 0] - pos[i, 0], discs[c, 1] - pos[i, 1],
+                               discs[c, 2] + clearance[i], radius[i], vel[i, 0], vel[i, 1],
+                               tau_rule, tau_fixed, tau_min, tau_max, alpha, push_speed, out)
+                P[i, k, 0], P[i, k, 1] = out[0], out[1]
+                D[i, k, 0], D[i, k, 1] = out[2], out[3]
+                continue
             x0, y0, x1, y1 = seg[s, 0], seg[s, 1], seg[s, 2], seg[s, 3]
             length = math.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2)
             ex, ey = (x1 - x0) / length, (y1 - y0) / length
@@ -314,28 +316,29 @@ def ivo_line(pos: ArrayLike, v_opt: ArrayLike, radius: float, ellipse: Ellipse,
     """
     p = np.asarray(pos, dtype=float)
     v = np.asarray(v_opt, dtype=float)
-    rule, fixed = _tau_rule(tau)
+    rule, fixed = tau_rule(tau)
     out = np.empty(10)
     c = ellipse.centre - p
     _pair_line(c[0], c[1], ellipse.axis[0], ellipse.axis[1], ellipse.a, ellipse.b,
                float(radius), v[0], v[1], rule, fixed, float(tau_min), float(tau_max),
                float(alpha), float(push_speed), np.empty(N_SAMPLES + 1), out)
-    return IvoLine(out[0:2].copy(), out[2:4].copy(), out[8:10].copy(), out[6:8].copy(),
-                   float(out[4]), bool(out[5]))
+    return as_line(out)
 
 
 def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
-              polygons: list[ArrayLike] | FloatArray,
+              polygons: list[ArrayLike] | FloatArray | None,
               max_range: float, tau: float | str = "center", tau_min: float = 0.1,
               tau_max: float = 10.0, clearance: float | ArrayLike | None = None,
               stretch: float = 1.0, max_segment: float | None = None,
-              max_lines: int | None = None, alpha: float = 1.0, push_speed: float = 0.0
+              max_lines: int | None = None, alpha: float = 1.0, push_speed: float = 0.0,
+              discs: ArrayLike | None = None
               ) -> tuple[FloatArray, FloatArray, NDArray[np.int64]]:
-    """IVO half-planes (eq 10) of ``N`` robots against polygon obstacles, nearest first.
+    """IVO half-planes (eq 10) of ``N`` robots against polygons and discs, nearest first.
 
-    One line per segment (polygon edge or piece) whose distance to the robot's
-    centre is at most ``max_range`` (eq 11's "obstacles within the obstacle
-    avoidance range"), ordered by that distance. Use them as hard lines of
+    One line per segment (polygon edge or piece) and per disc whose distance to
+    the robot's centre (to the segment, to the disc's boundary) is at most
+    ``max_range`` (eq 11's "obstacles within the obstacle avoidance range"),
+    ordered by that distance (segments before discs on ties). Use them as hard lines of
     :func:`comparisons.orca.velocities.orca_velocities` or
     :func:`comparisons.orca.lp.solve_lines` (which adds ``D(0, v_max)``, eq 11).
 
@@ -345,7 +348,8 @@ def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
         radius: ``(N,)`` or scalar robot radii ``r_A``, m.
         polygons: Obstacle vertex arrays ``(M, 2)``, m (see :func:`polygon_segments`),
             or the ``(S, 4)`` array that function returns (computed once by a
-            caller that steps many times; ``max_segment`` is then not used).
+            caller that steps many times; ``max_segment`` is then not used);
+            ``None``: no polygons.
         max_range: Obstacle avoidance range, m.
         tau: Horizon of eq 9: ``"center"``, ``"gap"`` or a fixed value, s (see
             :func:`ivo_line`).
@@ -357,6 +361,8 @@ def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
         max_lines: Most lines per robot (the nearest kept); ``None``: all in range.
         alpha: Responsibility ``alpha`` of eq 10 (1: static obstacles).
         push_speed: Outward speed required inside ``O' (+) D(r_A)``, m/s.
+        discs: ``(C, 3)`` static discs ``(cx, cy, R)``, m, each treated exactly as the
+            ellipse ``O' = D(c, R + m)`` (:mod:`comparisons.orca.ivo_disc`); ``None``: none.
 
     Returns:
         ``(points (N, H, 2) m/s, directions (N, H, 2), count (N,))`` in the
@@ -364,8 +370,8 @@ def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
         (``H = max(count)``).
 
     Raises:
-        ValueError: If ``stretch < 1``, a clearance is negative or a fixed
-            ``tau`` is not positive.
+        ValueError: If ``stretch < 1``, a clearance or disc radius is negative or a
+            fixed ``tau`` is not positive.
     """
     # fresh writable C arrays: one numba signature whatever the callers pass
     p = np.array(np.asarray(pos, dtype=float).reshape(-1, 2))
@@ -373,15 +379,18 @@ def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
     v = np.array(np.asarray(vel_opt, dtype=float).reshape(n, 2))
     r = np.array(np.broadcast_to(np.asarray(radius, dtype=float), (n,)))
     m = np.array(np.broadcast_to(r if clearance is None else np.asarray(clearance, float), (n,)))
-    if stretch < 1.0 or np.any(m < 0.0):
-        raise ValueError("need stretch >= 1 and clearance >= 0")
-    rule, fixed = _tau_rule(tau)
+    disc = np.array(np.asarray([] if discs is None else discs, dtype=float).reshape(-1, 3))
+    if stretch < 1.0 or np.any(m < 0.0) or np.any(disc[:, 2] < 0.0):
+        raise ValueError("need stretch >= 1, clearance >= 0 and disc radii >= 0")
+    rule, fixed = tau_rule(tau)
     prepared = isinstance(polygons, np.ndarray) and polygons.ndim == 2 and polygons.shape[1] == 4
-    seg = np.ascontiguousarray(polygons if prepared else polygon_segments(polygons, max_segment),
-                               dtype=float)
-    if len(seg) == 0 or n == 0:
+    seg = np.ascontiguousarray(polygons if prepared else polygon_segments(
+        [] if polygons is None else polygons, max_segment), dtype=float)
+    if len(seg) + len(disc) == 0 or n == 0:
         return np.zeros((n, 0, 2)), np.zeros((n, 0, 2)), np.zeros(n, np.int64)
     dist = point_segment_distance(p[:, None, :], seg[None, :, 0:2], seg[None, :, 2:4])
+    if len(disc):
+        dist = np.hstack([dist.reshape(n, len(seg)), disc_distances(p, disc)])
     dist[dist > max_range] = np.inf
     order = np.argsort(dist, axis=1, kind="stable")
     count = np.isfinite(dist).sum(axis=1)
@@ -392,17 +401,6 @@ def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
     count = count.astype(np.int64)
     P = np.zeros((n, h, 2))
     D = np.zeros((n, h, 2))
-    _kernel(p, v, r, m, seg, order, count, float(stretch), rule, fixed, float(tau_min),
-            float(tau_max), float(alpha), float(push_speed), P, D)
+    _kernel(p, v, r, m, seg.reshape(-1, 4), disc, order, count, float(stretch), rule, fixed,
+            float(tau_min), float(tau_max), float(alpha), float(push_speed), P, D)
     return P, D, count
-
-
-def _tau_rule(tau: float | str) -> tuple[int, float]:
-    """Encode the ``tau`` argument as ``(rule, fixed value)``."""
-    if isinstance(tau, str):
-        if tau not in _TAU_RULES:
-            raise ValueError(f"tau must be a positive float or one of {sorted(_TAU_RULES)}")
-        return _TAU_RULES[tau], 0.0
-    if not tau > 0.0:
-        raise ValueError("a fixed tau must be positive")
-    return TAU_FIXED, float(tau)

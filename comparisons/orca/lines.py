@@ -11,7 +11,9 @@ circle of one time step (``tau = dt``) is used instead, as RVO2 does, so that
 the pair separates within the step.
 
 Lines are written in the convention of :mod:`comparisons.orca.lp` (point,
-unit direction, allowed side on the left).
+unit direction, allowed side on the left). The escape from a disc's truncated
+cone, :func:`disc_vo_escape`, is shared with the improved VO of a static disc
+(:mod:`comparisons.orca.ivo_disc`).
 """
 
 from __future__ import annotations
@@ -19,6 +21,54 @@ from __future__ import annotations
 import math
 
 import numba
+
+
+@numba.njit(cache=True, inline="always")
+def disc_vo_escape(px, py, vx, vy, rad, inv_tau):  # pragma: no cover - numba
+    """Smallest change ``u`` of ``v`` onto the boundary of a disc's truncated VO cone (eq 7).
+
+    The velocity obstacle of the disc ``D(p, rad)`` (relative position ``p``,
+    outside it: ``|p| > rad``) for horizon ``tau`` is the cone
+    ``{v | exists t in [0, tau]: t v in D(p, rad)}``, cut off by ``D(p / tau, rad / tau)``.
+    ``u`` goes from ``v`` to the nearest boundary point (onto the cut-off circle
+    or onto a leg), whether ``v`` is inside the cone or not; the boundary's
+    outward normal there is the left normal of the returned direction.
+
+    Args:
+        px: x of the disc centre relative to the robot, m.
+        py: y of the disc centre relative to the robot, m.
+        vx: x of the (relative) velocity, m/s.
+        vy: y of the (relative) velocity, m/s.
+        rad: Disc radius (combined radii), m.
+        inv_tau: 1 / time horizon, 1/s.
+
+    Returns:
+        ``(dx, dy, ux, uy)``: unit direction of the boundary line at the nearest
+        point (the VO on its right) and ``u``, m/s.
+    """
+    dist_sq = px * px + py * py
+    rad_sq = rad * rad
+    wx = vx - inv_tau * px  # from the cut-off centre to the relative velocity
+    wy = vy - inv_tau * py
+    w_sq = wx * wx + wy * wy
+    dot = wx * px + wy * py
+    if dot < 0.0 and dot * dot > rad_sq * w_sq:  # nearest boundary: cut-off circle
+        w_len = math.sqrt(w_sq)
+        ux_, uy_ = wx / w_len, wy / w_len
+        dx, dy = uy_, -ux_
+        scale = rad * inv_tau - w_len
+        ux, uy = scale * ux_, scale * uy_
+    else:  # nearest boundary: a leg of the cone
+        leg = math.sqrt(dist_sq - rad_sq)
+        if px * wy - py * wx > 0.0:  # left leg
+            dx = (px * leg - py * rad) / dist_sq
+            dy = (px * rad + py * leg) / dist_sq
+        else:  # right leg
+            dx = -(px * leg + py * rad) / dist_sq
+            dy = -(-px * rad + py * leg) / dist_sq
+        along = vx * dx + vy * dy
+        ux, uy = along * dx - vx, along * dy - vy
+    return dx, dy, ux, uy
 
 
 @numba.njit(cache=True)
@@ -55,26 +105,7 @@ def agent_lines(ax, ay, avx, avy, a_r, nbr_pos, nbr_vel, nbr_r, n_nbr, inv_tau, 
         rad = a_r + nbr_r[j]
         rad_sq = rad * rad
         if dist_sq > rad_sq:
-            wx = vx - inv_tau * px  # from the cut-off centre to the relative velocity
-            wy = vy - inv_tau * py
-            w_sq = wx * wx + wy * wy
-            dot = wx * px + wy * py
-            if dot < 0.0 and dot * dot > rad_sq * w_sq:  # nearest boundary: cut-off circle
-                w_len = math.sqrt(w_sq)
-                ux_, uy_ = wx / w_len, wy / w_len
-                dx, dy = uy_, -ux_
-                scale = rad * inv_tau - w_len
-                ux, uy = scale * ux_, scale * uy_
-            else:  # nearest boundary: a leg of the cone
-                leg = math.sqrt(dist_sq - rad_sq)
-                if px * wy - py * wx > 0.0:  # left leg
-                    dx = (px * leg - py * rad) / dist_sq
-                    dy = (px * rad + py * leg) / dist_sq
-                else:  # right leg
-                    dx = -(px * leg + py * rad) / dist_sq
-                    dy = -(-px * rad + py * leg) / dist_sq
-                along = vx * dx + vy * dy
-                ux, uy = along * dx - vx, along * dy - vy
+            dx, dy, ux, uy = disc_vo_escape(px, py, vx, vy, rad, inv_tau)
         else:  # overlapping: cut-off circle of one time step
             wx = vx - inv_dt * px
             wy = vy - inv_dt * py
