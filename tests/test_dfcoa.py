@@ -41,6 +41,19 @@ def test_without_avoidance_it_is_the_formation_law():
         obs.slot_offset, obs.pose, obs.leader, 2.8, 0.7, 0.98))
 
 
+@pytest.mark.parametrize("name, t_max", [("dfcoa_s1", 40.0), ("dfcoa_s2", 30.0)])
+def test_numba_kernels_give_the_reference_run(name, t_max):
+    """kernel=True (numba) and kernel=False (NumPy reference) give the same log, bit for bit."""
+    sc = load_scenario(SCENARIOS / f"{name}.toml", overrides={"t_max": t_max})
+    logs = []
+    for kernel in (True, False):
+        ctrl = make_controller("dfcoa")
+        ctrl.kernel = kernel
+        logs.append(Simulator(sc, ctrl).run())
+    assert np.nanmin(logs[0].clearance) < 0.8  # the VFH* layer was active
+    assert logs[0].digest() == logs[1].digest()
+
+
 @pytest.mark.parametrize("name", ["dfcoa_s1", "dfcoa_s2"])
 def test_paper_scenarios_reach_the_goal_without_collision(name):
     sc = load_scenario(SCENARIOS / f"{name}.toml")

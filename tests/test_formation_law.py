@@ -6,6 +6,7 @@ import pytest
 from dfcoa_opt.control.formation_law import (
     formation_errors,
     formation_tracking_law,
+    formation_tracking_law_fast,
     pose_error,
     tracking_point_coordinates,
 )
@@ -70,3 +71,21 @@ def test_pose_error_algorithm2_matches_slot_geometry():
     rot = polar_offsets(d_a, phi_a) @ np.array([[c, s], [-s, c]])
     np.testing.assert_allclose(p_true, lead[:2] + rot, atol=1e-12)
     np.testing.assert_allclose(e, p_true - pose[:, :2], atol=1e-12)
+
+
+def test_numba_law_has_the_reference_bits():
+    """formation_tracking_law_fast (numba) equals formation_tracking_law bit for bit."""
+    rng = np.random.default_rng(11)
+    n = 5000
+    pose = np.column_stack((rng.uniform(-50, 50, (n, 2)), rng.uniform(-20, 20, n)))
+    pose[::9, 2] = np.pi * rng.integers(-6, 7, len(pose[::9]))  # delta on the wrap's edges
+    offsets = rng.normal(0.0, 2.0, (n, 2))
+    offsets[::4, 1] = -0.0
+    for lead in (np.array([1.0, -2.0, 0.4, 0.3, 0.25]), np.array([-3.0, 7.0, -9.0, 0.0, -0.6]),
+                 np.array([0.0, 0.0, np.pi, 0.5, 0.0, 99.0])):
+        for k1, k2, d in ((2.8, 0.7, 0.98), (1.0, 3.0, 0.2)):
+            want = formation_tracking_law(offsets, pose, lead, k1, k2, d)
+            got = formation_tracking_law_fast(offsets, pose, lead, k1, k2, d)
+            np.testing.assert_array_equal(got.view(np.uint64), want.view(np.uint64))
+    with pytest.raises(ValueError, match="leader"):
+        formation_tracking_law_fast(offsets, pose, [0.0, 0.0, 0.0], 1.0, 1.0, 1.0)

@@ -15,6 +15,10 @@ Per robot, from its own observation only (distributed, §4.5.4):
 The pose comes from the scenario's estimator (``truth`` or ``mcl``, Algorithm
 3). The virtual leader follows the improved A* path by pure pursuit in the
 simulator (``leader.planner = "improved_astar"``).
+
+Each step runs the numba versions of 1-3 (``*_fast``, :class:`VFHStar` kernels);
+``DFCOA(params, kernel=False)`` runs the NumPy reference functions instead, with
+bit-identical commands (``tests/test_dfcoa.py``).
 """
 
 from __future__ import annotations
@@ -25,10 +29,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dfcoa_opt.control.base import Observation
-from dfcoa_opt.control.formation_law import formation_tracking_law
+from dfcoa_opt.control.formation_law import formation_tracking_law, formation_tracking_law_fast
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.control.vfh import VFHParams
-from dfcoa_opt.control.vfh_star import VFHStar, blend
+from dfcoa_opt.control.vfh import VFHParams, wrap_angles
+from dfcoa_opt.control.vfh_star import VFHStar, blend, blend_fast
 from dfcoa_opt.geometry import wrap_angle
 from dfcoa_opt.params import param
 
@@ -54,30 +58,33 @@ class DFCOA:
         vfh: VFHParams = field(default_factory=VFHParams,
                                metadata={"doc": "Improved VFH* and blending (Algorithm 1)."})
 
-    def __init__(self, params: Params) -> None:
+    def __init__(self, params: Params, kernel: bool = True) -> None:
+        """``kernel=False`` runs the NumPy reference functions (same bits, slower)."""
         self.p = params
+        self.kernel = kernel
         self.vfh: VFHStar | None = None
         self.last_steering: np.ndarray | None = None
 
     def reset(self, scenario, rng: np.random.Generator) -> None:
         """New VFH* state (hysteresis); its robot radius is the scenario's ``robots.radius``."""
         vfh = dataclasses.replace(self.p.vfh, robot_radius=scenario.spec.robots.radius)
-        self.vfh = VFHStar(vfh, scenario.n)
+        self.vfh = VFHStar(vfh, scenario.n, kernel=self.kernel)
         self.last_steering = np.full(scenario.n, np.nan)
 
     def act(self, obs: Observation) -> np.ndarray:
         """Row i uses robot i's pose, scan, neighbours and the broadcast leader."""
+        fast = self.kernel
         offsets = obs.slot_offset
         if self.p.compensate_tracking_offset:
             offsets = offsets + np.array([self.p.d, 0.0])
-        cmd = formation_tracking_law(offsets, obs.pose, obs.leader, self.p.k1, self.p.k2,
-                                     self.p.d)
+        law = formation_tracking_law_fast if fast else formation_tracking_law
+        cmd = law(offsets, obs.pose, obs.leader, self.p.k1, self.p.k2, self.p.d)
         if not self.p.avoidance or obs.scan is None or self.vfh is None:
             return cmd
         # target direction: towards the slot's tracking target, in the robot frame
         target = obs.slot - obs.pose[:, :2]
         heading = np.arctan2(target[:, 1], target[:, 0])
-        target_dir = wrap_angle(heading - obs.pose[:, 2])
+        target_dir = (wrap_angles if fast else wrap_angle)(heading - obs.pose[:, 2])
         res = self.vfh.step(obs.scan, obs.neighbours, obs.pose, target_dir, obs.robot_ids)
         self.last_steering = res.direction
-        return blend(cmd, res.direction, res.danger, self.p.vfh)
+        return (blend_fast if fast else blend)(cmd, res.direction, res.danger, self.p.vfh)

@@ -8,14 +8,19 @@ law below makes the closed loop exactly ``de_x/dt = -k1 e_x``,
 ``de_y/dt = -k2 e_y`` (eq 24) for any leader motion, as long as the robot's
 limits do not saturate. The printed eq 26-27 swap sin/cos and a sign; the
 derivation is in ``docs/methods/formation_law.md`` and the decay rates are
-checked by ``tests/test_formation_law.py``.
+checked by ``tests/test_formation_law.py``. :func:`formation_tracking_law_fast`
+is the same law in numba, bit-identical, for the per-step controller.
 """
 
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dfcoa_opt.control.vfh import wrap1
 from dfcoa_opt.geometry import wrap_angle
 
 FloatArray = NDArray[np.float64]
@@ -91,6 +96,54 @@ def formation_tracking_law(offsets: ArrayLike, pose: ArrayLike, leader: ArrayLik
     delta = wrap_angle(pose[:, 2] - lead[2])
     c, s = np.cos(delta), np.sin(delta)
     return np.column_stack((a * c + b * s, (b * c - a * s) / d))
+
+
+@numba.njit(cache=True)
+def _tracking_law_kernel(offsets: FloatArray, pose: FloatArray, leader: FloatArray, k1: float,
+                         k2: float, d: float) -> FloatArray:  # pragma: no cover - numba
+    """:func:`formation_tracking_law` row by row, same float operations in the same order."""
+    n = pose.shape[0]
+    out = np.empty((n, 2))
+    x_l, y_l, th_l, v_l, w_l = leader[0], leader[1], leader[2], leader[3], leader[4]
+    c, s = math.cos(th_l), math.sin(th_l)
+    for i in range(n):
+        th = pose[i, 2]
+        dx = pose[i, 0] + d * math.cos(th) - x_l
+        dy = pose[i, 1] + d * math.sin(th) - y_l
+        l_x, l_y = dx * c + dy * s, dy * c - dx * s  # eq 15
+        a = k1 * (offsets[i, 0] - l_x) + v_l - w_l * l_y
+        b = k2 * (offsets[i, 1] - l_y) + w_l * l_x
+        delta = wrap1(th - th_l)  # eq 28
+        cd, sd = math.cos(delta), math.sin(delta)
+        out[i, 0] = a * cd + b * sd
+        out[i, 1] = (b * cd - a * sd) / d
+    return out
+
+
+def formation_tracking_law_fast(offsets: ArrayLike, pose: ArrayLike, leader: ArrayLike,
+                                k1: float, k2: float, d: float) -> FloatArray:
+    """:func:`formation_tracking_law` (eq 24-28) as one numba kernel, bit-identical.
+
+    ``sin``, ``cos`` and the angle wrap give the same bits in numba as in NumPy
+    (``tests/test_formation_law.py`` checks it); the NumPy function is the reference.
+
+    Args:
+        offsets: ``(N, 2)`` targets ``l*`` in the leader frame, m.
+        pose: ``(N, 3)`` follower poses (x, y, theta), m, m, rad.
+        leader: Broadcast leader state ``(x, y, theta, v, w)`` (m, m, rad, m/s, rad/s).
+        k1: Longitudinal gain, 1/s.
+        k2: Lateral gain, 1/s.
+        d: Tracking-point distance, m.
+
+    Returns:
+        ``(N, 2)`` commands ``(v_f, w_f)`` in m/s and rad/s (unsaturated).
+    """
+    p = np.asarray(pose, dtype=float).reshape(-1, 3)
+    off = np.asarray(offsets, dtype=float).reshape(len(p), 2)
+    lead = np.asarray(leader, dtype=float).reshape(-1)
+    if lead.shape[0] < 5:
+        raise ValueError("leader must be (x, y, theta, v, w)")
+    return _tracking_law_kernel(off, p, lead, float(k1), float(k2), float(d))
 
 
 def pose_error(leader: ArrayLike, d_a: ArrayLike, phi_a: ArrayLike,

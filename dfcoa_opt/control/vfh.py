@@ -20,13 +20,16 @@ so sector 0 is straight ahead. Pipeline (:func:`vfh_step`):
    runs 1-4, and ``danger_level`` and ``blend`` are the safety layer of
    section 4.5.3; :class:`~dfcoa_opt.control.vfh_star.VFHStar` keeps the state.
 
-Choices and Table 2 units: ``docs/methods/vfh.md``.
+Choices and Table 2 units: ``docs/methods/vfh.md``. The scalar numba helpers
+:func:`wrap1`, :func:`clip1` and :func:`sector1` (bit-identical to ``wrap_angle``,
+``np.clip`` and :func:`sector_index`) serve the kernels of ``vfh_star``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -118,6 +121,63 @@ class VFHResult:
     histogram: FloatArray
     binary: BoolArray
     masked: BoolArray
+
+
+@numba.njit(cache=True)
+def wrap1(a: float) -> float:  # pragma: no cover - numba
+    """Scalar :func:`~dfcoa_opt.geometry.wrap_angle` to (-pi, pi], rad, bit-identical.
+
+    ``mod(a + pi, 2 pi) - pi`` with NumPy's float ``mod`` (``fmod``, plus ``2 pi``
+    when negative, ``+0`` for zero) and ``-pi`` mapped to ``pi``. ``fmod(x, 2 pi)``
+    is exact and equals ``x`` for ``|x| < 2 pi``, so that common case skips it.
+    """
+    two_pi = 2.0 * np.pi
+    m = a + np.pi
+    if not -two_pi < m < two_pi:
+        m = np.fmod(m, two_pi)
+    if m < 0.0:
+        m += two_pi
+    elif m == 0.0:
+        m = 0.0
+    w = m - np.pi
+    return np.pi if w == -np.pi else w
+
+
+@numba.njit(cache=True)
+def clip1(x: float, lo: float, hi: float) -> float:  # pragma: no cover - numba
+    """Scalar ``np.clip`` (``x`` kept unless strictly outside, so NaN and -0.0 pass)."""
+    if x < lo:
+        return lo
+    if x > hi:
+        return hi
+    return x
+
+
+@numba.njit(cache=True)
+def sector1(angle: float, scale: float, k: int) -> int:  # pragma: no cover - numba
+    """Scalar :func:`sector_index`, ``scale = K / (2 pi)`` in 1/rad (finite ``angle``)."""
+    return int(np.floor(angle * scale + 0.5)) % k
+
+
+@numba.njit(cache=True)
+def _wrap_kernel(a: FloatArray, out: FloatArray) -> None:  # pragma: no cover - numba
+    for i in range(a.size):
+        out[i] = wrap1(a[i])
+
+
+def wrap_angles(a: ArrayLike) -> FloatArray:
+    """:func:`~dfcoa_opt.geometry.wrap_angle` as one numba call (bit-identical, faster).
+
+    Args:
+        a: Angles in rad, any shape.
+
+    Returns:
+        The angles wrapped to (-pi, pi], rad, same shape.
+    """
+    a = np.asarray(a, dtype=float, order="C")
+    out = np.empty_like(a)
+    _wrap_kernel(a.reshape(-1), out.reshape(-1))
+    return out
 
 
 def sector_centres(num_sectors: int) -> FloatArray:
