@@ -132,11 +132,3 @@ def test_unicycle_kernel_matches_numpy_reference_bit_for_bit():
     assert out.pose[0, 2] == Unicycle(RobotSpec(w_max=10.0)).step_reference(
         edge, np.array([[0.0, 1.0]]), 0.1).pose[0, 2]
 
-
-def test_scalar_wrap_is_wrap_angle_bit_for_bit():
-    from dfcoa_opt.geometry import wrap_angle
-    from dfcoa_opt.robots.unicycle_kernel import wrap
-
-    a = np.random.default_rng(1).normal(size=20000) * 20.0
-    a[:6] = [np.pi, -np.pi, 3 * np.pi, -3 * np.pi, 0.0, -0.0]
-    assert np.array_equal([wrap(float(x)) for x in a], wrap_angle(a))

@@ -16,14 +16,13 @@ import pytest
 from dfcoa_opt.control.base import Neighbours
 from dfcoa_opt.control.vfh import (
     VFHParams,
-    clip1,
     sector1,
     sector_index,
-    wrap1,
     wrap_angles,
 )
 from dfcoa_opt.control.vfh_star import VFHStar, blend, blend_fast
 from dfcoa_opt.geometry import wrap_angle
+from dfcoa_opt.scalar_kernels import clip1, wrap1
 from dfcoa_opt.world.lidar import LaserScan
 
 PI = math.pi

@@ -20,8 +20,8 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dfcoa_opt.control.vfh import wrap1
 from dfcoa_opt.geometry import wrap_angle
+from dfcoa_opt.scalar_kernels import wrap1
 
 FloatArray = NDArray[np.float64]
 

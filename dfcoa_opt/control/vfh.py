@@ -21,8 +21,8 @@ so sector 0 is straight ahead. Pipeline (:func:`vfh_step`):
    section 4.5.3; :class:`~dfcoa_opt.control.vfh_star.VFHStar` keeps the state.
 
 Choices and Table 2 units: ``docs/methods/vfh.md``. The scalar numba helpers
-:func:`wrap1`, :func:`clip1` and :func:`sector1` (bit-identical to ``wrap_angle``,
-``np.clip`` and :func:`sector_index`) serve the kernels of ``vfh_star``.
+:func:`sector1` (bit-identical to :func:`sector_index`) and
+:func:`wrap_angles` serve the kernels of ``vfh_star``.
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.geometry import wrap_angle
 from dfcoa_opt.params import param
+from dfcoa_opt.scalar_kernels import wrap1
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -121,36 +122,6 @@ class VFHResult:
     histogram: FloatArray
     binary: BoolArray
     masked: BoolArray
-
-
-@numba.njit(cache=True)
-def wrap1(a: float) -> float:  # pragma: no cover - numba
-    """Scalar :func:`~dfcoa_opt.geometry.wrap_angle` to (-pi, pi], rad, bit-identical.
-
-    ``mod(a + pi, 2 pi) - pi`` with NumPy's float ``mod`` (``fmod``, plus ``2 pi``
-    when negative, ``+0`` for zero) and ``-pi`` mapped to ``pi``. ``fmod(x, 2 pi)``
-    is exact and equals ``x`` for ``|x| < 2 pi``, so that common case skips it.
-    """
-    two_pi = 2.0 * np.pi
-    m = a + np.pi
-    if not -two_pi < m < two_pi:
-        m = np.fmod(m, two_pi)
-    if m < 0.0:
-        m += two_pi
-    elif m == 0.0:
-        m = 0.0
-    w = m - np.pi
-    return np.pi if w == -np.pi else w
-
-
-@numba.njit(cache=True)
-def clip1(x: float, lo: float, hi: float) -> float:  # pragma: no cover - numba
-    """Scalar ``np.clip`` (``x`` kept unless strictly outside, so NaN and -0.0 pass)."""
-    if x < lo:
-        return lo
-    if x > hi:
-        return hi
-    return x
 
 
 @numba.njit(cache=True)

@@ -25,16 +25,15 @@ from dfcoa_opt.control.vfh import (
     VFHParams,
     VFHResult,
     binary_histogram,
-    clip1,
     polar_histogram,
     repulsion_histogram,
     sector1,
     sector_centres,
     select_direction,
     turning_mask,
-    wrap1,
 )
 from dfcoa_opt.geometry import wrap_angle
+from dfcoa_opt.scalar_kernels import clip1, wrap1
 from dfcoa_opt.world.lidar import LaserScan
 
 

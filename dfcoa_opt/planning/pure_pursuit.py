@@ -15,7 +15,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.robots.unicycle_kernel import wrap
+from dfcoa_opt.scalar_kernels import wrap1
 
 FloatArray = NDArray[np.float64]
 
@@ -73,7 +73,7 @@ class PurePursuit:
         self._s = self._project(pose[:2])
         target = self.point_at(self._s + self.lookahead)
         dx, dy = target - pose[:2]
-        alpha = wrap(float(np.arctan2(dy, dx) - pose[2]))  # numpy's atan2 (SIMD), as before
+        alpha = wrap1(float(np.arctan2(dy, dx) - pose[2]))  # numpy's atan2 (SIMD), as before
         dist = max(float(np.hypot(dx, dy)), 1e-9)
         w = 2.0 * self.speed * math.sin(alpha) / max(dist, self.lookahead) if dist > 1e-9 else 0.0
         return self.speed, min(max(w, -self.w_max), self.w_max), target

@@ -15,14 +15,7 @@ import math
 import numba
 import numpy as np
 
-_TWO_PI = 2.0 * math.pi
-
-
-@numba.njit(cache=True, inline="always")
-def wrap(a: float) -> float:  # pragma: no cover - numba
-    """:func:`dfcoa_opt.geometry.wrap_angle` of one angle: (-pi, pi], rad."""
-    w = (a + math.pi) % _TWO_PI - math.pi
-    return math.pi if w == -math.pi else w
+from dfcoa_opt.scalar_kernels import wrap1
 
 
 @numba.njit(cache=True, inline="always")
@@ -35,7 +28,7 @@ def arc(x: float, y: float, th: float, v: float, w: float,
     else:
         chord = 2.0 * v / w * math.sin(0.5 * dth)
     th_mid = th + 0.5 * dth
-    return x + chord * math.cos(th_mid), y + chord * math.sin(th_mid), wrap(th + dth)
+    return x + chord * math.cos(th_mid), y + chord * math.sin(th_mid), wrap1(th + dth)
 
 
 @numba.njit(cache=True)
