@@ -4,7 +4,10 @@ Run ``python -m benchmarks.bench_astar``. Each row times one call with
 ``time.perf_counter`` after a warm-up call (numba compilation excluded). The
 reference is the textbook A* below (heapq, dict g-values, same moves, same
 octile heuristic, no corner cutting), measured in the same run on the same
-problem; both must return the same (optimal) cost, which is checked.
+problem; both must return the same (optimal) cost, which is checked. The
+compiled peer pyastar2d (C++, ``bench`` extra) is timed on the same grids when
+it is installed; it solves an easier problem (diagonal steps cost 1, corners
+are cut), so its rows compare speed, not optimality.
 
 Problems:
 - the paper-000 Scenario 1 map (``scenarios/**/dfcoa_s1.toml``) rasterised at
@@ -30,6 +33,10 @@ from dfcoa_opt.world.grid import OccupancyGrid
 
 SQRT2 = math.sqrt(2.0)
 ROOT = Path(__file__).resolve().parents[1]
+
+
+#: The compiled peer of row (b) (speed only; see :func:`pyastar2d_calls`).
+PEER = "pyastar2d 1.1 C++ A* (diagonal steps cost 1, cuts corners)"
 
 
 def heapq_astar(occ: list[list[bool]], start: tuple[int, int],
@@ -98,6 +105,26 @@ def _check(ours: float, ref: float, what: str) -> None:
         raise AssertionError(f"{what}: cost {ours} differs from the reference {ref}")
 
 
+def pyastar2d_calls(occ: np.ndarray, start: tuple[int, int], goal: tuple[int, int],
+                    samples: int) -> np.ndarray | None:
+    """Times (us) of pyastar2d's C++ A* on the same grid; None if it is not installed.
+
+    pyastar2d (``bench`` extra) is a speed peer only: a move costs the weight
+    of the cell entered, so diagonal steps cost 1, not sqrt(2), and it cuts
+    corners -- not the same shortest-path problem as ours.
+    """
+    try:
+        import pyastar2d
+    except ImportError:
+        print("pyastar2d is not installed: its peer rows are left out (pip install pyastar2d)")
+        return None
+    weights = np.where(occ, np.inf, 1.0).astype(np.float32)
+    if pyastar2d.astar_path(weights, start, goal, allow_diagonal=True) is None:
+        raise RuntimeError("pyastar2d found no path where ours did")
+    return time_calls(lambda: pyastar2d.astar_path(weights, start, goal, allow_diagonal=True),
+                      samples)
+
+
 def run() -> list[dict]:
     """Time the searches; returns one dict per configuration."""
     rows = []
@@ -112,6 +139,9 @@ def run() -> list[dict]:
     ref = time_calls(lambda: heapq_astar(occ_list, s_rc, g_rc), 200)
     fast = time_calls(lambda: search(occ, s_rc, g_rc), 1000)
     rows.append(row("A* search 35x35 (dfcoa_s1 at 1 cell/m)", fast, ref_name, ref))
+    peer = pyastar2d_calls(occ, s_rc, g_rc, 1000)
+    if peer is not None:
+        rows.append(row("A* search 35x35 (dfcoa_s1 at 1 cell/m)", fast, PEER, peer))
     full = time_calls(lambda: plan(grid, (7.0, 7.0), (12.0, 29.0), AStarParams()), 1000)
     rows.append(row("A* plan 35x35 (inflate 0.5 m, search, shortening, metres)", full,
                     ref_name, ref))
@@ -128,8 +158,12 @@ def run() -> list[dict]:
     big_list = big.tolist()
     ref = time_calls(lambda: heapq_astar(big_list, (0, 0), corner), 3)
     fast = time_calls(lambda: search(big, (0, 0), corner), 15)
-    rows.append(row(f"A* search 1024x1024, 20% random cells, corner to corner "
-                    f"({ours.expanded} nodes; reference {ref_nodes})", fast, ref_name, ref))
+    what = (f"A* search 1024x1024, 20% random cells, corner to corner "
+            f"({ours.expanded} nodes; reference {ref_nodes})")
+    rows.append(row(what, fast, ref_name, ref))
+    peer = pyastar2d_calls(big, (0, 0), corner, 15)
+    if peer is not None:
+        rows.append(row(what, fast, PEER, peer))
     return rows
 
 
