@@ -13,6 +13,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -61,6 +62,33 @@ def _left_of(a, b, c):
         (a[..., 1] - c[..., 1]) * (b[..., 0] - a[..., 0])
 
 
+@numba.njit(cache=True)
+def _side_counts(p1, p2, eps):  # pragma: no cover - numba
+    """Per candidate splitter (edge ``i``), the other edges left or crossing / right or crossing.
+
+    In float32, with :func:`_left_of`'s operations: edge ``j`` is left of the
+    line of edge ``i`` when both its end points are (``>= -eps``), right when
+    both are (``<= eps``) and it is not left, crossing otherwise.
+    """
+    n = p1.shape[0]
+    n_left = np.zeros(n, np.int64)
+    n_right = np.zeros(n, np.int64)
+    for i in range(n):
+        ax, ay, bx, by = p1[i, 0], p1[i, 1], p2[i, 0], p2[i, 1]
+        for j in range(n):
+            if j == i:
+                continue
+            s1 = (ax - p1[j, 0]) * (by - ay) - (ay - p1[j, 1]) * (bx - ax)
+            s2 = (ax - p2[j, 0]) * (by - ay) - (ay - p2[j, 1]) * (bx - ax)
+            left = s1 >= -eps and s2 >= -eps
+            right = not left and s1 <= eps and s2 <= eps
+            if not right:
+                n_left[i] += 1
+            if not left:
+                n_right[i] += 1
+    return n_left, n_right
+
+
 def _build_tree(pts32, nxt, prv, dirs, convex, points):
     """RVO2's obstacle-tree construction (single precision), splitting edges in place.
 
@@ -77,29 +105,26 @@ def _build_tree(pts32, nxt, prv, dirs, convex, points):
         members, parent, side, level = todo.pop()
         if not members:
             continue
-        n = len(members)
         p1 = np.array([pts32[j] for j in members], np.float32)
         p2 = np.array([pts32[nxt[j]] for j in members], np.float32)
-        # side of every edge's end points w.r.t. every candidate splitter (rows)
-        s1 = _left_of(p1[:, None], p2[:, None], p1[None])
-        s2 = _left_of(p1[:, None], p2[:, None], p2[None])
-        left = (s1 >= -eps) & (s2 >= -eps)
-        right = ~left & (s1 <= eps) & (s2 <= eps)
-        off = ~np.eye(n, dtype=bool)
-        n_left = np.count_nonzero(~right & off, axis=1)  # left or crossing
-        n_right = np.count_nonzero(~left & off, axis=1)  # right or crossing
+        n_left, n_right = _side_counts(p1, p2, eps)
         big, small = np.maximum(n_left, n_right), np.minimum(n_left, n_right)
         # splitter: fewest edges on the larger side, then on the smaller; first such
         best = int(np.lexsort((small, big))[0])
+        # side of every edge's end points w.r.t. the splitter
+        s1 = _left_of(p1[best], p2[best], p1)
+        s2 = _left_of(p1[best], p2[best], p2)
+        left = (s1 >= -eps) & (s2 >= -eps)
+        right = ~left & (s1 <= eps) & (s2 <= eps)
         i = members[best]
         a, b = pts32[i], pts32[nxt[i]]
         lefts, rights = [], []
         for jj, j in enumerate(members):
             if jj == best:
                 continue
-            if left[best, jj]:
+            if left[jj]:
                 lefts.append(j)
-            elif right[best, jj]:
+            elif right[jj]:
                 rights.append(j)
             else:  # edge j crosses the splitter's line: cut it there
                 j2 = nxt[j]
@@ -115,7 +140,7 @@ def _build_tree(pts32, nxt, prv, dirs, convex, points):
                 prv.append(j)
                 nxt[j] = new
                 prv[j2] = new
-                if s1[best, jj] > 0.0:
+                if s1[jj] > 0.0:
                     lefts.append(j)
                     rights.append(new)
                 else:
