@@ -30,9 +30,11 @@ runs the same law on its own observation row:
    back at the latest step (the simulator does not log it).
 
 Speed: ``kernel = "numba"`` (default) computes step 3 with
-:func:`comparisons.lf_vo_kernel.vo_clearance` (one pass per robot, exact
-clearances with culling of obstacles that cannot be the nearest) and the costs
-once per turn rate of the grid; ``kernel = "numpy"`` is the dense reference
+:func:`comparisons.lf_vo_kernel.vo_clearance` (one call and one rollout per
+robot for robots, humans and discs, each checked over its own horizon; exact
+clearances with culling of obstacles that cannot be the nearest) and the choice
+with :func:`comparisons.lf_vo_kernel.vo_choose` (costs of the safe samples
+only, trigonometry once per turn rate); ``kernel = "numpy"`` is the dense reference
 (:func:`comparisons.lf_vo_core.rollout`, :func:`~comparisons.lf_vo_core.path_clearance`,
 :func:`~comparisons.lf_vo_core.vo_cost`). Both give the same commands.
 
@@ -87,7 +89,7 @@ from comparisons.lf_vo_core import (
     target_error,
     vo_cost,
 )
-from comparisons.lf_vo_kernel import vo_clearance
+from comparisons.lf_vo_kernel import vo_choose, vo_clearance
 from dfcoa_opt.control.base import Observation
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.params import param
@@ -101,6 +103,7 @@ class LeaderFollowerVO:
     """Leader-follower V formation (eq 4-11) with a sampled velocity obstacle (eq 12)."""
 
     command = "unicycle"
+    uses_scan = False  # obstacles come from the map's discs, obs.neighbours and obs.obstacles
 
     @dataclass(frozen=True)
     class Params:
@@ -242,18 +245,20 @@ class LeaderFollowerVO:
         robots = self._robots(obs)
         if hold is not None:
             robots = (*robots[:3], robots[3] & ~np.asarray(hold, dtype=bool)[:, None])
-        if p.kernel == "numba":
-            common = (pose, v, w, step)
-            far = vo_clearance(*common, p.horizon_steps, p.turn_time, *self._humans(obs),
-                               self._circles, self._circle_reach, w_stride=p.w_samples)
-            near = vo_clearance(*common, steps_r, p.turn_time, *robots, w_stride=p.w_samples)
-        else:  # the numpy reference
+        if p.kernel == "numpy":  # the reference: the robots over the first steps_r steps
             pts = rollout(pose, v, w, step, p.horizon_steps, p.turn_time)
             parts = [np.concatenate(pair, axis=1) for pair in zip(self._static(obs.n),
                                                                   self._humans(obs), strict=True)]
             far = path_clearance(pts, step, *parts)
             near = path_clearance(pts[:, :, :steps_r], step, *robots)
-        return np.minimum(far, near)
+            return np.minimum(far, near)
+        # numba: one pass, the robots' columns checked over their first steps_r steps
+        humans = self._humans(obs)
+        cols = [np.concatenate(pair, axis=1) for pair in zip(humans, robots, strict=True)]
+        limit = np.concatenate((np.full(humans[3].shape[1], p.horizon_steps),
+                                np.full(robots[3].shape[1], steps_r)))
+        return vo_clearance(pose, v, w, step, p.horizon_steps, p.turn_time, *cols, self._circles,
+                            self._circle_reach, w_stride=p.w_samples, limit=limit)
 
     def samples(self, v_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(N, S)`` grid of (v, omega) samples for per-robot speed limits ``v_max`` (m/s)."""
@@ -265,23 +270,6 @@ class LeaderFollowerVO:
         v = np.repeat(v_max[:, None] * frac, self.p.w_samples, axis=1)
         w = np.broadcast_to(w_row, v.shape).copy()
         return v, w
-
-    def _grid_cost(self, theta: np.ndarray, v: np.ndarray, w: np.ndarray, v_ref: np.ndarray,
-                   w_ref: np.ndarray, theta_t: np.ndarray) -> np.ndarray:
-        """:func:`vo_cost` of the samples of :meth:`samples` (+ the preferred column), ``(N, S)``.
-
-        The same values as the flat call; the grid's turn rates are passed once
-        (``(1, 1, W)``), so the trigonometry is done per turn rate, not per sample.
-        """
-        p, n = self.p, len(v)
-        nv, nw = p.v_samples, p.w_samples
-        args = (v_ref, w_ref, theta_t, p.turn_time, p.pref_weight, p.heading_weight,
-                p.turn_weight)
-        grid = v[:, :nv * nw].reshape(n, nv, nw)
-        cost = vo_cost(theta, grid, self._grid[2][:nw].reshape(1, 1, nw), *args).reshape(n, -1)
-        if v.shape[1] == nv * nw:
-            return cost
-        return np.column_stack((cost, vo_cost(theta, v[:, nv * nw:], w[:, nv * nw:], *args)))
 
     def act(self, obs: Observation) -> np.ndarray:
         """Row i uses robot i's pose, neighbours, sensed humans, slot and the broadcast leader."""
@@ -297,15 +285,16 @@ class LeaderFollowerVO:
             v = np.column_stack((v, v_ref))
             w = np.column_stack((w, w_ref))
         clear = self.clearance(obs, v, w, hold=dist <= p.arrival_radius)
+        weights = (p.turn_time, p.pref_weight, p.heading_weight, p.turn_weight)
         if p.kernel == "numba":
-            cost = self._grid_cost(pose[:, 2], v, w, v_ref, w_ref, theta_t)
+            best, fell = vo_choose(pose[:, 2], v, w, v_ref, w_ref, theta_t, clear, *weights,
+                                   w_stride=p.w_samples)
         else:  # the numpy reference
-            cost = vo_cost(pose[:, 2], v, w, v_ref, w_ref, theta_t, p.turn_time, p.pref_weight,
-                           p.heading_weight, p.turn_weight)
-        safe = clear >= 0.0
-        best = np.argmin(np.where(safe, cost, np.inf), axis=1)
-        fell = ~safe.any(axis=1)
-        best = np.where(fell, np.argmax(clear, axis=1), best)
+            cost = vo_cost(pose[:, 2], v, w, v_ref, w_ref, theta_t, *weights)
+            safe = clear >= 0.0
+            best = np.argmin(np.where(safe, cost, np.inf), axis=1)
+            fell = ~safe.any(axis=1)
+            best = np.where(fell, np.argmax(clear, axis=1), best)
         rows = np.arange(obs.n)
         cmd = np.column_stack((v[rows, best], w[rows, best]))
         if p.fallback == "stop":

@@ -80,15 +80,17 @@ from comparisons.virtual_spring_core import (
     conflict_resolution,
     consensus_input,
     consistency_velocity,
-    disc_normals,
     dynamic_speed_limit,
     error_trend,
     fig1_adjacency,
     follower_avoidance_velocity,
     leader_avoidance_velocity,
     leader_velocity,
+    norm2,
+    polygon_edge_table,
     polygon_normals,
     spring_force,
+    unit_vectors,
     vo_conflict,
 )
 from dfcoa_opt.control.base import Observation, slot_velocity
@@ -112,6 +114,7 @@ class VirtualSpring:
     """
 
     command = "velocity"
+    uses_scan = False  # sources: the map's circles and polygons, neighbours, moving obstacles
 
     @dataclass(frozen=True)
     class Params:
@@ -166,6 +169,8 @@ class VirtualSpring:
         self._circles = np.zeros((0, 2))
         self._circle_r = np.zeros(0)
         self._polygons: list[np.ndarray] = []
+        self._edges = polygon_edge_table([])
+        self._const: dict[tuple, tuple[np.ndarray, ...]] = {}  # per-shape constants of a step
         self._t_seen = np.zeros(0)
         self._e_prev, self._e_last = np.zeros(0), np.zeros(0)
         self._lim_prev, self._lim_last = np.zeros(0), np.zeros(0)
@@ -196,6 +201,8 @@ class VirtualSpring:
         self._circles = np.array([c.center for c in circles], dtype=float).reshape(-1, 2)
         self._circle_r = np.array([c.radius for c in circles], dtype=float)
         self._polygons = [np.asarray(v, dtype=float) for v in scenario.world.polygons]
+        self._edges = polygon_edge_table(self._polygons)  # static: built once
+        self._const = {}
         self._t_seen = np.full(n, -np.inf)
         self._e_prev, self._e_last = np.full(n, np.nan), np.full(n, np.nan)
         self._lim_prev, self._lim_last = np.full(n, self._v_max), np.full(n, self._v_max)
@@ -216,9 +223,11 @@ class VirtualSpring:
         hit = nb.index == self.p.leader_index
         seen = hit.any(axis=1)
         k = np.argmax(hit, axis=1)
-        virt = body_to_world(np.asarray(obs.leader[:3], dtype=float), self._lead_offset)
-        v_virt = slot_velocity(obs.leader, virt)
         own = (obs.robot_ids == self.p.leader_index)[:, None]
+        virt = v_virt = np.zeros(2)  # only used by the rows that neither are nor see the leader
+        if not (seen | own[:, 0]).all():
+            virt = body_to_world(np.asarray(obs.leader[:3], dtype=float), self._lead_offset)
+            v_virt = slot_velocity(obs.leader, virt)
         p_l = np.where(own, obs.pose[:, :2], np.where(seen[:, None], nb.position[rows, k], virt))
         v_l = np.where(own, obs.velocity, np.where(seen[:, None], nb.velocity[rows, k], v_virt))
         moving = np.hypot(v_l[:, 0], v_l[:, 1]) > _STILL
@@ -233,23 +242,46 @@ class VirtualSpring:
         th = heading.reshape(heading.shape + (1,) * (index.ndim - 1))
         return rotate(rel, th)
 
+    def _constants(self, kind: str, n: int, k: int, m: int) -> tuple[np.ndarray, ...]:
+        """Arrays of ``kind`` (``"spring"``, ``"resolve"``) that depend only on the shapes.
+
+        ``n`` rows, ``k`` neighbour columns, ``m`` moving-obstacle columns.
+        """
+        key = (kind, n, k, m)
+        if key not in self._const:
+            c, q, r = len(self._circle_r), len(self._edges.a), self._radius
+            if kind == "spring":  # circle centres, radii of the circles and the robots
+                self._const[key] = (np.broadcast_to(self._circles, (n, c, 2)),
+                                    np.concatenate((np.broadcast_to(self._circle_r, (n, c)),
+                                                    np.full((n, k), r)), axis=1),
+                                    np.ones((n, c + q), dtype=bool))
+            else:  # robots' Minkowski radius, eq 17 shares
+                self._const[key] = (np.full((n, k), 2.0 * r), np.concatenate(
+                    (np.ones((n, k)), np.full((n, m), self.p.obstacle_share)), axis=1))
+        return self._const[key]
+
     def spring(self, obs: Observation) -> np.ndarray:
-        """Eq 7 for every row: static discs and polygons, robots in range, moving obstacles."""
+        """Eq 7 for every row: static discs and polygons, robots in range, moving obstacles.
+
+        The sources are, in this order, the static circles, the polygons' nearest
+        boundary points (edges built at reset), the neighbours and the moving
+        obstacles; the discs' normals (:func:`~comparisons.virtual_spring_core.disc_normals`)
+        are computed all at once.
+        """
         pos, r, n = obs.pose[:, :2], self._radius, obs.n
-        parts = []
-        if len(self._circle_r):
-            parts.append((*disc_normals(pos, self._circles, self._circle_r),
-                          np.ones((n, len(self._circle_r)), dtype=bool)))
-        if self._polygons:
-            parts.append((*polygon_normals(pos, self._polygons),
-                          np.ones((n, len(self._polygons)), dtype=bool)))
         nb, mo = obs.neighbours, obs.obstacles
-        parts.append((*disc_normals(pos, nb.position, np.full(nb.index.shape, r)), nb.mask))
-        parts.append((*disc_normals(pos, mo.position, mo.radius), mo.mask))
-        n_hat = np.concatenate([q[0] for q in parts], axis=1)
-        clear = np.concatenate([q[1] for q in parts], axis=1) - r
-        mask = np.concatenate([q[2] for q in parts], axis=1) & (clear <= self.p.spring_range)
-        delta = n_hat * np.maximum(clear, self.p.spring_min_distance)[..., None]
+        circles, radii, always = self._constants("spring", n, nb.index.shape[1], mo.mask.shape[1])
+        unit, dist = unit_vectors(pos[:, None, :] - np.concatenate(
+            (circles, nb.position, mo.position), axis=1))
+        surface = dist - np.concatenate((radii, mo.radius), axis=1)
+        if len(self._edges.a):
+            c = circles.shape[1]
+            n_hat, s = polygon_normals(pos, self._edges)
+            unit = np.concatenate((unit[:, :c], n_hat, unit[:, c:]), axis=1)
+            surface = np.concatenate((surface[:, :c], s, surface[:, c:]), axis=1)
+        clear = surface - r
+        mask = np.concatenate((always, nb.mask, mo.mask), axis=1) & (clear <= self.p.spring_range)
+        delta = unit * np.maximum(clear, self.p.spring_min_distance)[..., None]
         return spring_force(delta, mask, self.p.spring_gain)
 
     def _trend(self, t: float, ids: np.ndarray, err: np.ndarray) -> np.ndarray:
@@ -274,14 +306,16 @@ class VirtualSpring:
         p, r = self.p, self._radius
         pos = obs.pose[:, :2]
         nb, mo = obs.neighbours, obs.obstacles
+        rad_nb, share = self._constants("resolve", obs.n, nb.index.shape[1], mo.mask.shape[1])
         p_k = np.concatenate((nb.position, mo.position), axis=1)
         v_k = np.concatenate((nb.velocity, mo.velocity), axis=1)
-        rad = np.concatenate((np.full(nb.index.shape, 2.0 * r), mo.radius + r), axis=1)
+        rad = np.concatenate((rad_nb, mo.radius + r), axis=1)
         mask = np.concatenate((nb.mask, mo.mask), axis=1)
-        share = np.concatenate((np.ones(nb.index.shape), np.full(mo.mask.shape,
-                                                                 p.obstacle_share)), axis=1)
         hit = mask & vo_conflict(p_k - pos[:, None], v[:, None] - v_k, rad + p.vo_margin,
                                  p.vo_horizon)
+        if not hit.any() and not np.signbit(v[v == 0.0]).any():
+            # no conflict: eq 17's changes are zeros (+-0), and v + 0 is v unless v has a -0
+            return np.zeros_like(v), hit.sum(axis=1)
         return conflict_resolution(pos, v, p_k, v_k, hit, share), hit.sum(axis=1)
 
     # --------------------------------------------------------------------- act
@@ -307,7 +341,7 @@ class VirtualSpring:
         v_fol = follower_avoidance_velocity(v_l, consistency_velocity(u, p.beta), f)
         v = np.where(lead[:, None], v_lead, v_fol)
         # eq 12-13, followers
-        err = np.linalg.norm(pos - p_l - e_own, axis=1)
+        err = norm2(pos - p_l - e_own)
         eps = self._trend(obs.t, ids, err)
         base = (self._lim_prev[ids] if p.limit_memory == "limit"
                 else np.hypot(vel[:, 0], vel[:, 1]))

@@ -8,7 +8,8 @@ inputs only. Equation numbers are the paper's (``docs/methods/virtual_spring.md`
 * :func:`consensus_input` -- eq 4.
 * :func:`leader_velocity` -- eq 6.
 * :func:`spring_force` -- eq 7; :func:`disc_normals` and :func:`polygon_normals`
-  turn discs and polygons into eq 7's source points.
+  turn discs and polygons into eq 7's source points (:func:`polygon_edge_table`:
+  the polygons' edges, built once per scenario).
 * :func:`leader_avoidance_velocity`, :func:`follower_avoidance_velocity` -- eq 8, eq 9.
 * :func:`consistency_velocity` -- eq 10-11.
 * :func:`error_trend` and :func:`dynamic_speed_limit` -- eq 12-13.
@@ -18,10 +19,12 @@ inputs only. Equation numbers are the paper's (``docs/methods/virtual_spring.md`
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dfcoa_opt.geometry import closest_point_on_segment, points_in_polygons, polygon_edges
+from dfcoa_opt.geometry import polygon_edges
 
 FloatArray = NDArray[np.float64]
 
@@ -29,11 +32,17 @@ FloatArray = NDArray[np.float64]
 TINY = 1e-12
 
 
-def _unit(v: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Unit vectors of ``(..., 2)`` ``v`` (0 where ``|v| <= TINY``) and the norms."""
-    norm = np.linalg.norm(v, axis=-1)
-    safe = np.where(norm > TINY, norm, 1.0)
-    return np.where((norm > TINY)[..., None], v / safe[..., None], 0.0), norm
+def norm2(v: FloatArray) -> FloatArray:
+    """``np.linalg.norm(v, axis=-1)`` of ``(..., 2)`` ``v``, bit for bit, with fewer calls."""
+    x, y = v[..., 0], v[..., 1]
+    return np.sqrt(x * x + y * y)
+
+
+def unit_vectors(v: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Unit vectors of ``(..., 2)`` ``v`` (0 where ``|v| <= TINY``) and the norms (same unit)."""
+    norm = norm2(v)
+    big = norm > TINY
+    return np.where(big[..., None], v / np.where(big, norm, 1.0)[..., None], 0.0), norm
 
 
 def fig1_adjacency(n: int, leader_index: int) -> FloatArray:
@@ -141,7 +150,7 @@ def spring_force(delta: ArrayLike, mask: ArrayLike, gain: float = 1.0) -> FloatA
         ``(N, 2)`` spring force ``(f^x, f^y)``, m/s.
     """
     delta = np.asarray(delta, dtype=float)
-    d = np.linalg.norm(delta, axis=-1)
+    d = norm2(delta)
     use = np.asarray(mask, dtype=bool) & (d > TINY)
     w = np.where(use, 1.0 / np.where(use, d, 1.0) ** 3, 0.0)
     return gain * (w[..., None] * delta).sum(axis=1)
@@ -162,36 +171,72 @@ def disc_normals(p: ArrayLike, centres: ArrayLike,
         (negative inside).
     """
     rel = np.asarray(p, dtype=float)[:, None, :] - np.asarray(centres, dtype=float)
-    n_hat, dist = _unit(rel)
+    n_hat, dist = unit_vectors(rel)
     return n_hat, dist - np.asarray(radii, dtype=float)
 
 
+class PolygonEdges(NamedTuple):
+    """Padded edges of ``Q`` static polygons (:func:`polygon_edge_table`), m.
+
+    ``a``, ``b``: ``(Q, V, 2)`` starts and ends (:func:`dfcoa_opt.geometry.polygon_edges`);
+    ``ab = b - a``; ``den``: ``(Q, V)`` ``|ab|^2`` (1 for zero-length edges, m^2);
+    ``flat``: horizontal (and padding) edges; ``dy``: ``y_b - y_a`` (1 for flat edges).
+    """
+
+    a: FloatArray
+    b: FloatArray
+    ab: FloatArray
+    den: FloatArray
+    flat: NDArray[np.bool_]
+    dy: FloatArray
+
+
+def polygon_edge_table(polygons: list[ArrayLike]) -> PolygonEdges:
+    """Edges of ``Q`` polygons (vertex arrays ``(V_q, 2)``, m), built once per scenario.
+
+    The constants are those :func:`dfcoa_opt.geometry.closest_point_on_segment`
+    and :func:`dfcoa_opt.geometry.points_in_polygons` compute on every call.
+    """
+    a, b = polygon_edges(polygons)
+    ab = b - a
+    den = np.einsum("...i,...i->...", ab, ab)
+    flat = a[..., 1] == b[..., 1]
+    return PolygonEdges(a, b, ab, np.where(den > 0.0, den, 1.0), flat,
+                        np.where(flat, 1.0, b[..., 1] - a[..., 1]))
+
+
 def polygon_normals(p: ArrayLike,
-                    polygons: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
+                    polygons: list[FloatArray] | PolygonEdges) -> tuple[FloatArray, FloatArray]:
     """Outward unit normals and signed distances from polygons to robots.
 
     The normal points from the polygon's nearest boundary point to the robot
-    (away from the polygon when the robot is inside).
+    (away from the polygon when the robot is inside). Nearest points and the
+    inside test are bit for bit :func:`dfcoa_opt.geometry.closest_point_on_segment`
+    (the first nearest edge wins) and :func:`dfcoa_opt.geometry.points_in_polygons`.
 
     Args:
         p: ``(N, 2)`` robot positions, m.
-        polygons: ``Q`` vertex arrays ``(V, 2)``, m.
+        polygons: ``Q`` vertex arrays ``(V, 2)``, m, or their edges
+            (:func:`polygon_edge_table`, faster when the polygons do not change).
 
     Returns:
         ``(n_hat (N, Q, 2), s (N, Q))``, s in m, negative inside a polygon.
     """
     p = np.asarray(p, dtype=float)
-    if not len(polygons):
+    e = polygons if isinstance(polygons, PolygonEdges) else polygon_edge_table(polygons)
+    if not len(e.a):
         return np.zeros((len(p), 0, 2)), np.zeros((len(p), 0))
-    a, b = polygon_edges(polygons)
-    closest = closest_point_on_segment(p[:, None, None, :], a, b)  # (N, Q, V, 2)
-    k = np.argmin(np.linalg.norm(p[:, None, None, :] - closest, axis=-1), axis=-1)  # (N, Q)
-    nearest = np.take_along_axis(closest, k[..., None, None], axis=2)[:, :, 0]  # (N, Q, 2)
-    inside = points_in_polygons(p, a, b)
-    unit, d = _unit(p[:, None, :] - nearest)
-    n_hat = np.where(inside[..., None], -unit, unit)
-    s = np.where(inside, -d, d)
-    return n_hat, s
+    pt = p[:, None, None, :]
+    t = np.einsum("...i,...i->...", pt - e.a, e.ab) / e.den
+    closest = e.a + np.clip(t, 0.0, 1.0)[..., None] * e.ab  # (N, Q, V, 2)
+    k = np.argmin(norm2(pt - closest), axis=-1)  # (N, Q)
+    nearest = closest[np.arange(len(p))[:, None], np.arange(len(e.a)), k]
+    px, py, y1 = pt[..., 0], pt[..., 1], e.a[..., 1]  # even-odd rule, all edges at once
+    crosses = ((y1 <= py) != (e.b[..., 1] <= py)) & ~e.flat
+    inside = np.logical_xor.reduce(crosses & (px < e.a[..., 0] + (py - y1) * e.ab[..., 0] / e.dy),
+                                   axis=-1)
+    unit, d = unit_vectors(p[:, None, :] - nearest)
+    return np.where(inside[..., None], -unit, unit), np.where(inside, -d, d)
 
 
 def leader_avoidance_velocity(v_l: ArrayLike, f: ArrayLike) -> FloatArray:
@@ -321,11 +366,12 @@ def vo_conflict(rel_pos: ArrayLike, rel_vel: ArrayLike, radius: ArrayLike,
     """
     d = np.asarray(rel_pos, dtype=float)
     w = np.asarray(rel_vel, dtype=float)
-    ww = (w**2).sum(-1)
-    tau = np.clip((d * w).sum(-1) / np.where(ww > 0.0, ww, 1.0), 0.0, horizon)
-    tau = np.where(ww > 0.0, tau, 0.0)
-    miss = np.linalg.norm(d - tau[..., None] * w, axis=-1)
-    return miss <= np.asarray(radius, dtype=float)
+    wx, wy = w[..., 0], w[..., 1]
+    ww = wx * wx + wy * wy
+    moves = ww > 0.0
+    dw = d[..., 0] * wx + (d[..., 1] * wy + 0.0)  # (d * w).sum(-1), bit for bit
+    tau = np.where(moves, np.clip(dw / np.where(moves, ww, 1.0), 0.0, horizon), 0.0)
+    return norm2(d - tau[..., None] * w) <= np.asarray(radius, dtype=float)
 
 
 def conflict_resolution(p_i: ArrayLike, v_i: ArrayLike, p_k: ArrayLike, v_k: ArrayLike,
@@ -351,13 +397,13 @@ def conflict_resolution(p_i: ArrayLike, v_i: ArrayLike, p_k: ArrayLike, v_k: Arr
     p_i = np.asarray(p_i, dtype=float)[:, None, :]
     v_i = np.asarray(v_i, dtype=float)[:, None, :]
     p_k, v_k = np.asarray(p_k, dtype=float), np.asarray(v_k, dtype=float)
-    axis, _ = _unit(v_i + v_k)
-    own, _ = _unit(np.broadcast_to(v_i, v_k.shape))
-    other, _ = _unit(v_k)
-    for fallback in (own, other):
-        none = np.linalg.norm(axis, axis=-1) == 0.0
-        axis = np.where(none[..., None], fallback, axis)
-    front = ((p_i - p_k) * axis).sum(-1) > 0.0
-    half = 0.5 * np.linalg.norm(v_i - v_k, axis=-1) * np.asarray(share, dtype=float)
+    axis, _ = unit_vectors(v_i + v_k)
+    for fallback in (v_i, v_k):  # own direction ((N, 1, 2)), then the other's
+        none = (axis[..., 0] == 0.0) & (axis[..., 1] == 0.0)  # |axis| == 0: no direction
+        if none.any():
+            axis = np.where(none[..., None], unit_vectors(fallback)[0], axis)
+    rel = p_i - p_k
+    front = rel[..., 0] * axis[..., 0] + rel[..., 1] * axis[..., 1] > 0.0
+    half = 0.5 * norm2(v_i - v_k) * np.asarray(share, dtype=float)
     step = np.where(front, half, -half) * np.asarray(conflict, dtype=bool)
     return (step[..., None] * axis).sum(axis=1)
