@@ -154,18 +154,19 @@ def test_robot_risk_counts_ordered_pairs_within_detection_range():
     assert m.collision_risk(make_log(pose=[[[0.0, 0.0]]]), MetricSpec())[0] == 0.0
 
 
-def test_robot_risk_is_per_step_across_chunks(monkeypatch):
-    rng = np.random.default_rng(3)
-    pos = rng.uniform(0, 4, size=(7, 5, 2))
+@pytest.mark.parametrize(("steps", "n", "side"), [(7, 5, 4.0), (30, 120, 25.0)])
+def test_robot_risk_is_per_step_and_matches_all_pairs(steps, n, side):
+    """The sweep-line pair term against a dense all-pairs sum, step by step."""
+    rng = np.random.default_rng(n)
+    pos = rng.uniform(0, side, size=(steps, n, 2))
+    pos[0, 1] = pos[0, 0]  # coincident robots: the distance floor applies
     log = make_log(pose=pos)
     spec = MetricSpec(risk_lambda2=0.0, risk_detection_range=2.0)
     d = np.linalg.norm(pos[:, :, None] - pos[:, None], axis=-1)
-    off = ~np.eye(5, dtype=bool)
-    inv = np.where(off & (d <= 2.0), 1.0 / np.where(off, d, 1.0) ** 2, 0.0)
-    want = inv.sum(axis=(1, 2))
-    np.testing.assert_allclose(m.collision_risk(log, spec), want)
-    monkeypatch.setattr(m, "_CHUNK_POINTS", 10)  # 2 steps per KD-tree
-    np.testing.assert_allclose(m.collision_risk(log, spec), want)
+    off = ~np.eye(n, dtype=bool)
+    floor = m.RISK_DISTANCE_FLOOR
+    inv = np.where(off & (d <= 2.0), 1.0 / np.maximum(np.where(off, d, 1.0), floor) ** 2, 0.0)
+    np.testing.assert_allclose(m.collision_risk(log, spec), inv.sum(axis=(1, 2)), rtol=1e-12)
 
 
 def test_obstacle_risk_static_and_moving(monkeypatch):
