@@ -27,9 +27,13 @@ from __future__ import annotations
 
 import importlib
 import json
+import multiprocessing
+import os
+import pickle
 import sys
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -135,26 +139,89 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
         if name not in names:
             raise DfcoaError(f"--only: unknown recipe '{name}'{did_you_mean(name, names)}; "
                              f"available: {', '.join(names)}")
-    for r in todo:
-        if only and r.name not in only:
-            continue
-        t0 = time.perf_counter()
-        dest = out / r.name
-        dest.mkdir(parents=True, exist_ok=True)
-        if r.sweep is None:
-            arts = r.render(scenarios, dest)
-            done = "computed"
-        else:
+    config = config or ExecutorConfig()
+    overlap = config.kind == "process" and (config.jobs or os.cpu_count() or 1) > 1
+    with _Renderer(overlap) as renderer:
+        for r in todo:
+            if only and r.name not in only:
+                continue
+            t0 = time.perf_counter()
+            dest = out / r.name
+            dest.mkdir(parents=True, exist_ok=True)
+            if r.sweep is None:
+                renderer.submit(r, scenarios, dest, "computed", t0)
+                continue
             result = run_sweep(scenarios / r.sweep, cache / r.name, config, seeds=seeds,
                                progress=progress, overrides=overrides)
-            arts = r.render(result.store, dest)
-            done = (f"{result.ran} runs ({result.failed} failed), {result.skipped} cached")
-        atomic_write(dest / "artefacts.json", json.dumps(
-            {"recipe": r.name, "title": r.title, "sweep": r.sweep,
-             "artefacts": [asdict(a) for a in arts]}, indent=1) + "\n")
-        print(f"{r.name}: {done}; {len(arts)} artefacts in {time.perf_counter() - t0:.1f} s",
-              file=sys.stderr)
+            done = f"{result.ran} runs ({result.failed} failed), {result.skipped} cached"
+            renderer.submit(r, result.store.root, dest, done, t0)
     return write_index(out, names)
+
+
+def _render(render: Renderer, source: Path, is_store: bool, dest: Path) -> list[Artefact]:
+    """Run one renderer (in the render process or inline); ``source``: store root or scenarios."""
+    from dfcoa_opt.bench.store import ResultsStore
+
+    return render(ResultsStore(source) if is_store else source, dest)
+
+
+class _Renderer:
+    """Renders recipes, in a separate process while the next sweep simulates.
+
+    Rendering (matplotlib) runs in this process between sweeps otherwise, and
+    the pool's workers wait: 35 s of the comparison figures' ``make figures``
+    left a core idle. With ``overlap``, renderers go to one render process in
+    submission order, and the artefact lists come back as they finish; a
+    renderer that cannot be pickled (a local function) renders inline.
+    """
+
+    def __init__(self, overlap: bool) -> None:
+        self.pool: ProcessPoolExecutor | None = None
+        if overlap:
+            ctx = multiprocessing.get_context("forkserver")
+            self.pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx)
+        self.pending: list[tuple[Recipe, Path, str, float, Future[list[Artefact]]]] = []
+
+    def __enter__(self) -> _Renderer:
+        return self
+
+    def submit(self, r: Recipe, source: Path, dest: Path, done: str, t0: float) -> None:
+        """Render ``r`` from ``source`` (store root, or scenario root without a sweep)."""
+        args = (r.render, source, r.sweep is not None, dest)
+        fut: Future[list[Artefact]] = Future()
+        if self.pool is not None and _picklable(r.render):
+            fut = self.pool.submit(_render, *args)
+        else:
+            fut.set_result(_render(*args))
+        self.pending.append((r, dest, done, t0, fut))
+        self._collect(block=False)
+
+    def _collect(self, block: bool) -> None:
+        """Write the artefact lists of finished renders, in submission order."""
+        while self.pending and (block or self.pending[0][4].done()):
+            r, dest, done, t0, fut = self.pending.pop(0)
+            arts = fut.result()
+            atomic_write(dest / "artefacts.json", json.dumps(
+                {"recipe": r.name, "title": r.title, "sweep": r.sweep,
+                 "artefacts": [asdict(a) for a in arts]}, indent=1) + "\n")
+            print(f"{r.name}: {done}; {len(arts)} artefacts in {time.perf_counter() - t0:.1f} s",
+                  file=sys.stderr)
+
+    def __exit__(self, *exc: object) -> None:
+        try:
+            if exc[0] is None:
+                self._collect(block=True)
+        finally:
+            if self.pool is not None:
+                self.pool.shutdown(cancel_futures=True)
+
+
+def _picklable(obj: object) -> bool:
+    try:
+        pickle.dumps(obj)
+    except Exception:  # noqa: BLE001 - any pickling failure means: render inline
+        return False
+    return True
 
 
 def write_index(out: Path, order: Sequence[str]) -> Path:

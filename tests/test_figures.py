@@ -42,3 +42,28 @@ def test_cli_set_must_be_toml(tmp_path, capsys):
     code = main(["figures", "--out", str(tmp_path / "o"), "--set", "t_max=abc"])
     assert code == 2
     assert "--set: t_max: 'abc' is not a TOML value" in capsys.readouterr().err
+
+
+def test_renders_overlap_in_a_process_and_local_renderers_run_inline(tmp_path, monkeypatch):
+    """Picklable renderers go to the render process (its errors come back); others inline."""
+    import operator
+
+    import pytest
+
+    from dfcoa_opt import figures
+
+    def local(scenarios, dest):  # a closure: cannot be pickled, so it renders inline
+        (dest / "hello.md").write_text(str(scenarios))
+        return [figures.Artefact("hello.md", "-", "test")]
+
+    recipes()  # register the real recipes first, so that they stay out of the patched table
+    monkeypatch.setattr(figures, "_RECIPES", {"local": figures.Recipe("local", None, "T", local)})
+    cfg = ExecutorConfig("process", 2)
+    index = make_figures(SCENARIOS, tmp_path / "out", tmp_path / "cache", cfg, progress=False)
+    assert (tmp_path / "out" / "local" / "hello.md").read_text() == str(SCENARIOS)
+    assert "`local/hello.md`" in index.read_text()
+    # operator.sub(Path, Path) raises in the render process; the error reaches the caller
+    monkeypatch.setattr(figures, "_RECIPES",
+                        {"bad": figures.Recipe("bad", None, "T", operator.sub)})
+    with pytest.raises(TypeError, match="unsupported operand"):
+        make_figures(SCENARIOS, tmp_path / "out2", tmp_path / "cache", cfg, progress=False)

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 from dfcoa_opt.bench.runner import Outcome, execute
 from dfcoa_opt.bench.sweep import RunSpec
+from dfcoa_opt.control.registry import BUILTIN_MODULES
 from dfcoa_opt.errors import DfcoaError
 
 EXECUTORS = ("serial", "process", "dask")
@@ -80,6 +81,7 @@ def _processes(runs: Sequence[RunSpec], jobs: int) -> Iterator[Outcome]:
     """
     queue = iter(runs)
     ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(list(WORKER_PRELOAD))
     with ProcessPoolExecutor(max_workers=min(jobs, len(runs)), mp_context=ctx,
                              initializer=_one_numba_thread) as pool:
         active = {pool.submit(execute, r) for r in itertools.islice(queue, 2 * jobs)}
@@ -92,6 +94,14 @@ def _processes(runs: Sequence[RunSpec], jobs: int) -> Iterator[Outcome]:
         finally:
             for fut in active:
                 fut.cancel()
+
+
+#: Imported once by the fork server (when it starts), so that every pool worker
+#: forks with them loaded instead of importing them itself: about 1.2 s saved per
+#: worker and pool (``make figures`` starts a pool per recipe). Importing runs no
+#: numba kernel, so no OpenMP thread exists yet when the server forks.
+WORKER_PRELOAD = ("dfcoa_opt.bench.runner", "dfcoa_opt.sim.simulator", "dfcoa_opt.metrics",
+                  "dfcoa_opt.localization.mcl", *BUILTIN_MODULES)
 
 
 def _one_numba_thread() -> None:
