@@ -139,6 +139,7 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
         if name not in names:
             raise DfcoaError(f"--only: unknown recipe '{name}'{did_you_mean(name, names)}; "
                              f"available: {', '.join(names)}")
+    start = time.perf_counter()
     config = config or ExecutorConfig()
     overlap = config.kind == "process" and (config.jobs or os.cpu_count() or 1) > 1
     with _Renderer(overlap) as renderer:
@@ -149,20 +150,29 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
             dest = out / r.name
             dest.mkdir(parents=True, exist_ok=True)
             if r.sweep is None:
-                renderer.submit(r, scenarios, dest, "computed", t0)
+                renderer.submit(r, scenarios, dest, "computed")
                 continue
             result = run_sweep(scenarios / r.sweep, cache / r.name, config, seeds=seeds,
                                progress=progress, overrides=overrides)
-            done = f"{result.ran} runs ({result.failed} failed), {result.skipped} cached"
-            renderer.submit(r, result.store.root, dest, done, t0)
+            renderer.submit(r, result.store.root, dest,
+                            f"{result.ran} runs ({result.failed} failed), {result.skipped} "
+                            f"cached, simulated in {time.perf_counter() - t0:.1f} s")
+    print(f"figures: {time.perf_counter() - start:.1f} s in all", file=sys.stderr)
     return write_index(out, names)
 
 
-def _render(render: Renderer, source: Path, is_store: bool, dest: Path) -> list[Artefact]:
-    """Run one renderer (in the render process or inline); ``source``: store root or scenarios."""
+def _render(render: Renderer, source: Path, is_store: bool,
+            dest: Path) -> tuple[list[Artefact], float]:
+    """Run one renderer (in the render process or inline); ``source``: store root or scenarios.
+
+    Returns:
+        The artefacts and the rendering's wall time, s.
+    """
     from dfcoa_opt.bench.store import ResultsStore
 
-    return render(ResultsStore(source) if is_store else source, dest)
+    t0 = time.perf_counter()
+    arts = render(ResultsStore(source) if is_store else source, dest)
+    return arts, time.perf_counter() - t0
 
 
 class _Renderer:
@@ -180,31 +190,34 @@ class _Renderer:
         if overlap:
             ctx = multiprocessing.get_context("forkserver")
             self.pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx)
-        self.pending: list[tuple[Recipe, Path, str, float, Future[list[Artefact]]]] = []
+        self.pending: list[tuple[Recipe, Path, str, Future[tuple[list[Artefact], float]]]] = []
 
     def __enter__(self) -> _Renderer:
         return self
 
-    def submit(self, r: Recipe, source: Path, dest: Path, done: str, t0: float) -> None:
-        """Render ``r`` from ``source`` (store root, or scenario root without a sweep)."""
+    def submit(self, r: Recipe, source: Path, dest: Path, done: str) -> None:
+        """Render ``r`` from ``source`` (store root, or scenario root without a sweep).
+
+        ``done`` (what the sweep did) starts the recipe's progress line.
+        """
         args = (r.render, source, r.sweep is not None, dest)
-        fut: Future[list[Artefact]] = Future()
+        fut: Future[tuple[list[Artefact], float]] = Future()
         if self.pool is not None and _picklable(r.render):
             fut = self.pool.submit(_render, *args)
         else:
             fut.set_result(_render(*args))
-        self.pending.append((r, dest, done, t0, fut))
+        self.pending.append((r, dest, done, fut))
         self._collect(block=False)
 
     def _collect(self, block: bool) -> None:
         """Write the artefact lists of finished renders, in submission order."""
-        while self.pending and (block or self.pending[0][4].done()):
-            r, dest, done, t0, fut = self.pending.pop(0)
-            arts = fut.result()
+        while self.pending and (block or self.pending[0][3].done()):
+            r, dest, done, fut = self.pending.pop(0)
+            arts, seconds = fut.result()
             atomic_write(dest / "artefacts.json", json.dumps(
                 {"recipe": r.name, "title": r.title, "sweep": r.sweep,
                  "artefacts": [asdict(a) for a in arts]}, indent=1) + "\n")
-            print(f"{r.name}: {done}; {len(arts)} artefacts in {time.perf_counter() - t0:.1f} s",
+            print(f"{r.name}: {done}; {len(arts)} artefacts rendered in {seconds:.1f} s",
                   file=sys.stderr)
 
     def __exit__(self, *exc: object) -> None:
