@@ -28,8 +28,11 @@ $(VENV)/.bench-installed: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[dev,dask,bench]'
 	touch $(VENV)/.bench-installed
 
+# BENCH_FIGURES=0 leaves out row (f), a whole `dfcoa figures` (about 5 min).
+BENCH_FIGURES ?= 1
+
 bench: $(VENV)/.bench-installed
-	MPLBACKEND=Agg $(BIN)/python -m benchmarks.run
+	MPLBACKEND=Agg BENCH_FIGURES=$(BENCH_FIGURES) $(BIN)/python -m benchmarks.run
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache

@@ -23,3 +23,11 @@ def test_scaling_scenarios_build_for_every_controller():
 def test_loglog_slope_recovers_a_power_law():
     n = np.array([4.0, 16.0, 64.0, 256.0, 1000.0])
     assert abs(loglog_slope(n, 3e-6 * n**1.3) - 1.3) < 1e-9
+
+
+def test_figures_row_can_be_left_out(monkeypatch, capsys):
+    from benchmarks import bench_figures
+
+    monkeypatch.setenv("BENCH_FIGURES", "0")
+    assert bench_figures.run() == []
+    assert "left out" in capsys.readouterr().out
