@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.bench_lidar import print_rows, row
+from benchmarks.bench_sim import scanning
 from dfcoa_opt.control.registry import make_controller
 from dfcoa_opt.localization import mcl_models
 from dfcoa_opt.localization.mcl import MonteCarloLocalization
@@ -104,7 +105,7 @@ def time_estimates(sc, poses: np.ndarray, scans: list) -> np.ndarray:
 
 
 def _per_step_and_run(sc) -> tuple[np.ndarray, np.ndarray]:
-    sim = Simulator(sc, make_controller("goto_slot"))
+    sim = Simulator(sc, scanning("goto_slot"))  # the LiDAR runs with truth too
     sim.run()  # warm-up
     step, whole = np.empty(RUNS), np.empty(RUNS)
     for k in range(RUNS):
