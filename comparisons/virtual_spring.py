@@ -75,9 +75,9 @@ from typing import Literal
 
 import numpy as np
 
+from comparisons.virtual_spring_conflict import conflict_resolution, vo_conflict
 from comparisons.virtual_spring_core import (
     cap_speed,
-    conflict_resolution,
     consensus_input,
     consistency_velocity,
     dynamic_speed_limit,
@@ -91,7 +91,6 @@ from comparisons.virtual_spring_core import (
     polygon_normals,
     spring_force,
     unit_vectors,
-    vo_conflict,
 )
 from dfcoa_opt.control.base import Observation, slot_velocity
 from dfcoa_opt.control.registry import register

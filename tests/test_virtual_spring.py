@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from comparisons.virtual_spring import VirtualSpring, VirtualSpringBasic
+from comparisons.virtual_spring_conflict import conflict_resolution, vo_conflict
 from comparisons.virtual_spring_core import (
-    conflict_resolution,
     consensus_input,
     consistency_velocity,
     disc_normals,
@@ -25,7 +25,6 @@ from comparisons.virtual_spring_core import (
     leader_velocity,
     polygon_normals,
     spring_force,
-    vo_conflict,
 )
 from dfcoa_opt.control.base import MovingObstacles, Observation
 from dfcoa_opt.control.registry import available, build_controller, make_controller

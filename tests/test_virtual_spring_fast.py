@@ -9,15 +9,14 @@ plain numpy forms of eq 15-17 (``(a * b).sum(-1)``, ``norm(...) == 0``).
 import numpy as np
 import pytest
 
+from comparisons.virtual_spring_conflict import conflict_resolution, vo_conflict
 from comparisons.virtual_spring_core import (
-    conflict_resolution,
     disc_normals,
     norm2,
     polygon_edge_table,
     polygon_normals,
     spring_force,
     unit_vectors,
-    vo_conflict,
 )
 from dfcoa_opt.geometry import closest_point_on_segment, points_in_polygons, polygon_edges
 from tests.test_virtual_spring import R, course, ctrl, observation
