@@ -53,3 +53,30 @@ def test_cli_exit_code_2_without_traceback(path: Path):
 def test_missing_file_is_one_line():
     with pytest.raises(ScenarioError, match="file not found"):
         load_scenario(CORPUS / "no_such_file.toml")
+
+
+@pytest.mark.parametrize("path", FILES, ids=[p.stem for p in FILES])
+def test_bench_rejects_a_sweep_over_the_bad_scenario(path: Path, tmp_path, capsys):
+    """``dfcoa bench``: exit 2 and one line naming the scenario file and its problem."""
+    from dfcoa_opt.cli import main
+
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'name = "bad"\nscenarios = ["{path}"]\ncontrollers = ["goto_slot"]\n'
+                     "seeds = 1\n")
+    assert main(["bench", str(sweep), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert str(path) in err[0] and expected_fragment(path) in err[0], err[0]
+    assert not (tmp_path / "out" / "rows").exists()  # rejected before any run
+
+
+def test_bench_rejects_a_sweep_naming_an_unknown_controller(tmp_path, capsys):
+    from dfcoa_opt.cli import main
+
+    scen = Path(__file__).resolve().parents[1] / "scenarios" / "example_empty.toml"
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'name = "bad"\nscenarios = ["{scen}"]\ncontrollers = ["goto_slott"]\n')
+    assert main(["bench", str(sweep), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(sweep) in err[0]
+    assert "controllers[0]: unknown controller 'goto_slott' (did you mean 'goto_slot'?)" in err[0]

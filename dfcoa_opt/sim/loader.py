@@ -6,7 +6,10 @@ with code 2. Checks beyond the per-key ones of :mod:`dfcoa_opt.sim.schema`:
 the map must load, polygons must be counter-clockwise, the leader's start and
 goal and explicit robot poses must lie on free cells inside the map, the leader
 planner, the localization mode and every ``[controllers.<id>]`` table must be
-known, and the planner must find a path.
+known, and the planner must find a path. Whatever the planner, the goal must
+be in the start's free region of the map (a grid search), and no robot may
+start on a formation slot inside an obstacle (an error; a robot body that only
+overlaps an obstacle at the start is allowed and counted as a contact).
 """
 
 from __future__ import annotations
@@ -166,6 +169,8 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
         leader0 = np.array([*spec.leader.start, heading])
         xy = slot_positions(leader0, offsets)
         pose = np.column_stack((xy, np.full(spec.team.n, heading)))
+    _check_start_clear(world, pose, spec, source)
+    _check_connected(world.grid, spec, source)
     return Scenario(spec=spec, source=source, world=world, offsets=offsets, initial_pose=pose,
                     leader_heading=float(heading), leader_path=np.asarray(path, dtype=float))
 
@@ -186,6 +191,42 @@ def _check_names(spec: ScenarioSpec, source: str) -> None:
                             f"available: {', '.join(estimator_names())}")
     estimator_options(spec.localization.mode, spec.localization.options, source)
     check_overrides(spec.controllers, source)
+
+
+def _check_start_clear(world: World, pose: Any, spec: ScenarioSpec, source: str) -> None:
+    """No robot may start on a formation slot inside a static obstacle: an error, not a warning.
+
+    With the default placement the robots start on their formation slots around
+    ``leader.start``; a slot inside an obstacle would start the run inside it,
+    which no controller can repair. Measured exactly on the shapes
+    (``World.clearance``), not on the grid. A robot whose *body* merely
+    overlaps an obstacle at the start is allowed (some tests start robots
+    close to walls on purpose); the simulator counts that contact at t = 0.
+    """
+    if spec.team.placement == "explicit":
+        return  # team.poses were checked on the (fatter) grid by _check_free
+    clear = world.clearance(np.asarray(pose, dtype=float)[:, :2])
+    for i in np.flatnonzero(clear <= 0.0):
+        x, y = pose[i][0], pose[i][1]
+        raise ScenarioError(source, "formation", f"robot {i} starts on its slot ({x:g}, {y:g}), "
+                                                 f"inside an obstacle; move leader.start or "
+                                                 f"the formation")
+
+
+def _check_connected(grid: OccupancyGrid, spec: ScenarioSpec, source: str) -> None:
+    """The goal must lie in the free region of the start, whatever the leader's planner.
+
+    A grid A* (8-connected, no corner cutting) on the map: a few ms. Planners
+    that search (``astar``) fail on their own; this catches the ``straight``
+    planner's line through a wall that closes the goal off.
+    """
+    from dfcoa_opt.planning.astar import search
+
+    start = tuple(int(v) for v in grid.world_to_cell(np.asarray(spec.leader.start, float)))
+    goal = tuple(int(v) for v in grid.world_to_cell(np.asarray(spec.leader.goal, float)))
+    if not search(grid.occupied, start, goal).found:
+        raise ScenarioError(source, "leader.goal", "unreachable from leader.start: no free "
+                                                   "path on the map joins them")
 
 
 def _check_free(grid: OccupancyGrid, point: Any, source: str, key: str) -> None:
