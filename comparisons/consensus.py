@@ -192,7 +192,7 @@ class ConsensusIvo:
     def __init__(self, params: Params) -> None:
         self.p = params
         fields = {k: getattr(params, k) for k in OrcaFilter.Params.__dataclass_fields__}
-        self._filter = OrcaFilter(OrcaFilter.Params(**fields))
+        self._filter = OrcaFilter(OrcaFilter.Params(**fields), owner=self.name)
         self._offsets = np.zeros((0, 2))
         self._v_max = 1.0
         self._k3 = params.k3

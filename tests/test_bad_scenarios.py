@@ -50,6 +50,19 @@ def test_cli_exit_code_2_without_traceback(path: Path):
     assert str(path) in lines[0] and expected_fragment(path) in lines[0]
 
 
+@pytest.mark.parametrize("path", FILES, ids=[p.stem for p in FILES])
+def test_cli_run_exits_2_with_one_line(path: Path, capsys):
+    """``dfcoa run`` (in-process, every file): exit 2, nothing on stdout, one stderr line."""
+    from dfcoa_opt.cli import main
+
+    assert main(["run", str(path), "--json"]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert str(path) in lines[0] and expected_fragment(path) in lines[0], lines[0]
+
+
 def test_missing_file_is_one_line():
     with pytest.raises(ScenarioError, match="file not found"):
         load_scenario(CORPUS / "no_such_file.toml")

@@ -136,3 +136,14 @@ def test_table1_orca_stalls_and_ivo_gets_round(mode):
     else:
         assert np.all(final <= sc.spec.leader.settle_tolerance)
         assert log.meta["reached_goal"]
+
+
+@pytest.mark.parametrize("cid", ["goto_slot+orca", "orca_nav", "consensus_ivo"])
+def test_a_qp_backend_that_is_not_installed_is_a_scenario_error(cid):
+    """A misspelt ``qp_solver`` stops the run before its first step, naming the owner's key."""
+    owner = cid.split("+")[-1]
+    sc = swap_scenario(n=2, controllers={owner: {"solver": "qp", "qp_solver": "osqpp"}})
+    with pytest.raises(ScenarioError, match=rf"<swap>: controllers\.{owner}\.qp_solver: "
+                                            r"qpsolvers backend 'osqpp' is not installed .*"
+                                            r"did you mean 'osqp'"):
+        run_scenario(sc, cid)

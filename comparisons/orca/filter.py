@@ -29,6 +29,7 @@ from comparisons.orca import lp, safe
 from comparisons.orca.ellipse import polygon_segments
 from comparisons.orca.ivo import ivo_lines
 from comparisons.orca.obstacles import ObstacleSet, obstacle_lines, prepare_obstacles
+from comparisons.orca.qp_backend import check_solver
 from comparisons.orca.velocities import orca_velocities
 from dfcoa_opt.control.base import Filtered, FilterResult, Observation
 from dfcoa_opt.control.registry import register, register_filter
@@ -79,8 +80,16 @@ class OrcaFilter:
         safe_discrete: bool = param(False, doc="Add hard half-planes that forbid overlap at "
                                                "the next step (comparisons/orca/safe.py).")
 
-    def __init__(self, params: Params) -> None:
+    def __init__(self, params: Params, owner: str | None = None) -> None:
+        """Build the filter.
+
+        Args:
+            params: The filter's parameters.
+            owner: Controller id whose ``[controllers.<owner>]`` table holds ``params``
+                (for error messages); default the filter's own id.
+        """
         self.p = params
+        self._owner = owner or self.name
         self._radius = 0.2
         self._v_max = 1.0
         self._segments = np.zeros((0, 2, 2))
@@ -96,7 +105,13 @@ class OrcaFilter:
         polygon (a circle as its circumscribed 32-gon); mode 'ivo' takes circles
         as exact discs (one line each, :mod:`comparisons.orca.ivo_disc`) and the
         other shapes as polygon edges.
+
+        Raises:
+            ScenarioError: ``solver = 'qp'`` with a ``qp_solver`` that is not installed.
         """
+        if self.p.solver == "qp":
+            check_solver(self.p.qp_solver, scenario.source,
+                         f"controllers.{self._owner}.qp_solver")
         rob = scenario.spec.robots
         self._radius = rob.radius
         self._v_max = self.p.v_max if self.p.v_max is not None else rob.v_max
@@ -258,4 +273,5 @@ class OrcaNavigator(Filtered):
 
     def __init__(self, params: Params) -> None:
         fields = {k: getattr(params, k) for k in OrcaFilter.Params.__dataclass_fields__}
-        super().__init__(_TowardsSlot(params.speed), OrcaFilter(OrcaFilter.Params(**fields)))
+        super().__init__(_TowardsSlot(params.speed), OrcaFilter(OrcaFilter.Params(**fields),
+                                                                  owner=self.name))

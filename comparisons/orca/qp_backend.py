@@ -17,12 +17,31 @@ import qpsolvers
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
+from dfcoa_opt.errors import ScenarioError, did_you_mean
+
 FloatArray = NDArray[np.float64]
 
 
 def scaled_tol(relative: float, v_max: float) -> float:
     """A tolerance in m/s: ``relative * max(1 m/s, v_max)``."""
     return relative * max(1.0, v_max)
+
+
+def check_solver(solver: str, source: str, key: str) -> None:
+    """Refuse a ``qpsolvers`` backend that is not installed, before any run.
+
+    Args:
+        solver: ``qpsolvers`` solver name from a scenario or sweep file.
+        source: File name for the message.
+        key: Key path of the setting, e.g. ``controllers.orca.qp_solver``.
+
+    Raises:
+        ScenarioError: ``solver`` is not in ``qpsolvers.available_solvers``.
+    """
+    known = list(qpsolvers.available_solvers)
+    if solver not in known:
+        raise ScenarioError(source, key, f"qpsolvers backend {solver!r} is not installed "
+                            f"(installed: {', '.join(known)}){did_you_mean(solver, known)}")
 
 
 class SolveFailed(RuntimeError):
