@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import signal
@@ -174,8 +175,16 @@ def test_sigkill_midway_then_resume_loses_and_duplicates_nothing(tmp_path):
     proc.wait()
     before = {p.name: p.read_bytes() for p in rows.glob("*.json")}
     assert 3 <= len(before) < 10, "the kill must land mid-sweep"
-    for data in before.values():  # every row present is whole
-        json.loads(data)
+    visible = [p for p in out.rglob("*") if p.is_file() and not p.name.startswith(".")]
+    for p in visible:  # every file a reader can see is whole: rows, manifest, CSV, logs
+        if p.suffix == ".json":
+            json.loads(p.read_bytes())
+        elif p.suffix == ".csv":
+            table = list(csv.reader(p.read_text().splitlines()))
+            assert table and all(len(r) == len(table[0]) for r in table), p
+        elif p.suffix == ".npz":
+            with np.load(p) as data:
+                assert data.files, p
     res = run_sweep(sweep, out, ExecutorConfig("serial"), progress=False)
     assert res.skipped == len(before) and res.ran == 10 - len(before)
     after = sorted(p.name for p in rows.glob("*"))
@@ -183,6 +192,28 @@ def test_sigkill_midway_then_resume_loses_and_duplicates_nothing(tmp_path):
     assert all((rows / n).read_bytes() == b for n, b in before.items())  # not re-run
     assert not [p for p in out.rglob(".*") if p.is_file()]       # no partial files left
     assert sorted(p.stem for p in (out / "logs").glob("*.npz")) == [Path(n).stem for n in after]
+
+
+def test_atomic_write_killed_mid_write_leaves_the_old_or_the_new_file_whole(tmp_path):
+    """A writer SIGKILLed while rewriting a 16 MB file: the target is one whole version,
+    and the partial file it leaves is hidden and removed by ``remove_partials``."""
+    from dfcoa_opt.atomic import remove_partials
+
+    target, size = tmp_path / "big.csv", 16 * 2**20
+    code = ("import sys, itertools\nfrom dfcoa_opt.atomic import atomic_write\n"
+            f"for k in itertools.count():\n    atomic_write({str(target)!r}, bytes([97 + k % 2]) "
+            f"* {size})\n    print(k, flush=True)\n")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    for _ in range(3):  # let it finish a few whole writes, then kill it inside the next
+        proc.stdout.readline()
+    time.sleep(0.01)
+    proc.kill()
+    proc.wait()
+    data = target.read_bytes()
+    assert len(data) == size and data.count(data[:1]) == size  # all a's or all b's
+    hidden = [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+    assert remove_partials(tmp_path) == len(hidden)
+    assert [p.name for p in tmp_path.iterdir()] == ["big.csv"]
 
 
 # -- failures ------------------------------------------------------------------------------------
