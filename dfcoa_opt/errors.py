@@ -26,11 +26,22 @@ class ScenarioError(DfcoaError):
     """
 
     def __init__(self, source: str, key: str, problem: str) -> None:
-        self.source = str(source)
-        self.key = key
+        self.source = printable(str(source))
+        self.key = printable(key)
         self.problem = " ".join(str(problem).split())  # force a single line
-        where = f"{self.source}: {key}: " if key else f"{self.source}: "
+        where = f"{self.source}: {self.key}: " if key else f"{self.source}: "
         super().__init__(where + self.problem)
+
+
+def printable(text: str) -> str:
+    """``text`` with every non-printable character (newline, tab, NUL, ...) as its escape.
+
+    Keys come from the user's file, and a TOML key may hold any character; the
+    message must stay one line and show what the file says.
+    """
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 class UnknownNameError(DfcoaError):

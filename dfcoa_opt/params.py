@@ -71,6 +71,9 @@ def _typename(tp: Any) -> str:
     return str(tp)
 
 
+_INT64_MAX = 2**63 - 1  # the TOML spec's integer range (tomllib accepts more)
+
+
 def _check_number(x: float, meta: Mapping[str, Any], src: str, key: str) -> None:
     if math.isnan(x):
         raise ScenarioError(src, key, "must be a number, got NaN")
@@ -97,13 +100,20 @@ def _convert(value: Any, tp: Any, meta: Mapping[str, Any], src: str, key: str) -
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ScenarioError(src, key,
                                 f"must be a number, got {type(value).__name__} {value!r}")
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:
+            raise ScenarioError(src, key, f"is beyond the float range, got an integer of "
+                                          f"{len(str(abs(value)))} digits") from None
         _check_number(value, meta, src, key)
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ScenarioError(src, key,
                                 f"must be an integer, got {type(value).__name__} {value!r}")
+        if abs(value) > _INT64_MAX:
+            raise ScenarioError(src, key, f"must fit in 64 bits (TOML integers do), got "
+                                          f"{len(str(abs(value)))} digits")
         _check_number(float(value), meta, src, key)
         return value
     if tp is bool:

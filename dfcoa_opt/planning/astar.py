@@ -167,7 +167,7 @@ def search(occupied: ArrayLike, start: ArrayLike, goal: ArrayLike, *,
         return SearchResult(np.zeros((0, 2), np.int64), math.inf, 0, time.perf_counter() - t0)
     offsets, inv_dist = _NO_OFFSETS, _NO_WEIGHTS
     if o_gain > 0.0 and window >= 1.0:
-        w = int(math.floor(window))
+        w = int(min(math.floor(window), max(occ.shape)))  # a wider disc adds no cell
         dr, dc = np.mgrid[-w:w + 1, -w:w + 1]
         d = np.hypot(dr, dc).ravel()
         keep = (d > 0) & (d <= window)

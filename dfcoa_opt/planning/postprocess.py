@@ -263,7 +263,7 @@ def planning_grid(grid: OccupancyGrid, inflate: float,
         row, col = (int(v) for v in grid.world_to_cell(p))
         if not (0 <= row < occ.shape[0] and 0 <= col < occ.shape[1]) or not occ[row, col]:
             continue
-        k = int(math.ceil(inflate * grid.resolution)) + 1
+        k = int(math.ceil(min(inflate * grid.resolution, max(occ.shape)))) + 1  # map-bounded
         r0, r1 = max(row - k, 0), min(row + k + 1, occ.shape[0])
         c0, c1 = max(col - k, 0), min(col + k + 1, occ.shape[1])
         rows, cols = np.mgrid[r0:r1, c0:c1]

@@ -139,6 +139,7 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
         data = {**data, "localization": {"mode": data["localization"]}}
     spec = build(ScenarioSpec, data, source)
     offsets = formation_offsets(spec.formation, spec.team.n)
+    _check_extents(spec, offsets, source)
     world = _build_world(spec, source, Path(base_dir), offsets)
     _check_free(world.grid, spec.leader.start, source, "leader.start")
     _check_free(world.grid, spec.leader.goal, source, "leader.goal")
@@ -240,6 +241,33 @@ def _check_free(grid: OccupancyGrid, point: Any, source: str, key: str) -> None:
         raise ScenarioError(source, key, f"({p[0]:g}, {p[1]:g}) is inside an obstacle")
 
 
+def _check_extents(spec: ScenarioSpec, offsets: np.ndarray, source: str) -> None:
+    """Every length and position of the file lies within :data:`MAX_EXTENT` of the origin.
+
+    Far-away values are mistakes (a missing decimal point, a unit slip), and
+    squaring them would overflow inside the geometry.
+
+    Raises:
+        ScenarioError: Names the first key with a value beyond the limit.
+    """
+    items: list[tuple[str, Any]] = [("leader.start", spec.leader.start),
+                                    ("leader.goal", spec.leader.goal),
+                                    ("team.poses", [p[:2] for p in spec.team.poses]),
+                                    ("formation", offsets)]
+    for i, o in enumerate(spec.world.obstacles):
+        items += [(f"world.obstacles[{i}].{name}", getattr(o, name))
+                  for name in ("center", "radius", "min", "max", "vertices")]
+    for i, d in enumerate(spec.world.dynamic_obstacles):
+        items += [(f"world.dynamic_obstacles[{i}].radius", d.radius),
+                  (f"world.dynamic_obstacles[{i}].waypoints", d.waypoints)]
+    for key, value in items:
+        values = np.asarray(value if value is not None else (), dtype=float)
+        if not np.all(np.abs(values) <= MAX_EXTENT):
+            shown = value if key != "formation" else "the slot offsets"
+            raise ScenarioError(source, key, f"{shown} reach beyond the {MAX_EXTENT:g} m "
+                                             f"this toolkit accepts")
+
+
 def _shape(spec: ObstacleSpec, source: str, key: str) -> Shape:
     try:
         if spec.type == "circle":
@@ -251,8 +279,8 @@ def _shape(spec: ObstacleSpec, source: str, key: str) -> Shape:
         raise ScenarioError(source, key, str(exc)) from None
 
 
-def _clutter(spec: ScenarioSpec, offsets: np.ndarray, extent: tuple[float, ...]
-             ) -> tuple[Circle, ...]:
+def _clutter(spec: ScenarioSpec, offsets: np.ndarray, extent: tuple[float, ...],
+             source: str) -> tuple[Circle, ...]:
     """The ``[world.clutter]`` discs, kept clear of the start, the goal and explicit poses.
 
     ``extent`` is the grid's ``(x0, x1, y0, y1)``, the default region.
@@ -261,6 +289,11 @@ def _clutter(spec: ScenarioSpec, offsets: np.ndarray, extent: tuple[float, ...]
     if cl.density == 0.0:
         return ()
     region = cl.region if cl.region is not None else (extent[0], extent[2], extent[1], extent[3])
+    tol = 1e-9 * max(1.0, *map(abs, extent))
+    if (region[0] < extent[0] - tol or region[2] > extent[1] + tol or region[1] < extent[2] - tol
+            or region[3] > extent[3] + tol):
+        raise ScenarioError(source, "world.clutter.region", f"{list(region)} must lie inside the "
+                            f"map [{extent[0]:g}, {extent[2]:g}, {extent[1]:g}, {extent[3]:g}]")
     reach = float(np.max(np.hypot(*offsets.T))) + spec.robots.radius
     points = [spec.leader.start, spec.leader.goal, *(p[:2] for p in spec.team.poses)]
     radius = [cl.keep_clear + reach, cl.keep_clear,
@@ -268,6 +301,26 @@ def _clutter(spec: ScenarioSpec, offsets: np.ndarray, extent: tuple[float, ...]
     rng = np.random.default_rng(spec.seed if cl.seed is None else cl.seed)
     return random_discs(rng, region, cl.density, cl.radius_min, cl.radius_max,
                         np.asarray(points, float), np.asarray(radius, float), cl.gap)
+
+
+#: Largest map, in cells (a bool grid plus float distance fields: about 10 GB at the limit).
+MAX_CELLS = 10**8
+#: Largest coordinate of the map's corners, m.
+MAX_EXTENT = 1e6
+
+
+def _check_cells(size: tuple[float, float], resolution: float, source: str) -> None:
+    """Refuse a ``world.size`` whose grid would not fit in memory, before allocating it.
+
+    Raises:
+        ScenarioError: More than :data:`MAX_CELLS` cells.
+    """
+    cells = [s * resolution for s in size]
+    total = math.prod(max(1.0, c) for c in cells)
+    if not total <= MAX_CELLS:
+        raise ScenarioError(source, "world.size", f"{size[0]:g} x {size[1]:g} m at "
+                            f"{resolution:g} cells/m is {cells[0]:.3g} x {cells[1]:.3g} cells, "
+                            f"more than the {MAX_CELLS:.0e} this toolkit accepts")
 
 
 def _build_world(spec: ScenarioSpec, source: str, base_dir: Path, offsets: np.ndarray) -> World:
@@ -287,7 +340,13 @@ def _build_world(spec: ScenarioSpec, source: str, base_dir: Path, offsets: np.nd
             raise ScenarioError(source, "world.map_image", f"cannot read image '{img}': "
                                                            f"{exc}") from None
     else:
+        _check_cells(ws.size, ws.resolution, source)  # type: ignore[arg-type]
         grid = OccupancyGrid.empty(ws.size, ws.resolution, ws.origin)  # type: ignore[arg-type]
+    x0, x1, y0, y1 = grid.extent
+    if not max(abs(x0), abs(x1), abs(y0), abs(y1)) <= MAX_EXTENT:
+        key = "world.origin" if max(map(abs, ws.origin)) > MAX_EXTENT else "world.resolution"
+        raise ScenarioError(source, key, f"the map spans [{x0:g}, {x1:g}] x [{y0:g}, {y1:g}] m, "
+                            f"beyond the {MAX_EXTENT:g} m this toolkit accepts")
     if ws.size is not None and (ws.map_ascii is not None or ws.map_image is not None):
         w, h = grid.size
         if abs(w - ws.size[0]) > grid.cell_size / 2 or abs(h - ws.size[1]) > grid.cell_size / 2:
@@ -295,7 +354,7 @@ def _build_world(spec: ScenarioSpec, source: str, base_dir: Path, offsets: np.nd
                                 f"which is {w:g} x {h:g} m at {ws.resolution:g} cells/m")
     raster = grid if ws.map_ascii is not None or ws.map_image is not None else None
     shapes = tuple(_shape(o, source, f"world.obstacles[{i}]") for i, o in enumerate(ws.obstacles))
-    shapes += _clutter(spec, offsets, grid.extent)
+    shapes += _clutter(spec, offsets, grid.extent, source)
     grid = grid.with_shapes(shapes)
     discs = tuple(MovingDisc(d.radius, d.speed, d.waypoints, d.start_time, d.end)
                   for d in ws.dynamic_obstacles)

@@ -155,7 +155,7 @@ class RobotSpec:
 class TeamSpec:
     """How many robots and where they start."""
 
-    n: int = param(doc="Number of robots.", ge=1)
+    n: int = param(doc="Number of robots.", ge=1, le=100_000)
     placement: Literal["formation", "explicit"] = param(
         "formation", doc="'formation': start on the formation slots around the leader's start; "
                          "'explicit': use poses.")

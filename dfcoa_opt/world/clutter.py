@@ -56,7 +56,8 @@ def random_discs(rng: np.random.Generator, region: tuple[float, float, float, fl
             break
         c = rng.uniform((x0, y0), (x1, y1), size=(_BATCH, 2))
         r = rng.uniform(radius_min, radius_max, size=_BATCH)
-        d_keep = np.linalg.norm(c[:, None, :] - keep_points[None], axis=2) - r[:, None]
+        rel = c[:, None, :] - keep_points[None]
+        d_keep = np.hypot(rel[..., 0], rel[..., 1]) - r[:, None]  # no overflow for far points
         ok = np.all(d_keep >= keep_radius[None, :], axis=1)
         for j in np.flatnonzero(ok):
             if area >= target:

@@ -150,10 +150,19 @@ class OccupancyGrid:
              self.origin[1] + (rows + 0.5) * self.cell_size), axis=-1)
 
     def world_to_cell(self, points: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-        """``(row, col)`` of the cells containing ``points`` ``(..., 2)`` m (may be outside)."""
+        """``(row, col)`` of the cells containing ``points`` ``(..., 2)`` m.
+
+        A point outside the grid gets an index outside it too, clipped to one cell
+        beyond the border (-1 or the size), so that far or non-finite points cast
+        safely; NaN gets -1.
+        """
         p = np.asarray(points, dtype=float)
-        col = np.floor((p[..., 0] - self.origin[0]) * self.resolution).astype(np.intp)
-        row = np.floor((p[..., 1] - self.origin[1]) * self.resolution).astype(np.intp)
+        h, w = self.shape
+        with np.errstate(over="ignore", invalid="ignore"):
+            col = np.floor((p[..., 0] - self.origin[0]) * self.resolution)
+            row = np.floor((p[..., 1] - self.origin[1]) * self.resolution)
+        col = np.nan_to_num(np.clip(col, -1, w), nan=-1).astype(np.intp)
+        row = np.nan_to_num(np.clip(row, -1, h), nan=-1).astype(np.intp)
         return row, col
 
     def in_bounds(self, row: ArrayLike, col: ArrayLike) -> NDArray[np.bool_]:

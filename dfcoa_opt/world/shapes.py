@@ -94,7 +94,8 @@ class Circle:
     def contains(self, points: NDArray[np.float64]) -> NDArray[np.bool_]:
         """Which of ``points`` ``(P, 2)`` (m) lie inside or on the circle."""
         p = np.asarray(points, dtype=float).reshape(-1, 2)
-        return ((p - np.asarray(self.center)) ** 2).sum(1) <= self.radius**2
+        d = p - np.asarray(self.center)
+        return np.hypot(d[:, 0], d[:, 1]) <= self.radius  # no overflow for huge radii
 
     def to_polygon(self, n: int = 32) -> Polygon:
         """A circumscribed ``n``-gon (contains the disc), counter-clockwise."""

@@ -1,0 +1,530 @@
+"""Strategies, a cost model and a TOML writer for the loader fuzz tests.
+
+Used by ``tests/test_fuzz_loader.py`` (see its docstring for what is fuzzed
+and why some legal but costly examples are skipped).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import types
+import typing
+from pathlib import Path
+from typing import Any, Literal, get_args, get_origin, get_type_hints
+
+from hypothesis import event
+from hypothesis import strategies as st
+
+from dfcoa_opt.control.registry import available, available_filters, controller_class
+from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.localization import estimator_names
+from dfcoa_opt.localization.mcl import MonteCarloLocalization
+from dfcoa_opt.planning.astar_improved import ImprovedAStarParams
+from dfcoa_opt.planning.registry import planner_names
+from dfcoa_opt.sim.scenario import Scenario
+from dfcoa_opt.sim.schema import ScenarioSpec
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# ----------------------------------------------------------------- cost model
+CELL_CAP = 250_000  # grid cells (bench/large_100.toml: 240,000; 9e6 cells: 1.5 s)
+N_CAP = 1_000_000  # robots (10**7 on a line: 0.3 s; 10**8: > 4 GiB)
+DISC_CAP = 2_000  # expected clutter discs
+DISC_CELLS_CAP = 5e7  # expected clutter discs x grid cells (rasterisation)
+WINDOW_CAP = 60.0  # improved-A* window, cells (60: 0.5 s on dfcoa_s2; 200: 7.6 s)
+FAST_FAIL = 1e13  # numpy refuses allocations this large at once
+
+
+def _num(x: Any) -> float | None:
+    """``x`` as a float when it is a (non-bool) number, else None; huge ints give inf."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return None
+    try:
+        return float(x)
+    except OverflowError:
+        return math.inf if x > 0 else -math.inf
+
+
+def _table(data: Any, key: str) -> dict[str, Any]:
+    value = data.get(key) if isinstance(data, dict) else None
+    return value if isinstance(value, dict) else {}
+
+
+def _costly(value: float | None, cap: float) -> bool:
+    """In the skipped band: above the cap but not absurd enough to fail at once."""
+    return value is not None and cap < value < FAST_FAIL
+
+
+def _grid_cells(world: dict[str, Any], res: float) -> tuple[float, float] | None:
+    """Estimated ``(columns, rows)`` of the grid the loader would build, or None."""
+    ascii_map = world.get("map_ascii")
+    if isinstance(ascii_map, str):
+        lines = ascii_map.strip("\n").split("\n")
+        return float(max(len(ln) for ln in lines)), float(len(lines))
+    size = world.get("size")
+    if isinstance(size, list) and len(size) == 2:
+        w, h = (_num(s) for s in size)
+        if w is not None and h is not None and w > 0 and h > 0:
+            return max(1.0, w * res), max(1.0, h * res)
+    return None
+
+
+def too_costly(data: Any) -> bool:
+    """Whether loading ``data`` could legally build a world too large for a fuzz example.
+
+    See the module docstring; a conservative estimate read from the raw dict
+    (whatever its types), not a check of validity.
+    """
+    world = _table(data, "world")
+    res = _num(world.get("resolution", 10.0))
+    res = res if res is not None and res > 0.0 else 10.0
+    grid = _grid_cells(world, res)
+    cells = grid[0] * grid[1] if grid is not None else None
+    if _costly(cells, CELL_CAP):
+        return True
+    if _costly(_num(_table(data, "team").get("n")), N_CAP):
+        return True
+    window = _num(_table(_table(data, "leader"), "planner_options").get("window"))
+    if window is not None and _costly(window * res, WINDOW_CAP):
+        return True
+    clutter = _table(world, "clutter")
+    density = _num(clutter.get("density"))
+    r_min = _num(clutter.get("radius_min", 0.2))
+    if density is None or not density > 0.0 or r_min is None or not r_min > 0.0:
+        return False
+    region = clutter.get("region")
+    nums = [_num(v) for v in region] if isinstance(region, list) else []
+    if len(nums) == 4 and None not in nums:
+        x0, y0, x1, y1 = nums  # type: ignore[misc]
+        width, height = x1 - x0, y1 - y0
+    elif grid is not None:
+        width, height = grid[0] / res, grid[1] / res  # the grid's extent
+    else:
+        width = height = 0.0
+    if not (math.isfinite(width) and math.isfinite(height)):
+        return False  # numpy refuses the draw range at once
+    discs = density * abs(width * height) / math.pi / r_min / r_min  # may be inf
+    return discs > DISC_CAP or discs * (cells or CELL_CAP) > DISC_CELLS_CAP
+
+
+# ----------------------------------------------------------------- schema names
+def _walk_schema(cls: type, prefix: str, keys: set[str], names: set[str],
+                 tables: set[str], arrays: set[str]) -> None:
+    """Collect field names, literal choices and table paths of a dataclass tree."""
+    for f in dataclasses.fields(cls):
+        keys.add(f.name)
+        tp = get_type_hints(cls)[f.name]
+        path = f"{prefix}.{f.name}" if prefix else f.name
+        for arg in (tp, *get_args(tp), *(a for b in get_args(tp) for a in get_args(b))):
+            if get_origin(arg) is Literal:
+                names.update(str(c) for c in get_args(arg))
+        if dataclasses.is_dataclass(tp):
+            tables.add(path)
+            _walk_schema(tp, path, keys, names, tables, arrays)
+        elif get_origin(tp) is tuple and get_args(tp) and dataclasses.is_dataclass(
+                get_args(tp)[0]):
+            arrays.add(path)
+            _walk_schema(get_args(tp)[0], path, keys, names, tables, arrays)
+        elif get_origin(tp) is dict:
+            tables.add(path)
+
+
+def _filter_params() -> dict[str, type]:
+    from dfcoa_opt.control import registry
+
+    return {fid: registry._FILTERS[fid].Params for fid in available_filters()}
+
+
+CONTROLLER_PARAMS: dict[str, type] = {cid: controller_class(cid).Params for cid in available()}
+CONTROLLER_PARAMS.update(_filter_params())
+PLANNER_PARAMS = ImprovedAStarParams  # a superset of the astar options
+ESTIMATOR_PARAMS = MonteCarloLocalization.Params
+
+_keys: set[str] = set()
+_names: set[str] = {*CONTROLLER_PARAMS, *planner_names(), *estimator_names()}
+_tables: set[str] = set()
+_arrays: set[str] = set()
+_walk_schema(ScenarioSpec, "", _keys, _names, _tables, _arrays)
+for _cls in (*CONTROLLER_PARAMS.values(), PLANNER_PARAMS, ESTIMATOR_PARAMS):
+    _walk_schema(_cls, "", _keys, _names, set(), set())
+_tables.update(f"controllers.{cid}" for cid in CONTROLLER_PARAMS)
+SCHEMA_KEYS = sorted(_keys)
+NAMES = sorted(_names)
+TABLE_PATHS = sorted(_tables)
+ARRAY_PATHS = sorted(_arrays)
+
+# ----------------------------------------------------------------- strategies
+HUGE_INTS = [2**31, 2**53 + 1, 2**63 - 1, 2**63, -(2**63), 2**64, 10**30, 10**400, -(10**400)]
+SPECIAL_FLOATS = [math.nan, math.inf, -math.inf, 0.0, -0.0, 5e-324, 1e-300, -1e-9, 1e15,
+                  1e300, 1.7976931348623157e308, -1.7976931348623157e308]
+INTS = st.one_of(st.integers(-5, 40), st.sampled_from(HUGE_INTS), st.integers())
+FLOATS = st.one_of(st.floats(-60, 60), st.sampled_from(SPECIAL_FLOATS), st.floats())
+CHARS = st.one_of(st.characters(codec="utf-8"), st.sampled_from("\n\r\t\x00\x7f \"'\\.[]=#{},"))
+TEXT = st.text(CHARS, max_size=12)
+KEY = st.one_of(st.sampled_from(SCHEMA_KEYS), TEXT)
+LEAF = st.one_of(INTS, FLOATS, TEXT, st.sampled_from(NAMES), st.booleans())
+ANY = st.recursive(LEAF, lambda inner: st.one_of(st.lists(inner, max_size=4),
+                                                 st.dictionaries(KEY, inner, max_size=4)),
+                   max_leaves=20)
+RANDOM_DICTS = st.dictionaries(KEY, ANY, max_size=8)
+
+_STRATS: dict[Any, st.SearchStrategy[Any]] = {}
+
+
+def typed(tp: Any) -> st.SearchStrategy[Any]:
+    """Values mostly of the annotated type (numbers mostly in a plausible range)."""
+    origin = get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        return typed(next(a for a in get_args(tp) if a is not type(None)))
+    if tp is float:
+        return st.one_of(st.floats(0.01, 60), st.floats(0.01, 60), FLOATS, st.integers(0, 40))
+    if tp is int:
+        return st.one_of(st.integers(0, 8), st.integers(0, 8), INTS)
+    if tp is bool:
+        return st.booleans()
+    if tp is str:
+        return st.one_of(st.sampled_from(NAMES), TEXT)
+    if origin is Literal:
+        return st.one_of(st.sampled_from([str(c) for c in get_args(tp)]), TEXT)
+    if dataclasses.is_dataclass(tp):
+        return schema_table(tp)
+    if origin is tuple:
+        args = get_args(tp)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return st.lists(typed(args[0]), max_size=4)
+        return st.tuples(*(typed(a) for a in args)).map(list)
+    return ANY
+
+
+def _field_strategy(cls: type, name: str, tp: Any) -> st.SearchStrategy[Any]:
+    if cls is ScenarioSpec and name == "controllers":
+        tables = {cid: schema_table(p) for cid, p in CONTROLLER_PARAMS.items()}
+        return st.fixed_dictionaries({}, optional=tables)
+    if name == "planner_options":
+        return schema_table(PLANNER_PARAMS)
+    if name == "options":
+        return schema_table(ESTIMATOR_PARAMS)
+    return typed(tp)
+
+
+def schema_table(cls: type) -> st.SearchStrategy[dict[str, Any]]:
+    """Dicts shaped like dataclass ``cls``: its keys, values mostly of the right type."""
+    if cls not in _STRATS:
+        hints = get_type_hints(cls)
+        required, optional = {}, {}
+        for f in dataclasses.fields(cls):
+            value = _field_strategy(cls, f.name, hints[f.name])
+            value = st.one_of(*[value] * 9, ANY)  # one value in ten is anything at all
+            no_default = f.default is dataclasses.MISSING and (
+                f.default_factory is dataclasses.MISSING)
+            (required if no_default else optional)[f.name] = value
+        extra = st.one_of(st.just({}), st.just({}), st.just({}),
+                          st.dictionaries(KEY, ANY, min_size=1, max_size=1))
+        _STRATS[cls] = st.builds(lambda a, b: {**b, **a},
+                                 st.fixed_dictionaries(required, optional=optional), extra)
+    return _STRATS[cls]
+
+
+SHAPED_DICTS = st.deferred(lambda: schema_table(ScenarioSpec))  # short repr in reports
+
+# --------------------------------------------------------------- valid bases
+BASE_FILES = [ROOT / "scenarios" / p for p in (
+    "example_empty.toml", "example_obstacles.toml", "dfcoa_s2.toml", "bench/clutter.toml",
+    "bench/large_20.toml", "paper001/table1_crossing.toml", "paper004/vs_n5_dyn1.toml")]
+BASE_FILES.append(ROOT / "tests" / "data" / "bench" / "tiny.toml")
+
+#: A hand-made base for what no scenario file uses: map_ascii, mcl, astar options, ids, force.
+ASCII_BASE = """\
+name = "fuzz_ascii"
+dt = 0.1
+t_max = 10.0
+seed = 3
+
+[world]
+resolution = 2
+origin = [0.0, 0.0]
+map_ascii = '''
+##########
+#........#
+#..##....#
+#........#
+#........#
+##########
+'''
+
+[[world.dynamic_obstacles]]
+radius = 0.3
+speed = 0.2
+waypoints = [[2.0, 1.0], [4.0, 1.0]]
+end = "loop"
+
+[robots]
+model = "double_integrator"
+
+[team]
+n = 2
+ids = [7, 9]
+placement = "explicit"
+poses = [[1.0, 2.2, 0.0], [0.75, 0.75, 0.0]]
+
+[formation]
+shape = "polar"
+offsets = [[0.5, 1.5], [0.5, -1.5]]
+
+[leader]
+start = [1.0, 1.0]
+goal = [4.0, 1.0]
+heading = 0.0
+planner = "astar"
+
+[leader.planner_options]
+inflate = 0.1
+smooth = true
+
+[localization]
+mode = "mcl"
+
+[localization.options]
+particle_limits = [10, 100]
+
+[[disturbances]]
+robot = 9
+t_start = 1.0
+t_end = 2.0
+value = [0.1, 0.0]
+kind = "force"
+
+[controllers.goto_slot]
+kp = 2.0
+
+[sensors]
+comm_radius = inf
+"""
+
+#: name -> (parsed file, its source name, its folder, its text)
+BASES: dict[str, tuple[dict[str, Any], str, Path, str]] = {
+    p.stem: (tomllib.loads(p.read_text()), str(p), p.parent, p.read_text()) for p in BASE_FILES}
+BASES["fuzz_ascii"] = (tomllib.loads(ASCII_BASE), "fuzz_ascii.toml", ROOT, ASCII_BASE)
+
+NUMBER_FACTORS = [-1, 0, 2, 10, 1000, 0.5, 1e-9, 1e9, 1e300]
+MUTANTS = st.one_of(
+    st.sampled_from([math.nan, math.inf, -math.inf, 0, 0.0, -0.0, -1, -1.0, -1e-9, 1e-300,
+                     5e-324, 1e15, 1e300, 1.7976931348623157e308, 2**31, 2**63 - 1, 2**63,
+                     10**400, "", "x", "nan", True, False, [], {}, [0.0, 0.0], [[0.0, 0.0]],
+                     [0.0, 0.0, 0.0, 0.0], {"x": 1}]),
+    st.floats(-100, 100), st.integers(-10, 100), st.sampled_from(NAMES), TEXT, ANY)
+
+
+def _nodes(node: Any, path: tuple[Any, ...] = ()) -> list[tuple[tuple[Any, ...], Any]]:
+    """Every ``(path, value)`` of a parsed file, the root first; paths hold keys and indices."""
+    out = [(path, node)]
+    items = node.items() if isinstance(node, dict) else (
+        enumerate(node) if isinstance(node, list) else ())
+    for k, v in items:
+        out.extend(_nodes(v, (*path, k)))
+    return out
+
+
+def _at(data: Any, path: tuple[Any, ...]) -> Any:
+    for k in path:
+        data = data[k]
+    return data
+
+
+def _unwrap(tp: Any) -> Any:
+    if get_origin(tp) in (typing.Union, types.UnionType):
+        return next(a for a in get_args(tp) if a is not type(None))
+    return tp
+
+
+def _schema_of(path: tuple[Any, ...]) -> type | None:
+    """The dataclass that describes the table at ``path`` of a scenario, or None."""
+    cls: Any = ScenarioSpec
+    i = 0
+    while i < len(path):
+        key = path[i]
+        if cls is ScenarioSpec and key == "controllers":
+            cls = CONTROLLER_PARAMS.get(path[i + 1]) if i + 1 < len(path) else None
+            i += 2
+            continue
+        if cls is None or key not in get_type_hints(cls):
+            return None
+        tp = _unwrap(get_type_hints(cls)[key])
+        if key in ("planner_options", "options"):
+            cls, i = (PLANNER_PARAMS if key == "planner_options" else ESTIMATOR_PARAMS), i + 1
+        elif dataclasses.is_dataclass(tp):
+            cls, i = tp, i + 1
+        elif (get_origin(tp) is tuple and dataclasses.is_dataclass(get_args(tp)[0])
+              and i + 1 < len(path) and isinstance(path[i + 1], int)):
+            cls, i = get_args(tp)[0], i + 2
+        else:
+            return None
+    return cls
+
+
+def _keys_for(path: tuple[Any, ...]) -> list[str]:
+    """The real keys of the table at ``path`` (controller ids for ``controllers``)."""
+    if path == ("controllers",):
+        return sorted(CONTROLLER_PARAMS)
+    cls = _schema_of(path)
+    return [f.name for f in dataclasses.fields(cls)] if cls is not None else []
+
+
+def _value_for(path: tuple[Any, ...], key: Any) -> st.SearchStrategy[Any]:
+    """Mutant values for ``key`` of the table at ``path``: plausible ones when the schema
+    knows the key, hostile ones always."""
+    if path == ("controllers",) and key in CONTROLLER_PARAMS:
+        return st.one_of(MUTANTS, schema_table(CONTROLLER_PARAMS[key]))
+    cls = _schema_of(path)
+    if cls is None or key not in get_type_hints(cls):
+        return MUTANTS
+    return st.one_of(MUTANTS, _field_strategy(cls, key, get_type_hints(cls)[key]))
+
+
+def _mutate(draw: Any, data: dict[str, Any]) -> None:
+    """One random edit of ``data`` in place (the edit is in Hypothesis's report)."""
+    nodes = _nodes(data)
+    op = draw(st.sampled_from(["replace", "replace", "delete", "add", "append", "scale"]))
+    lists = [p for p, v in nodes if isinstance(v, list)]
+    numbers = [p for p, v in nodes if _num(v) is not None and math.isfinite(_num(v))]
+    if op == "add":
+        path = draw(st.sampled_from([p for p, v in nodes if isinstance(v, dict)]))
+        real = _keys_for(path)
+        key = draw(st.one_of(st.sampled_from(real), KEY) if real else KEY)
+        _at(data, path)[key] = copy.deepcopy(draw(_value_for(path, key)))
+        return
+    if op == "append" and lists:
+        seq = _at(data, draw(st.sampled_from(lists)))
+        seq.append(copy.deepcopy(draw(st.one_of(st.sampled_from(seq), MUTANTS) if seq
+                                      else MUTANTS)))
+        return
+    if op == "scale" and numbers:
+        path = draw(st.sampled_from(numbers))
+        _at(data, path[:-1])[path[-1]] = _at(data, path) * draw(st.sampled_from(NUMBER_FACTORS))
+        return
+    path = draw(st.sampled_from([p for p, _ in nodes[1:]]))
+    parent, last = _at(data, path[:-1]), path[-1]
+    if op == "delete":
+        del parent[last]
+    else:
+        parent[last] = copy.deepcopy(draw(_value_for(path[:-1], last)))
+
+
+@st.composite
+def mutated_bases(draw: Any) -> tuple[str, dict[str, Any]]:
+    """A valid base scenario (by name) with one to three random edits."""
+    name = draw(st.sampled_from(sorted(BASES)))
+    data = copy.deepcopy(BASES[name][0])
+    for _ in range(draw(st.integers(1, 3))):
+        _mutate(draw, data)
+    return name, data
+
+
+# ------------------------------------------------------------ TOML writing
+def toml_string(s: str) -> str:
+    """A TOML basic string (control characters and DEL escaped)."""
+    out = []
+    for ch in s:
+        if ch in '"\\':
+            out.append("\\" + ch)
+        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
+            out.append(f"\\u{ord(ch):04X}")
+        else:
+            out.append(ch)
+    return '"' + "".join(out) + '"'
+
+
+def toml_value(v: Any) -> str:
+    """A TOML value on one line (inline tables and arrays)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        return ("inf" if v > 0 else "-inf") if math.isinf(v) else repr(v)
+    if isinstance(v, str):
+        return toml_string(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{toml_string(k)} = {toml_value(x)}" for k, x in v.items()) + "}"
+    raise TypeError(f"no TOML for {type(v).__name__}")
+
+
+def to_toml(data: dict[str, Any]) -> str:
+    """A whole TOML document: one ``"key" = value`` line per top-level key."""
+    return "".join(f"{toml_string(k)} = {toml_value(v)}\n" for k, v in data.items())
+
+
+TOML_LITERALS = st.one_of(
+    INTS.map(str), FLOATS.map(toml_value), TEXT.map(toml_string), st.sampled_from(NAMES).map(
+        toml_string),
+    st.sampled_from(["true", "false", "[]", "{}", "[1.0, 2.0]", "[[1.0, 2.0], [3.0, 4.0]]",
+                     "1e999", "0x10", "0o7", "1_000", "1979-05-27", "07:32:00", "'lit'",
+                     '"""a\nb"""', "'''\n#.\n.#\n'''", "nan", "-inf", "+inf", "-0", "[1, [2]]",
+                     '{x = 1}', "", "= 1", "[,]"]))
+TOML_LINES = st.one_of(
+    st.sampled_from(TABLE_PATHS).map(lambda p: f"[{p}]"),
+    st.sampled_from(ARRAY_PATHS).map(lambda p: f"[[{p}]]"),
+    st.tuples(st.one_of(st.sampled_from(SCHEMA_KEYS), TEXT.map(toml_string)),
+              TOML_LITERALS).map(lambda kv: f"{kv[0]} = {kv[1]}"),
+    TEXT)
+
+
+@st.composite
+def edited_texts(draw: Any) -> str:
+    """The text of a valid base with one to three lines inserted, deleted, replaced or cut."""
+    lines = BASES[draw(st.sampled_from(sorted(BASES)))][3].splitlines()
+    for _ in range(draw(st.integers(1, 3))):
+        i = draw(st.integers(0, len(lines)))
+        op = draw(st.sampled_from(["replace", "insert", "delete", "truncate"]))
+        if op == "insert":
+            lines.insert(i, draw(TOML_LINES))
+        elif i < len(lines):
+            if op == "replace":
+                lines[i] = draw(TOML_LINES)
+            elif op == "delete":
+                del lines[i]
+            else:
+                lines[i] = lines[i][:draw(st.integers(0, len(lines[i])))]
+    return "\n".join(lines) + "\n"
+
+
+TOML_TEXTS = st.one_of(st.text(CHARS, max_size=200),
+                       st.lists(TOML_LINES, max_size=25).map("\n".join), edited_texts())
+
+
+# ----------------------------------------------------------------- checks
+def check_outcome(call: Any, source: str) -> Scenario | None:
+    """Run the loader: a Scenario, or a ScenarioError on one line naming ``source``.
+
+    Any other exception propagates and fails the test.
+    """
+    try:
+        result = call()
+    except ScenarioError as exc:
+        msg = str(exc)
+        section = exc.key.split(".")[0].split("[")[0]
+        event(f"ScenarioError at {section if section in SCHEMA_KEYS else '<other>'}")
+        assert "\n" not in msg and "\r" not in msg, f"message is not one line: {msg!r}"
+        assert msg.startswith(f"{source}: "), f"message does not start with the file: {msg!r}"
+        return None
+    event("loaded")
+    assert isinstance(result, Scenario)
+    return result
+
+
+def parses(text: str) -> dict[str, Any] | None:
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        return None
