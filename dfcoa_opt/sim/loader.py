@@ -10,6 +10,9 @@ known, and the planner must find a path. Whatever the planner, the goal must
 be in the start's free region of the map (a grid search), and no robot may
 start on a formation slot inside an obstacle (an error; a robot body that only
 overlaps an obstacle at the start is allowed and counted as a contact).
+Sizes are bounded so that no legal-looking number exhausts memory or overflows:
+a map of at most :data:`MAX_CELLS` cells, and every position and length within
+:data:`MAX_EXTENT` m of the origin (``team.n`` <= 100,000 is a schema bound).
 """
 
 from __future__ import annotations
