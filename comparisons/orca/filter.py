@@ -14,6 +14,10 @@ velocity that minimises the largest violation, hard lines kept), ``stop``
 (zero velocity) or ``pass_through`` (the nominal velocity). With
 ``safe_discrete`` the robots also keep hard next-step separation half-planes
 (:mod:`comparisons.orca.safe`), so no two robots overlap at a sampling instant.
+The guarantee needs both robots of a pair to apply their half: the
+communication radius must cover one step's reach (checked at reset), and a
+robot whose neighbour table is full with every entry within reach (it may miss
+a robot) stops for that step, counted as a fallback.
 Method notes: ``docs/methods/orca_ivo.md``.
 """
 
@@ -33,6 +37,7 @@ from comparisons.orca.qp_backend import check_solver
 from comparisons.orca.velocities import orca_velocities
 from dfcoa_opt.control.base import Filtered, FilterResult, Observation
 from dfcoa_opt.control.registry import register, register_filter
+from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.params import param
 from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_MODIFIED, STATUS_OK, STATUS_SOLVER_FAIL
 from dfcoa_opt.world.shapes import Circle
@@ -107,14 +112,22 @@ class OrcaFilter:
         other shapes as polygon edges.
 
         Raises:
-            ScenarioError: ``solver = 'qp'`` with a ``qp_solver`` that is not installed.
+            ScenarioError: ``solver = 'qp'`` with a ``qp_solver`` that is not installed,
+                or ``safe_discrete`` with ``sensors.comm_radius`` below one step's reach.
         """
         if self.p.solver == "qp":
             check_solver(self.p.qp_solver, scenario.source,
                          f"controllers.{self._owner}.qp_solver")
         rob = scenario.spec.robots
+        v_max = self.p.v_max if self.p.v_max is not None else rob.v_max
+        reach = 2.0 * rob.radius + 2.0 * v_max * scenario.spec.dt
+        if self.p.safe_discrete and scenario.spec.sensors.comm_radius < reach:
+            raise ScenarioError(scenario.source, "sensors.comm_radius", f"must be >= "
+                                f"{reach:g} m (2 radius + 2 v_max dt) with "
+                                f"controllers.{self._owner}.safe_discrete: a robot must see "
+                                "every robot it could touch within one step")
         self._radius = rob.radius
-        self._v_max = self.p.v_max if self.p.v_max is not None else rob.v_max
+        self._v_max = v_max
         shapes = scenario.world.shapes
         self._polygons = [shape.to_polygon().as_array() for shape in shapes]
         edges = polygon_segments(self._polygons)
@@ -149,19 +162,28 @@ class OrcaFilter:
         if self.p.obstacles == "next_step" or self.p.safe_discrete:
             groups.append(safe.segment_safety_lines(obs.pose[:, :2], radius, v_max, obs.dt,
                                                     self._segments))
+        blind = np.zeros(n, dtype=bool)
         if self.p.safe_discrete:
-            groups.append(self._pair_lines(obs, radius, v_max))
+            *pair, blind = self._pair_lines(obs, radius, v_max)
+            groups.append(tuple(pair))
         if not groups:
-            return np.zeros((n, 0, 2)), np.zeros((n, 0, 2)), np.zeros(n, np.int64)
-        return concat_lines(groups)
+            return np.zeros((n, 0, 2)), np.zeros((n, 0, 2)), np.zeros(n, np.int64), blind
+        return (*concat_lines(groups), blind)
 
     def _pair_lines(self, obs: Observation, radius, v_max):
-        """Next-step separation from the neighbours each robot knows (its own row only)."""
+        """Next-step separation from the neighbours each robot knows (its own row only).
+
+        Returns:
+            ``(points, directions, count, blind)``: the lines, and which robots may not
+            know every robot within one step's reach (a full neighbour table whose
+            farthest entry is within reach), see :meth:`filter`.
+        """
         nb = obs.neighbours
         rel = obs.pose[:, None, :2] - nb.position
         dist = np.linalg.norm(rel, axis=-1)
         reach = 2.0 * radius[:, None] + 2.0 * v_max[:, None] * obs.dt
         used = nb.mask & (dist < reach)
+        blind = nb.mask.all(axis=1) & used.all(axis=1)
         order = np.argsort(np.where(used, dist, np.inf), axis=1, kind="stable")
         count = used.sum(axis=1)
         dist = np.take_along_axis(dist, order, axis=1)
@@ -170,7 +192,7 @@ class OrcaFilter:
         normal = rel / np.where(ok & (dist > 0), dist, 1.0)[..., None]
         bound = np.where(ok, (2.0 * radius[:, None] - dist) / (2.0 * obs.dt), 0.0)
         points, directions = safe.halfplane_lines(normal, bound)
-        return points, directions, count
+        return points, directions, count, blind
 
     def filter(self, obs: Observation, nominal: np.ndarray) -> FilterResult:
         """Closest velocity to ``nominal`` (rows ``(vx, vy)``) within the constraints."""
@@ -178,7 +200,7 @@ class OrcaFilter:
         n = obs.n
         nominal = np.asarray(nominal, dtype=float)[:, :2]
         nb = obs.neighbours
-        hp, hd, hc = self._hard_lines(obs)
+        hp, hd, hc, blind = self._hard_lines(obs)
         count = nb.mask.sum(axis=1)
         radius = np.full(n, self._radius)
         v_max = np.full(n, self._v_max)
@@ -202,6 +224,10 @@ class OrcaFilter:
         if self.p.safe_discrete:
             vel, scaled = safe.scale_into(vel, hp, hd, hc)
             out_status[scaled & (out_status == STATUS_OK)] = STATUS_MODIFIED
+            # a robot whose table may miss a robot in reach stops: v = 0 meets its half of
+            # every pair constraint, and its neighbours keep theirs (fallback, counted)
+            vel[blind] = 0.0
+            out_status[blind] = STATUS_FALLBACK
         per_robot = (time.perf_counter() - t0) / max(n, 1)
         return FilterResult(vel, out_status, np.where(bad, slack, 0.0), np.full(n, per_robot))
 

@@ -34,6 +34,12 @@ from numpy.typing import NDArray
 #: Parallel-line test of the 1D step (RVO2's ``RVO_EPSILON``), dimensionless.
 EPSILON = 1e-5
 
+#: Offset below which two parallel lines count as one line, m/s. RVO2 calls line
+#: ``k`` disjoint from a parallel earlier line at any negative offset, which makes
+#: a line repeated up to rounding (two polygon edges meeting at a vertex give one
+#: next-step line twice, offset ~1e-17) an infeasible program.
+COINCIDENT = 1e-9
+
 #: Per-robot outcome codes: :func:`solve_lines` returns the first two; the
 #: qpsolvers path (:mod:`comparisons.orca.qp`) can also report a solver failure.
 FEASIBLE, LEAST_VIOLATION, SOLVER_FAIL = 0, 1, 2
@@ -62,7 +68,7 @@ def _on_line(P, D, k, radius, ox, oy, direction_opt, out):  # pragma: no cover -
         den = det(dkx, dky, D[i, 0], D[i, 1])
         num = det(D[i, 0], D[i, 1], pkx - P[i, 0], pky - P[i, 1])
         if abs(den) <= EPSILON:  # (almost) parallel
-            if num < 0.0:
+            if num < -COINCIDENT:
                 return False
             continue
         t = num / den
