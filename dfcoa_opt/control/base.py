@@ -36,12 +36,15 @@ class Neighbours:
         position: ``(N, K, 2)`` their positions (as they broadcast them), m; 0 when padded.
         velocity: ``(N, K, 2)`` their world velocities, m/s; 0 when padded.
         distance: ``(N, K)`` centre distances, m, ascending; ``inf`` when padded.
+        heading: ``(N, K)`` their headings (as they broadcast them), rad; 0 when padded.
+            Optional: None where a hand-made table gives no headings.
     """
 
     index: NDArray[np.intp]
     position: FloatArray
     velocity: FloatArray
     distance: FloatArray
+    heading: FloatArray | None = None
 
     @property
     def mask(self) -> NDArray[np.bool_]:
@@ -51,7 +54,8 @@ class Neighbours:
     def take(self, rows: NDArray[np.intp]) -> Neighbours:
         """The rows of the given robots."""
         return Neighbours(self.index[rows], self.position[rows], self.velocity[rows],
-                          self.distance[rows])
+                          self.distance[rows],
+                          None if self.heading is None else self.heading[rows])
 
 
 @dataclass(frozen=True)

@@ -143,7 +143,8 @@ class Simulator:
             pad = (idx < 0)[..., None]
             nb = Neighbours(idx, np.where(pad, 0.0, np.take(est[:, :2], safe, axis=0)),
                             np.where(pad, 0.0, np.take(state.velocity, safe, axis=0)),
-                            prox.distance)  # np.take: pos[idx]'s values, faster
+                            prox.distance,  # np.take: pos[idx]'s values, faster
+                            np.where(pad[..., 0], 0.0, np.take(est[:, 2], safe)))
             moving = self._moving_obstacles(dyn_dist, dyn_pos, dyn_vel, dyn.radii) if m \
                 else no_moving
             slots = slot_positions(lead[:3], sc.offsets)

@@ -1,0 +1,189 @@
+"""``cbf``: a control-barrier-function QP safety filter over velocity commands.
+
+Beyond the papers (the Robotarium's barrier certificates, and Ames et al.'s
+CBF-QP). Each robot's velocity ``u_i`` is the closest one to the nominal
+``u_hat_i`` whose barriers do not fall faster than ``-gamma h``:
+
+    min sum_i ||u_i - u_hat_i||^2
+    s.t. dh/dt >= -gamma h   for every barrier h,   |u_x|, |u_y| <= v_max.
+
+Barriers (:mod:`comparisons.distance_constraints`, shared with ``nmpc``):
+
+- robot pairs: ``h_ij = ||p_i - p_j||^2 - D_s^2``, ``D_s = 2 r + margin``;
+- static circles and polygons (through the nearest boundary point ``q``) and
+  sensed moving discs: ``h = delta |delta| - D_o^2``, ``D_o = r + margin``,
+  i.e. ``||p - q||^2 - D_o^2`` outside; a moving disc's velocity enters
+  ``dh/dt``.
+
+Every row is divided by ``2 |delta|``, so it reads ``n . u >= ...`` in m/s and
+its violation is in m/s. Modes: ``centralized`` solves one QP for all robots
+(pair rows couple ``u_i`` and ``u_j``); ``distributed`` lets each robot solve
+its own QP and take half of every pair's decrease (``gamma h_ij / 2`` each;
+the two halves add up to the pair's condition). Unicycles use the
+single-integrator-to-unicycle map of the simulator (the near-identity point
+``robots.nid_distance`` ahead, which moves with the commanded velocity):
+barriers are on those points, with ``D`` grown by the offset.
+
+``discrete_time`` (default) uses ``gamma_eff = min(gamma, 1/dt)``: all these
+barriers are convex in the positions outside the obstacle (squared distance to
+a point, a disc or a convex polygon), so ``h(p + u dt) >= h + dt grad h . u
+>= (1 - gamma dt) h >= 0``: a single integrator never crosses a barrier at a
+sampling instant. It is a guarantee for convex obstacles and exact motion;
+non-convex polygons, unicycles (the near-identity point moves along an arc)
+and speed saturation make it approximate. Uniform speed saturation keeps it
+(every right-hand side is <= 0 while h >= 0).
+
+Infeasible programs (a robot already inside a margin, a moving disc too
+fast) go to the ``infeasible`` policy and are counted (``STATUS_FALLBACK``):
+``least_violation`` takes the velocity closest to the nominal one among
+those whose largest row violation is least (an LP, then the QP with the rows
+relaxed by it); ``stop``; ``pass_through``.
+A solver error is ``STATUS_SOLVER_FAIL`` with the ``stop`` command, or the
+nominal one under ``pass_through``. Method notes: ``docs/methods/cbf.md``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from comparisons.cbf_qp import (
+    BarrierRows,
+    solve_centralized,
+    solve_distributed,
+    solve_distributed_exact,
+)
+from comparisons.distance_constraints import (
+    StaticObstacles,
+    barrier,
+    disc_nearest,
+    pair_geometry,
+)
+from comparisons.orca.qp_backend import check_solver
+from dfcoa_opt.control.base import FilterResult, Observation
+from dfcoa_opt.control.registry import register_filter
+from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.params import param
+
+#: Distances below this are taken as this in the row normalisation, m.
+MIN_DELTA = 1e-9
+
+
+@register_filter("cbf")
+class CbfFilter:
+    """CBF-QP safety filter (see the module docstring)."""
+
+    command = "velocity"
+    uses_scan = False
+
+    @dataclass(frozen=True)
+    class Params:
+        """Parameters of the ``cbf`` filter."""
+
+        gamma: float = param(2.0, doc="Class-K gain gamma of dh/dt >= -gamma h.", unit="1/s",
+                             gt=0.0)
+        margin: float = param(0.05, doc="Extra distance kept beyond contact.", unit="m",
+                              ge=0.0)
+        mode: Literal["distributed", "centralized"] = param(
+            "distributed", doc="'distributed': one QP per robot, half of every pair's "
+                               "decrease each; 'centralized': one QP for all robots.")
+        discrete_time: bool = param(True, doc="Use gamma_eff = min(gamma, 1/dt), which keeps "
+                                              "convex barriers at every sampling instant.")
+        v_max: float | None = param(None, doc="Half-width of the speed box |u_x|, |u_y|; "
+                                              "default the robots' v_max / sqrt 2 (the box "
+                                              "inside the speed disc).", unit="m/s", gt=0.0)
+        obstacle_range: float = param(3.0, doc="Static obstacles farther than this (signed "
+                                               "distance) get no row.", unit="m", gt=0.0)
+        max_obstacles: int = param(6, doc="Most static obstacles per robot (nearest first).",
+                                   ge=0)
+        infeasible: Literal["least_violation", "stop", "pass_through"] = param(
+            "least_violation", doc="Policy when the barrier rows have no common point.")
+        solver: str = param("osqp", doc="qpsolvers backend; 'exact' (distributed mode "
+                                        "only): ORCA's exact 2D solver, same optimum.")
+
+    def __init__(self, params: Params, owner: str | None = None) -> None:
+        """Build the filter.
+
+        Args:
+            params: The filter's parameters.
+            owner: Controller id whose table holds ``params`` (for messages); default ``cbf``.
+        """
+        self.p = params
+        self._owner = owner or self.name
+        self._radius = 0.2
+        self._offset = 0.0
+        self._v_box = 1.0
+        self._gamma = params.gamma
+        self._static = StaticObstacles.from_shapes(())
+
+    def reset(self, scenario, rng: np.random.Generator) -> None:
+        """Read the robots' size, model and limits, and the map's shapes.
+
+        Raises:
+            ScenarioError: The ``solver`` backend is not installed.
+        """
+        key = f"controllers.{self._owner}.solver"
+        if self.p.solver == "exact":
+            if self.p.mode != "distributed":
+                raise ScenarioError(scenario.source, key, "'exact' solves 2D programs: it "
+                                                          "needs mode = 'distributed'")
+        else:
+            check_solver(self.p.solver, scenario.source, key)
+        rob = scenario.spec.robots
+        self._radius = rob.radius
+        self._offset = rob.nid_distance if rob.model == "unicycle" else 0.0
+        self._v_box = self.p.v_max if self.p.v_max is not None else rob.v_max / np.sqrt(2.0)
+        dt = scenario.spec.dt
+        self._gamma = min(self.p.gamma, 1.0 / dt) if self.p.discrete_time else self.p.gamma
+        self._static = StaticObstacles.from_shapes(scenario.world.shapes)
+
+    def _points(self, position: np.ndarray, heading: np.ndarray | None) -> np.ndarray:
+        """The controlled points: centres, or the near-identity points of unicycles."""
+        if self._offset == 0.0 or heading is None:
+            return position
+        return position + self._offset * np.stack([np.cos(heading), np.sin(heading)], -1)
+
+    def rows(self, obs: Observation) -> tuple[BarrierRows, BarrierRows]:
+        """Barrier rows ``n . u_i >= bound`` (m/s) of every robot: pairs, and obstacles.
+
+        Returns:
+            ``(pairs, obstacles)``. Pair rows hold the whole ``gamma h`` (the
+            distributed mode halves it); obstacle rows (static, then moving) are
+            each robot's alone.
+        """
+        g, r, m = self._gamma, self._radius + self._offset, self.p.margin
+        p = self._points(obs.pose[:, :2], obs.pose[:, 2])
+        nb = obs.neighbours
+        q = self._points(nb.position, nb.heading)
+        delta, normal = pair_geometry(p, q)
+        h, _ = barrier(delta, normal, 2.0 * r + m)
+        pairs = BarrierRows(normal, -g * h / (2.0 * np.maximum(delta, MIN_DELTA)), nb.mask,
+                            nb.index)
+        near = self._static.nearest(p, self.p.max_obstacles, self.p.obstacle_range)
+        mv = obs.obstacles
+        discs = np.concatenate([mv.position, mv.radius[..., None]], axis=-1)
+        _, d_mv, n_mv = disc_nearest(p, discs)
+        delta = np.concatenate([near.delta, d_mv], axis=1)
+        normal = np.concatenate([near.normal, n_mv], axis=1)
+        mask = np.concatenate([near.mask, mv.mask], axis=1)
+        h, _ = barrier(np.where(mask, delta, 1.0), normal, r + m)
+        # a moving disc's own velocity: dh/dt = grad . (u - v_o)
+        v_obs = np.concatenate([np.zeros(near.normal.shape), mv.velocity], axis=1)
+        bound = -g * h / (2.0 * np.maximum(np.abs(delta), MIN_DELTA)) \
+            + np.einsum("nkc,nkc->nk", normal, v_obs)
+        return pairs, BarrierRows(normal, np.where(mask, bound, -np.inf), mask, None)
+
+    def filter(self, obs: Observation, nominal: np.ndarray) -> FilterResult:
+        """Closest velocity to ``nominal`` (rows ``(vx, vy)``) within the barrier rows."""
+        t0 = time.perf_counter()
+        nominal = np.asarray(nominal, dtype=float)[:, :2]
+        pairs, obstacles = self.rows(obs)
+        solve = (solve_centralized if self.p.mode == "centralized" else
+                 solve_distributed_exact if self.p.solver == "exact" else solve_distributed)
+        vel, status, slack = solve(nominal, pairs, obstacles, self._v_box, self.p.solver,
+                                   self.p.infeasible)
+        per_robot = (time.perf_counter() - t0) / max(obs.n, 1)
+        return FilterResult(vel, status, slack, np.full(obs.n, per_robot))

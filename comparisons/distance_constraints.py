@@ -1,0 +1,208 @@
+"""Distance-constraint builders shared by the ``cbf`` safety filter and the ``nmpc`` controller.
+
+One builder per geometry, each returning the same three things for a point and
+the thing it must keep away from: the nearest point ``q`` of that thing, the
+signed distance ``delta`` (negative inside an obstacle, m) and the unit normal
+``n`` pointing from ``q`` towards the point (outwards for an obstacle). A method
+turns them into its own constraint:
+
+- ``cbf`` (:mod:`comparisons.cbf`): the barrier ``h = delta |delta| - D^2``
+  (``= ||p - q||^2 - D^2`` outside) with gradient ``2 |delta| n`` in ``p``, held
+  by ``dh/dt >= -gamma h``;
+- ``nmpc`` (:mod:`comparisons.nmpc`): the half-plane ``n . (x - q) >= D`` at
+  each predicted position ``x`` of the horizon, linearised where the previous
+  plan put the robot (exact for a disc's tangent and for convex polygons, whose
+  nearest-point half-plane contains the whole obstacle).
+
+Geometries:
+
+- **robot pairs** (:func:`pair_geometry`): another robot's centre, ``q = p_j``,
+  ``delta = ||p_i - p_j||``;
+- **discs** (circles of the map, moving obstacles): ``q = c + r n``,
+  ``delta = ||p - c|| - r``;
+- **polygons** (rectangles and polygons of the map): the nearest point of the
+  boundary (:func:`dfcoa_opt.geometry.closest_point_on_segment`), negative
+  ``delta`` inside (even-odd rule of :func:`dfcoa_opt.geometry.points_in_polygons`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dfcoa_opt.geometry import closest_point_on_segment, points_in_polygons, polygon_edges
+from dfcoa_opt.world.shapes import Circle
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Nearest:
+    """Nearest points of ``K`` things to each of ``P`` points, nearest first.
+
+    Attributes:
+        point: ``(P, K, 2)`` nearest point ``q`` of each thing, m.
+        delta: ``(P, K)`` signed distance, m (negative inside; ``inf`` in unused slots).
+        normal: ``(P, K, 2)`` unit normal from ``q`` towards the point (outward).
+        mask: ``(P, K)`` which slots hold a thing within reach.
+    """
+
+    point: FloatArray
+    delta: FloatArray
+    normal: FloatArray
+    mask: NDArray[np.bool_]
+
+
+def _unit(v: FloatArray, fallback: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``(v / |v|, |v|)``, with ``fallback`` where ``|v| = 0``."""
+    norm = np.hypot(v[..., 0], v[..., 1])
+    safe = np.where(norm > 0.0, norm, 1.0)[..., None]
+    return np.where(norm[..., None] > 0.0, v / safe, fallback), norm
+
+
+def pair_geometry(position: FloatArray, other: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Distance and unit normal from other robots' centres to each robot's centre.
+
+    Args:
+        position: ``(N, 2)`` robot centres, m.
+        other: ``(N, K, 2)`` centres of the robots each one keeps away from, m.
+
+    Returns:
+        ``(delta (N, K) m, normal (N, K, 2))``; coincident centres get the normal
+        ``(1, 0)``.
+    """
+    rel = np.asarray(position, float)[:, None, :] - np.asarray(other, float)
+    normal, delta = _unit(rel, np.array([1.0, 0.0]))
+    return delta, normal
+
+
+@dataclass(frozen=True)
+class StaticObstacles:
+    """The map's exact shapes, split into discs and polygons for the builders.
+
+    Attributes:
+        discs: ``(C, 3)`` circle centre x, y and radius, m.
+        edge_a: ``(Q, V, 2)`` polygon edge starts (padded, :func:`polygon_edges`), m.
+        edge_b: ``(Q, V, 2)`` polygon edge ends, m.
+    """
+
+    discs: FloatArray
+    edge_a: FloatArray
+    edge_b: FloatArray
+
+    @classmethod
+    def from_shapes(cls, shapes) -> StaticObstacles:
+        """Circles as exact discs, every other shape as its polygon."""
+        discs = np.array([(*s.center, s.radius) for s in shapes if isinstance(s, Circle)],
+                         dtype=float).reshape(-1, 3)
+        polys = [s.to_polygon().as_array() for s in shapes if not isinstance(s, Circle)]
+        a, b = polygon_edges(polys)
+        return cls(discs, a.reshape(len(polys), a.shape[1], 2),
+                   b.reshape(len(polys), b.shape[1], 2))
+
+    @property
+    def count(self) -> int:
+        """Number of obstacles (discs + polygons)."""
+        return len(self.discs) + len(self.edge_a)
+
+    def nearest(self, points: FloatArray, max_count: int, reach: float) -> Nearest:
+        """The ``max_count`` nearest obstacles of each point within ``reach`` (signed distance).
+
+        Args:
+            points: ``(P, 2)`` query points, m.
+            max_count: Slots per point ``K``.
+            reach: Obstacles farther than this (signed distance, m) are left out.
+
+        Returns:
+            :class:`Nearest` with ``K = max_count`` slots, nearest first.
+        """
+        p = np.asarray(points, float).reshape(-1, 2)
+        q_d, d_d, n_d = disc_nearest(p, self.discs)
+        q_p, d_p, n_p = polygon_nearest(p, self.edge_a, self.edge_b)
+        q = np.concatenate([q_d, q_p], axis=1)
+        delta = np.concatenate([d_d, d_p], axis=1)
+        normal = np.concatenate([n_d, n_p], axis=1)
+        k = max_count
+        order = np.argsort(delta, axis=1, kind="stable")[:, :k]
+        delta = np.take_along_axis(delta, order, axis=1)
+        q = np.take_along_axis(q, order[..., None], axis=1)
+        normal = np.take_along_axis(normal, order[..., None], axis=1)
+        pad = k - delta.shape[1]
+        if pad > 0:
+            delta = np.pad(delta, ((0, 0), (0, pad)), constant_values=np.inf)
+            q = np.pad(q, ((0, 0), (0, pad), (0, 0)))
+            normal = np.pad(normal, ((0, 0), (0, pad), (0, 0)))
+            normal[:, -pad:, 0] = 1.0
+        mask = delta <= reach
+        return Nearest(q, np.where(mask, delta, np.inf), normal, mask)
+
+
+def disc_nearest(points: FloatArray, discs: FloatArray) -> tuple[FloatArray, FloatArray,
+                                                                  FloatArray]:
+    """Nearest boundary point, signed distance and outward normal of every disc.
+
+    Args:
+        points: ``(P, 2)`` query points, m.
+        discs: ``(C, 3)`` centre x, y and radius, m, the same for every point; or
+            ``(P, C, 3)``, each point's own discs (e.g. the moving obstacles it senses).
+
+    Returns:
+        ``(q (P, C, 2), delta (P, C), normal (P, C, 2))``; a point at a centre gets the
+        normal ``(1, 0)``.
+    """
+    rel = np.asarray(points, float)[:, None, :] - discs[..., :2]
+    normal, dist = _unit(rel, np.array([1.0, 0.0]))
+    radius = discs[..., 2]
+    return discs[..., :2] + radius[..., None] * normal, dist - radius, normal
+
+
+def polygon_nearest(points: FloatArray, edge_a: FloatArray, edge_b: FloatArray
+                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Nearest boundary point, signed distance and outward normal of every polygon.
+
+    Args:
+        points: ``(P, 2)`` query points, m.
+        edge_a: ``(Q, V, 2)`` edge starts, m.
+        edge_b: ``(Q, V, 2)`` edge ends, m.
+
+    Returns:
+        ``(q (P, Q, 2), delta (P, Q), normal (P, Q, 2))``: ``delta < 0`` inside, and the
+        normal then points from the point to ``q`` (out of the polygon). A point on the
+        boundary gets the outward normal of its edge.
+    """
+    n_pts, n_poly = len(points), len(edge_a)
+    if n_poly == 0:
+        return np.zeros((n_pts, 0, 2)), np.zeros((n_pts, 0)), np.zeros((n_pts, 0, 2))
+    cand = closest_point_on_segment(points[:, None, None, :], edge_a[None], edge_b[None])
+    rel = points[:, None, None, :] - cand
+    d2 = rel[..., 0] ** 2 + rel[..., 1] ** 2
+    best = np.argmin(d2, axis=2)
+    q = np.take_along_axis(cand, best[..., None, None], axis=2)[:, :, 0]
+    inside = points_in_polygons(points, edge_a, edge_b)
+    edge = np.take_along_axis(np.broadcast_to(edge_b - edge_a, cand.shape),
+                              best[..., None, None], axis=2)[:, :, 0]
+    outward = np.stack([edge[..., 1], -edge[..., 0]], axis=-1)  # CCW polygon: right of edge
+    outward, _ = _unit(outward, np.array([1.0, 0.0]))
+    normal, dist = _unit(points[:, None, :] - q, outward)
+    normal = np.where(inside[..., None], -normal, normal)
+    return q, np.where(inside, -dist, dist), normal
+
+
+def barrier(delta: FloatArray, normal: FloatArray, margin: float | FloatArray
+            ) -> tuple[FloatArray, FloatArray]:
+    """The CBF ``h = delta |delta| - D^2`` and its gradient ``2 |delta| n`` in the point.
+
+    Outside (``delta >= 0``) this is ``||p - q||^2 - D^2``, the squared-distance
+    barrier, convex in ``p`` for a disc, a convex polygon or another robot.
+
+    Args:
+        delta: Signed distances, m.
+        normal: ``(..., 2)`` unit normals.
+        margin: Safe distance ``D`` (broadcast), m.
+
+    Returns:
+        ``(h m^2, grad (..., 2) m)``.
+    """
+    return delta * np.abs(delta) - np.square(margin), 2.0 * np.abs(delta)[..., None] * normal
