@@ -32,6 +32,8 @@ FloatArray = NDArray[np.float64]
 ROW_TOL = 1e-9
 #: Largest slack of the relaxed program that still counts as feasible, m/s.
 FEASIBLE_TOL = 1e-6
+#: Extra relaxation of the rows beyond the least violation in the second solve, m/s.
+LV_TOL = 1e-7
 #: Commands closer than this to the nominal one count as unchanged, m/s.
 UNCHANGED_TOL = 1e-9
 
@@ -94,8 +96,10 @@ def _solve(name: str, G: sp.csr_matrix, h: FloatArray, u_hat: FloatArray, v_box:
         return None, np.inf
     t = max(0.0, float(lp_res.x[dim]))
     x = solver(2.0 * np.eye(dim), -2.0 * u_hat, np.vstack([G, box]),
-               np.concatenate([h + t + ROW_TOL, hb]))
-    return (x, t) if x is not None else (None, np.inf)
+               np.concatenate([h + t + LV_TOL, hb]))
+    # the relaxed set can be a sliver the QP solver does not finish; the LP's own
+    # point has the same least violation (it is just not the closest to u_hat)
+    return (x if x is not None else np.clip(lp_res.x[:dim], -v_box, v_box)), t
 
 
 def _meets(normal: FloatArray, bound: FloatArray, u: FloatArray, v_box: float) -> bool:
