@@ -1,0 +1,367 @@
+"""Distributed nonlinear MPC formation controller: ``nmpc`` (not from the papers).
+
+Every robot solves its own small NLP each step (casadi, built once per run in
+:meth:`Nmpc.reset`, :mod:`comparisons.nmpc_problem`) and applies the first
+control ``(v, omega)`` (``command = "unicycle"``):
+
+* **Model.** The unicycle over ``H`` stages of ``tau`` s (default the scenario's
+  ``dt``), integrated exactly along the arc like the simulator's model; bounds
+  ``v_min <= v <= v_max``, ``|omega| <= w_max`` from ``[robots]`` (and the wheel
+  limit when it is finite).
+* **Cost.** Slot tracking (``w_track``, ``w_terminal`` at the last stage), the
+  heading of the slot's path (``w_heading``), the deviation from the slot's
+  feed-forward twist (``w_effort``) and the control rate (``w_rate``). The slot is
+  predicted from the broadcast leader state moving at constant (v, omega)
+  (:func:`comparisons.nmpc_geometry.slot_reference`).
+* **Constraints.** At each stage, half-planes ``n . (p_k - q) >= D`` from the
+  shared builders of :mod:`comparisons.distance_constraints`, linearised at the
+  position the previous (shifted) plan predicts for that stage: the ``M``
+  nearest static shapes and moving discs (constant velocity), ``D = radius +
+  margin``, and the ``K`` nearest neighbours along their plans of the previous
+  step, ``D = 2 radius + margin``. One slack per stage, with an exact L1 penalty.
+* **Distributed.** The controller keeps every robot's last plan by global id;
+  robot ``i`` reads only the plans of its neighbours in ``obs.neighbours`` (plans
+  written at time ``t`` are visible from the next step on).
+* **Solver.** ``"sqp"`` (default: casadi ``sqpmethod`` + ``daqp`` with a
+  Gauss-Newton Hessian, at most 20 iterations, re-solved by IPOPT when it fails;
+  2.2-2.6x faster per solve than IPOPT on S1/S2 in ``benchmarks/bench_nmpc.py``) or
+  ``"ipopt"``; warm-started from the shifted previous solution and multipliers. A
+  failed solve (no success, an exception, a non-finite value) applies
+  ``on_failure`` and is logged with status ``STATUS_SOLVER_FAIL``;
+  ``last_result.solve_time`` is the solver time per robot, s.
+
+Formulation, measurements and limits: ``docs/methods/nmpc.md``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, replace
+from functools import lru_cache
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from comparisons.distance_constraints import StaticObstacles
+from comparisons.nmpc_geometry import (
+    neighbour_predictions,
+    obstacle_halfplanes,
+    robot_halfplanes,
+    slot_reference,
+)
+from comparisons.nmpc_problem import NW, NmpcProblem, ProblemSpec, SolveOutput, rollout
+from dfcoa_opt.control.base import FilterResult, Observation
+from dfcoa_opt.control.registry import register
+from dfcoa_opt.geometry import wrap_angle
+from dfcoa_opt.params import param
+from dfcoa_opt.sim.log import STATUS_OK, STATUS_SOLVER_FAIL, RunLog
+
+if TYPE_CHECKING:
+    from dfcoa_opt.sim.scenario import Scenario
+
+FloatArray = NDArray[np.float64]
+
+
+@lru_cache(maxsize=8)
+def _problem(spec: ProblemSpec) -> NmpcProblem:
+    """The casadi problem of a spec (casadi Functions are stateless: shared by runs)."""
+    return NmpcProblem(spec)
+
+
+#: Default iteration limits: SQP (Gauss-Newton converges linearly on hard problems, so a
+#: failure is cut short and rescued) and IPOPT (also the rescue's limit).
+SQP_MAX_ITER, IPOPT_MAX_ITER = 20, 100
+
+
+@register("nmpc")
+class Nmpc:
+    """Distributed NMPC tracking the formation slot (module docstring).
+
+    Attributes:
+        last_result: The latest step's commands, status (``STATUS_OK`` or
+            ``STATUS_SOLVER_FAIL``), largest slack (m) and solve time per robot (s).
+        last_iterations: ``(N,)`` iterations of the latest solves (-1 after an exception).
+        last_rescued: ``(N,)`` which robots' SQP failed and IPOPT then succeeded.
+    """
+
+    command = "unicycle"
+    uses_scan = False  # obstacles from the map's exact shapes and obs.obstacles
+
+    @dataclass(frozen=True)
+    class Params:
+        """Parameters of ``nmpc``."""
+
+        horizon: int = param(10, doc="Prediction horizon H (stages).", ge=2, le=100)
+        step: float | None = param(None, doc="Prediction step tau; default the scenario's dt.",
+                                   unit="s", gt=0.0)
+        w_track: float = param(1.0, doc="Slot tracking weight of stages 1..H-1.",
+                               unit="1/m^2", ge=0.0)
+        w_terminal: float = param(10.0, doc="Slot tracking weight of the last stage.",
+                                  unit="1/m^2", ge=0.0)
+        w_heading: float = param(0.1, doc="Weight of 1 - cos(heading error to the slot's "
+                                          "path).", ge=0.0)
+        w_effort: float = param(0.1, doc="Weight of the squared deviation of (v, omega) from "
+                                         "the slot's feed-forward twist.",
+                                unit="s^2/m^2, s^2/rad^2", ge=0.0)
+        w_rate: float = param(0.1, doc="Weight of the squared change of (v, omega) between "
+                                       "stages.", unit="s^2/m^2, s^2/rad^2", ge=0.0)
+        slack_weight: float = param(1000.0, doc="L1 (and L2, per m^2) penalty on the slack of "
+                                                "the distance constraints.", unit="1/m", gt=0.0)
+        margin: float = param(0.1, doc="Extra distance kept from obstacles (beyond the robot "
+                                       "radius) and between robots (beyond 2 radii).",
+                              unit="m", ge=0.0)
+        max_neighbours: int = param(4, doc="Neighbour constraints per stage K (nearest first).",
+                                    ge=0, le=50)
+        max_obstacles: int = param(4, doc="Obstacle constraints per stage M (nearest first).",
+                                   ge=0, le=50)
+        reach: float = param(1.5, doc="Obstacles and neighbours farther than this from the "
+                                      "linearisation point are left out.", unit="m", gt=0.0)
+        solver: Literal["sqp", "ipopt"] = param(
+            "sqp", doc="'sqp' (casadi sqpmethod, faster) or 'ipopt' (interior point).")
+        qp_solver: Literal["daqp", "qrqp"] = param(
+            "daqp", doc="QP solver of the 'sqp' solver (casadi conic plugin).")
+        sqp_hessian: Literal["gauss-newton", "exact"] = param(
+            "gauss-newton", doc="Hessian of the 'sqp' solver: Gauss-Newton of the squared "
+                                "residuals (convex QPs) or the exact, unconvexified one.")
+        rescue: bool = param(True, doc="When an 'sqp' solve fails, solve again with IPOPT "
+                                       "before applying on_failure.")
+        max_iter: int | None = param(None, doc="Iteration limit of the solver (hitting it is "
+                                               "a failure); default 20 for 'sqp', 100 for "
+                                               "'ipopt' and an IPOPT rescue.", ge=1, le=10_000)
+        tol: float = param(1e-4, doc="Solver tolerance (primal and dual).", gt=0.0, lt=1.0)
+        on_failure: Literal["shift", "stop", "goto"] = param(
+            "shift", doc="After a failed solve: 'shift' applies the previous plan's next "
+                         "control (stop without one), 'stop' applies zero, 'goto' a "
+                         "proportional slot-tracking command.")
+        goto_gain: float = param(1.0, doc="Gain of the 'goto' fallback (v = k e_forward, "
+                                          "omega = 2 k heading error).", unit="1/s", gt=0.0)
+
+    def __init__(self, params: Params) -> None:
+        self.p = params
+        self.last_result: FilterResult | None = None
+        self.last_iterations: NDArray[np.intp] = np.zeros(0, dtype=np.intp)
+        self.last_rescued: NDArray[np.bool_] = np.zeros(0, dtype=bool)
+        self.problem: NmpcProblem | None = None
+        self.rescuer: NmpcProblem | None = None
+
+    # ------------------------------------------------------------------ set-up
+    def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
+        """Build the casadi solver(s) (once per parameter set) and clear every plan."""
+        p, rob = self.p, scenario.spec.robots
+        self.tau = p.step if p.step is not None else scenario.spec.dt
+        wheel = None
+        if math.isfinite(rob.wheel_speed_max):
+            wheel = (rob.track_width, rob.wheel_radius * rob.wheel_speed_max)
+        self.spec = ProblemSpec(
+            horizon=p.horizon, tau=self.tau, slots=p.max_obstacles + p.max_neighbours,
+            w_track=p.w_track, w_terminal=p.w_terminal, w_heading=p.w_heading,
+            w_effort=p.w_effort, w_rate=p.w_rate, w_slack=(p.slack_weight, p.slack_weight),
+            v_min=rob.v_lower, v_max=rob.v_max, w_max=rob.w_max, wheel=wheel,
+            solver=p.solver, qp_solver=p.qp_solver, hessian=p.sqp_hessian,
+            max_iter=p.max_iter or (SQP_MAX_ITER if p.solver == "sqp" else IPOPT_MAX_ITER),
+            tol=p.tol)
+        self.problem = _problem(self.spec)
+        self.rescuer = None
+        if p.rescue and p.solver == "sqp":
+            self.rescuer = _problem(replace(self.spec, solver="ipopt", hessian="exact",
+                                            qp_solver="qrqp", max_iter=IPOPT_MAX_ITER))
+        self.radius = rob.radius
+        self.static = StaticObstacles.from_shapes(scenario.world.shapes)
+        self._t: float | None = None
+        self._alloc(scenario.spec.team.n)
+        self.last_result = None
+
+    def _alloc(self, n: int) -> None:
+        """Plan buffers for ``n`` robots (by global id): written (``_w``) and read (``_r``)."""
+        h, rows = self.p.horizon, self.spec.rows
+        self._w = {"t": np.full(n, np.nan), "u": np.zeros((n, h, 2)),
+                   "x": np.zeros((n, h + 1, 3)), "lam_x": np.zeros((n, NW * h)),
+                   "lam_g": np.zeros((n, rows * h)), "lam_ok": np.zeros(n, dtype=bool)}
+        self._r = {k: v.copy() for k, v in self._w.items()}
+
+    def _grow(self, n: int) -> None:
+        """Make room for global ids below ``n`` (hand-made observations)."""
+        have = len(self._w["t"])
+        if n <= have:
+            return
+        for buf in (self._w, self._r):
+            for k, v in buf.items():
+                fill = np.nan if k == "t" else 0
+                buf[k] = np.concatenate((v, np.full((n - have, *v.shape[1:]), fill, v.dtype)))
+
+    # ------------------------------------------------------------------ plans
+    def _age(self, t: float, ids: NDArray[np.intp]) -> FloatArray:
+        """Age of the readable plans of ``ids`` at ``t``, in stages (``inf`` = none)."""
+        age = (t - self._r["t"][ids]) / self.tau
+        return np.where(np.isfinite(age) & (age >= -1e-9), np.maximum(age, 0.0), np.inf)
+
+    def _shifted(self, t: float, ids: NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
+        """Own previous controls shifted to ``t`` (zeros without a plan), and their age."""
+        h = self.p.horizon
+        age = self._age(t, ids)
+        u = np.zeros((len(ids), h, 2))
+        live = age < h
+        if live.any():
+            idx = np.minimum(np.floor(age[live][:, None] + 1e-6).astype(np.intp)
+                             + np.arange(h), h - 1)
+            u[live] = np.take_along_axis(self._r["u"][ids[live]], idx[..., None], axis=1)
+        return u, age
+
+    def _shifted_multipliers(self, g: int, age: float
+                             ) -> tuple[FloatArray, FloatArray] | tuple[None, None]:
+        """Robot ``g``'s last multipliers shifted by ``age`` stages (None without them)."""
+        h = self.p.horizon
+        if not (age < h and self._r["lam_ok"][g]):
+            return None, None
+        idx = np.minimum(np.arange(h) + int(math.floor(age + 1e-6)), h - 1)
+        lam_x = self._r["lam_x"][g].reshape(h, -1)[idx].ravel()
+        lam_g = self._r["lam_g"][g].reshape(h, -1)[idx].ravel()
+        return lam_x, lam_g
+
+    def _store(self, g: int, t: float, pose: FloatArray, u: FloatArray,
+               x: FloatArray | None = None, out: SolveOutput | None = None) -> None:
+        """Write robot ``g``'s plan made at ``t`` (states rolled out when not given)."""
+        w = self._w
+        w["t"][g], w["u"][g] = t, u
+        w["x"][g] = x if x is not None else rollout(pose[None], u[None], self.tau)[0]
+        w["lam_ok"][g] = out is not None
+        if out is not None:
+            w["lam_x"][g], w["lam_g"][g] = out.lam_x, out.lam_g
+
+    # ------------------------------------------------------------------ step
+    def _problems(self, obs: Observation, u0: FloatArray, fresh: NDArray[np.bool_]
+                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Initial guesses ``(N, 6H)``, parameter vectors and constraint lower bounds.
+
+        Linearisation points: the rollout of the shifted plan, or the current
+        position for robots without a plan (``fresh``).
+        """
+        p, h, n = self.p, self.p.horizon, obs.n
+        x0 = rollout(obs.pose, u0, self.tau)
+        lin = np.where(fresh[:, None, None], obs.pose[:, None, :2], x0[:, 1:, :2])
+        ref, psi, uref = slot_reference(obs.leader, obs.slot_offset,
+                                        self.tau * np.arange(1, h + 1))
+        on, oc = obstacle_halfplanes(lin, self.static, obs.obstacles, self.tau, p.max_obstacles,
+                                     self.radius + p.margin, p.reach)
+        every = np.arange(len(self._r["t"]))
+        pred, mask = neighbour_predictions(obs.neighbours, p.max_neighbours, self._r["x"][..., :2],
+                                           self._age(float(obs.t), every), self.tau, h)
+        rn, rc = robot_halfplanes(lin, pred, mask, 2.0 * self.radius + p.margin, p.reach)
+        normals = np.concatenate((on, rn), axis=2).reshape(n, h, -1)
+        stage = np.concatenate((ref, psi[..., None], uref, normals), axis=2).reshape(n, -1)
+        params = np.concatenate((obs.pose, obs.twist, stage), axis=1)
+        lbg = np.tile(self.problem.lbg_template, (n, 1)).reshape(n, h, -1)
+        lbg[:, :, 3:3 + self.spec.slots] = np.concatenate((oc, rc), axis=2)
+        guess = np.zeros((n, h, NW))
+        guess[..., :2], guess[..., 2:5] = u0, x0[:, 1:]
+        return guess.reshape(n, -1), params, lbg.reshape(n, -1)
+
+    def _solve(self, i: int, args: tuple) -> SolveOutput | None:
+        """Solve robot row ``i``'s problem; IPOPT rescues a failed SQP (``rescue``)."""
+        out = None
+        for problem in (self.problem, self.rescuer):
+            if problem is None:
+                break
+            try:
+                out = problem.solve(*args)
+            except RuntimeError:
+                out = None
+            if out is not None and out.success:
+                self.last_rescued[i] = problem is self.rescuer
+                return out
+        return out
+
+    def act(self, obs: Observation) -> FloatArray:
+        """One solve per robot; row i uses row i of ``obs`` and its neighbours' last plans."""
+        assert self.problem is not None, "reset() first"
+        h, t, n = self.p.horizon, float(obs.t), obs.n
+        if self._t is None or t > self._t + 1e-9:  # a new step: last step's plans become readable
+            self._r = {k: v.copy() for k, v in self._w.items()}
+            self._t = t
+        ids = np.asarray(obs.robot_ids, dtype=np.intp)
+        self._grow(int(max(ids.max(initial=-1), obs.neighbours.index.max(initial=-1))) + 1)
+        u0, age = self._shifted(t, ids)
+        fresh = age >= h  # no plan: guess the goto command
+        for i in np.flatnonzero(fresh):
+            u0[i] = goto_command(obs.pose[i], obs.slot[i], self.p.goto_gain, self.spec)
+        guess, params, lbg = self._problems(obs, u0, fresh)
+        cmd, slack, solve_time = np.zeros((n, 2)), np.zeros(n), np.zeros(n)
+        status = np.full(n, STATUS_OK, dtype=np.int8)
+        self.last_iterations = np.full(n, -1, dtype=np.intp)
+        self.last_rescued = np.zeros(n, dtype=bool)
+        for i in range(n):
+            g = int(ids[i])
+            t0 = time.perf_counter()
+            out = self._solve(i, (guess[i], params[i], lbg[i],
+                                  *self._shifted_multipliers(g, age[i])))
+            solve_time[i] = time.perf_counter() - t0
+            if out is not None:
+                self.last_iterations[i] = out.iterations
+            if out is not None and out.success:
+                w = out.w.reshape(h, NW)
+                cmd[i] = w[0, :2]
+                slack[i] = max(float(w[:, 5].max()), 0.0)
+                self._store(g, t, obs.pose[i], w[:, :2].copy(),
+                            np.vstack((obs.pose[i], w[:, 2:5])), out)
+            else:
+                status[i] = STATUS_SOLVER_FAIL
+                cmd[i] = self._fallback(obs, i, u0[i], age[i])
+        self.last_result = FilterResult(cmd.copy(), status, slack, solve_time)
+        return cmd
+
+    def _fallback(self, obs: Observation, i: int, shifted: FloatArray, age: float) -> FloatArray:
+        """The ``on_failure`` command of row ``i``; stores the plan it implies."""
+        g, t, pose, h = int(obs.robot_ids[i]), float(obs.t), obs.pose[i], self.p.horizon
+        policy = self.p.on_failure
+        if policy == "shift" and age < h:
+            # keep the previous plan (neighbours go on reading it); it runs out after H stages
+            for key, buf in self._w.items():
+                buf[g] = self._r[key][g]
+            return shifted[0].copy()
+        if policy == "goto":
+            u = goto_command(pose, obs.slot[i], self.p.goto_gain, self.spec)
+        else:
+            u = np.zeros(2)
+        self._store(g, t, pose, np.tile(u, (h, 1)))
+        return u
+
+
+def goto_command(pose: FloatArray, slot: FloatArray, gain: float, spec: ProblemSpec
+                 ) -> FloatArray:
+    """Proportional unicycle command towards the slot (the ``goto`` fallback).
+
+    ``v = k (e . heading)``, ``omega = 2 k wrap(atan2(e) - theta)``, clipped to the
+    limits, with ``e = slot - p`` (m) and ``k = gain`` (1/s).
+
+    Returns:
+        ``(2,)`` (v m/s, omega rad/s).
+    """
+    e = np.asarray(slot, float) - pose[:2]
+    th = float(pose[2])
+    v = gain * (e[0] * math.cos(th) + e[1] * math.sin(th))
+    err = float(wrap_angle(math.atan2(e[1], e[0]) - th)) if np.hypot(*e) > 1e-9 else 0.0
+    return np.array([min(max(v, spec.v_min), spec.v_max),
+                     min(max(2.0 * gain * err, -spec.w_max), spec.w_max)])
+
+
+def solve_time_stats(log: RunLog) -> dict[str, float | int]:
+    """Solve time per robot per step of an ``nmpc`` run, and its failures.
+
+    Args:
+        log: The run log (``filter_time`` and ``filter_status`` hold ``last_result``).
+
+    Returns:
+        ``median`` and ``p95`` solve time (s) over every (step, robot) entry,
+        ``entries`` counted, ``failures`` (status ``STATUS_SOLVER_FAIL``) and
+        ``failure_rate`` (failures / entries).
+    """
+    times = np.asarray(log.filter_time, float).ravel()
+    fails = int(np.count_nonzero(np.asarray(log.filter_status) == STATUS_SOLVER_FAIL))
+    if times.size == 0:
+        return {"median": math.nan, "p95": math.nan, "entries": 0, "failures": fails,
+                "failure_rate": math.nan}
+    return {"median": float(np.median(times)), "p95": float(np.percentile(times, 95)),
+            "entries": int(times.size), "failures": fails,
+            "failure_rate": fails / times.size}

@@ -1,0 +1,201 @@
+"""Slot references, neighbour predictions and distance half-planes of the ``nmpc`` controller.
+
+Everything here is batched over robots and row-wise: row ``i`` of every output
+depends on row ``i`` of its inputs only (plus the neighbours' broadcast plans
+passed in explicitly), so the controller stays distributed.
+
+The half-planes come from the shared builders of
+:mod:`comparisons.distance_constraints`: for a linearisation point ``xbar`` and a
+thing to keep away from, the builder gives the nearest point ``q`` and the unit
+normal ``n`` from ``q`` towards ``xbar``; the constraint on the predicted position
+``p`` is ``n . (p - q) >= D``, i.e. ``n . p >= c`` with ``c = n . q + D``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from comparisons.distance_constraints import StaticObstacles, disc_nearest, pair_geometry
+from dfcoa_opt.control.base import MovingObstacles, Neighbours
+
+FloatArray = NDArray[np.float64]
+#: Below this slot speed (m/s) the heading reference is the leader's heading.
+_STILL = 1e-6
+
+
+def slot_reference(leader: FloatArray, offsets: FloatArray, times: FloatArray
+                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Slots over the horizon, with the leader at constant (v, omega) (exact arc).
+
+    Args:
+        leader: ``(5,)`` broadcast leader state (x m, y m, theta rad, v m/s, omega rad/s).
+        offsets: ``(N, 2)`` slot offsets in the leader frame, m.
+        times: ``(H,)`` prediction times from now, s.
+
+    Returns:
+        ``(ref (N, H, 2) m, heading (N, H) rad, twist (N, H, 2))``: the slot
+        positions, the direction of the slot's velocity (the leader's heading when
+        the slot is still) and the slot's feed-forward twist ``(|d/dt slot| m/s,
+        omega rad/s)``, which a unicycle on the slot's path would apply.
+    """
+    x, y, th, v, w = (float(c) for c in leader)
+    half = 0.5 * w * times
+    small = np.abs(half) < 1e-9
+    sinc = np.where(small, 1.0, np.sin(half) / np.where(small, 1.0, half))
+    chord = v * times * sinc
+    lx, ly = x + chord * np.cos(th + half), y + chord * np.sin(th + half)
+    lth = th + w * times
+    c, s = np.cos(lth), np.sin(lth)
+    ox, oy = offsets[:, 0:1], offsets[:, 1:2]
+    rx, ry = c * ox - s * oy, s * ox + c * oy  # slot minus leader, world frame
+    ref = np.stack((lx + rx, ly + ry), axis=-1)
+    vx, vy = v * c - w * ry, v * s + w * rx
+    speed = np.hypot(vx, vy)
+    heading = np.where(speed > _STILL, np.arctan2(vy, vx), np.broadcast_to(lth, speed.shape))
+    twist = np.stack((speed, np.full(speed.shape, w)), axis=-1)
+    return ref, heading, twist
+
+
+def plan_positions(plans: FloatArray, age: FloatArray, horizon: int) -> FloatArray:
+    """Positions of stored plans at ``age + k`` stages, ``k = 0 .. horizon``.
+
+    Linear interpolation between the plan's stages; past its end, linear
+    extrapolation along its last segment.
+
+    Args:
+        plans: ``(..., H + 1, 2)`` planned positions at the plan's stages, m.
+        age: ``(...)`` time since the plan was made, in stages (>= 0).
+        horizon: Stages ``H`` wanted.
+
+    Returns:
+        ``(..., horizon + 1, 2)`` positions, m.
+    """
+    last = plans.shape[-2] - 2
+    f = age[..., None] + np.arange(horizon + 1)
+    i0 = np.clip(np.floor(f + 1e-9).astype(np.intp), 0, last)
+    frac = (f - i0)[..., None]
+    a = np.take_along_axis(plans, i0[..., None], axis=-2)
+    b = np.take_along_axis(plans, i0[..., None] + 1, axis=-2)
+    return a + frac * (b - a)
+
+
+def neighbour_predictions(nb: Neighbours, count: int, plans: FloatArray, plan_age: FloatArray,
+                          tau: float, horizon: int) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Predicted centres of each robot's ``count`` nearest neighbours at stages 1 .. H.
+
+    A neighbour with a plan of the previous steps (``plan_age`` finite, in
+    stages, less than ``horizon``) follows that plan, translated so that it starts
+    at the neighbour's broadcast position; one without moves at its broadcast
+    velocity.
+
+    Args:
+        nb: The observation's neighbour table (global robot ids in ``index``).
+        count: Neighbour slots ``K`` (extra ones are dropped, missing ones padded).
+        plans: ``(R, H + 1, 2)`` every robot's last plan, by global id, m.
+        plan_age: ``(R,)`` age of each plan in stages (``inf`` = none).
+        tau: Stage length, s.
+        horizon: Stages ``H``.
+
+    Returns:
+        ``(pred (N, K, H, 2) m, mask (N, K))``.
+    """
+    n = len(nb.index)
+    idx = np.full((n, count), -1, dtype=np.intp)
+    take = min(count, nb.index.shape[1])
+    idx[:, :take] = nb.index[:, :take]
+    pos = np.zeros((n, count, 2))
+    vel = np.zeros((n, count, 2))
+    pos[:, :take], vel[:, :take] = nb.position[:, :take], nb.velocity[:, :take]
+    mask = idx >= 0
+    safe = np.where(mask, idx, 0)
+    steps = tau * np.arange(1, horizon + 1)
+    pred = pos[:, :, None, :] + vel[:, :, None, :] * steps[:, None]
+    age = plan_age[safe]
+    planned = mask & (age < horizon)
+    if planned.any():
+        traj = plan_positions(plans[safe[planned]], age[planned], horizon)
+        pred[planned] = traj[:, 1:] + (pos[planned] - traj[:, 0])[:, None, :]
+    return pred, mask
+
+
+def robot_halfplanes(lin: FloatArray, pred: FloatArray, mask: NDArray[np.bool_],
+                     distance: float, reach: float) -> tuple[FloatArray, FloatArray]:
+    """Half-planes keeping each predicted position ``distance`` from the neighbours' centres.
+
+    Args:
+        lin: ``(N, H, 2)`` linearisation points (own predicted positions), m.
+        pred: ``(N, K, H, 2)`` predicted neighbour centres, m.
+        mask: ``(N, K)`` existing neighbours.
+        distance: ``D`` = 2 radius + margin, m.
+        reach: Neighbours farther than this from the linearisation point are left out, m.
+
+    Returns:
+        ``(normal (N, H, K, 2), offset (N, H, K) m)``; inactive rows have offset ``-inf``.
+    """
+    n, h = lin.shape[:2]
+    k = pred.shape[1]
+    other = pred.transpose(0, 2, 1, 3).reshape(n * h, k, 2)
+    delta, normal = pair_geometry(lin.reshape(n * h, 2), other)
+    delta, normal = delta.reshape(n, h, k), normal.reshape(n, h, k, 2)
+    other = other.reshape(n, h, k, 2)
+    active = mask[:, None, :] & (delta <= reach)
+    offset = np.einsum("nhkd,nhkd->nhk", normal, other) + distance
+    return normal, np.where(active, offset, -np.inf)
+
+
+def obstacle_halfplanes(lin: FloatArray, static: StaticObstacles, moving: MovingObstacles,
+                        tau: float, count: int, distance: float, reach: float
+                        ) -> tuple[FloatArray, FloatArray]:
+    """Half-planes of the ``count`` nearest static and moving obstacles at each stage.
+
+    Static shapes (discs and polygons) go through
+    :meth:`~comparisons.distance_constraints.StaticObstacles.nearest`; moving
+    discs are predicted at constant velocity to each stage's time and go through
+    :func:`~comparisons.distance_constraints.disc_nearest`. The ``count`` nearest
+    of both (signed distance from the linearisation point) within ``reach`` are kept.
+
+    Args:
+        lin: ``(N, H, 2)`` linearisation points, m (stage k at ``(k + 1) tau`` s from now).
+        static: The map's shapes.
+        moving: The observation's moving obstacles.
+        tau: Stage length, s.
+        count: Slots per stage ``M``.
+        distance: ``D`` = robot radius + margin, m.
+        reach: Obstacles farther than this (signed distance) are left out, m.
+
+    Returns:
+        ``(normal (N, H, M, 2), offset (N, H, M) m)``; inactive rows have offset ``-inf``.
+    """
+    n, h = lin.shape[:2]
+    near = static.nearest(lin.reshape(n * h, 2), count, reach)
+    q = near.point.reshape(n, h, count, 2)
+    delta = near.delta.reshape(n, h, count)
+    normal = near.normal.reshape(n, h, count, 2)
+    m = moving.mask.shape[1]
+    if m and moving.mask.any():
+        times = tau * np.arange(1, h + 1)
+        mq = np.zeros((n, h, m, 2))
+        md = np.full((n, h, m), np.inf)
+        mn = np.zeros((n, h, m, 2))
+        mn[..., 0] = 1.0
+        for i in np.flatnonzero(moving.mask.any(axis=1)):
+            sel = moving.mask[i]
+            c = moving.position[i, sel][None] + moving.velocity[i, sel][None] * times[:, None, None]
+            r = np.broadcast_to(moving.radius[i, sel], c.shape[:2])
+            discs = np.concatenate((c, r[..., None]), axis=-1).reshape(-1, 3)
+            qq, dd, nn = disc_nearest(lin[i], discs)  # (H, H * m_i): stage j vs all stages
+            diag = np.arange(h)
+            mi = int(sel.sum())
+            mq[i, :, :mi] = qq.reshape(h, h, mi, 2)[diag, diag]
+            md[i, :, :mi] = dd.reshape(h, h, mi)[diag, diag]
+            mn[i, :, :mi] = nn.reshape(h, h, mi, 2)[diag, diag]
+        q = np.concatenate((q, mq), axis=2)
+        delta = np.concatenate((delta, md), axis=2)
+        normal = np.concatenate((normal, mn), axis=2)
+        order = np.argsort(delta, axis=2, kind="stable")[..., :count]
+        delta = np.take_along_axis(delta, order, axis=2)
+        q = np.take_along_axis(q, order[..., None], axis=2)
+        normal = np.take_along_axis(normal, order[..., None], axis=2)
+    offset = np.einsum("nhkd,nhkd->nhk", normal, q) + distance
+    return normal, np.where(delta <= reach, offset, -np.inf)
