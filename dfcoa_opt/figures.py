@@ -46,7 +46,8 @@ from dfcoa_opt.errors import DfcoaError, did_you_mean
 #: Modules whose import registers recipes, in index order.
 RECIPE_MODULES = ("dfcoa_opt.bench.recipes", "dfcoa_opt.bench.recipes_dfcoa",
                   "dfcoa_opt.bench.recipes_astar", "dfcoa_opt.bench.recipes_paper001",
-                  "dfcoa_opt.bench.recipes_paper002", "dfcoa_opt.bench.recipes_paper004")
+                  "dfcoa_opt.bench.recipes_paper002", "dfcoa_opt.bench.recipes_paper004",
+                  "dfcoa_opt.bench.recipes_beyond")
 
 
 @dataclass(frozen=True)

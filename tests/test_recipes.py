@@ -239,3 +239,28 @@ def test_paper004_scenarios_are_table_1_and_the_generators_output(tmp_path):
     centres = sorted(tuple(c.center) for c in sc.world.circles)
     assert centres == sorted([(9, 10), (11, 9), (10, 12), (14, 17), (15, 13), (15, 16), (20, 19)])
     assert len(sc.spec.world.dynamic_obstacles) == 3
+
+
+def test_beyond_recipe_reports_solve_times_of_cbf_and_nmpc(tmp_path):
+    """The "beyond" renderer: the cross-method table and a solve-time row per solver-backed
+    controller, whose robot-step count is that of the logs."""
+    from dfcoa_opt.bench.executors import ExecutorConfig
+    from dfcoa_opt.bench.harness import run_sweep
+    from dfcoa_opt.bench.recipes_beyond import render_beyond
+
+    tiny = Path(__file__).parent / "data" / "bench" / "tiny.toml"
+    sweep = tmp_path / "beyond.toml"
+    sweep.write_text(f'name = "beyond"\nscenarios = ["{tiny}"]\n'
+                     'controllers = ["nmpc", "goto_slot+cbf", "goto_slot"]\nseeds = 1\n'
+                     '[[variants]]\nt_max = 1.0\n')
+    res = run_sweep(sweep, tmp_path / "out", ExecutorConfig("serial"), progress=False)
+    assert res.failed == 0
+    arts = render_beyond(res.store, tmp_path / "fig")
+    assert {"solve_times.md"} <= {a.path for a in arts}
+    text = (tmp_path / "fig" / "solve_times.md").read_text()
+    rows = [ln.split(" | ") for ln in text.splitlines() if ln.startswith("| nmpc")
+            or ln.startswith("| goto_slot+cbf")]
+    assert len(rows) == 2 and "| goto_slot |" not in text  # goto_slot has no solver
+    nmpc = next(r for r in rows if r[0] == "| nmpc")
+    assert float(nmpc[2]) > 0 and float(nmpc[3]) >= float(nmpc[2])
+    assert int(nmpc[4]) == 3 * 11  # 3 robots x 11 logged steps of 1 s at dt 0.1
