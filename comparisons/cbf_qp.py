@@ -24,7 +24,13 @@ from scipy.optimize import linprog
 
 from comparisons.orca import lp
 from comparisons.orca.qp_backend import Solver
-from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_MODIFIED, STATUS_OK, STATUS_SOLVER_FAIL
+from dfcoa_opt.sim.log import (
+    STATUS_FALLBACK,
+    STATUS_MODIFIED,
+    STATUS_OK,
+    STATUS_SOLVER_FAIL,
+    UNCHANGED_TOL,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -34,8 +40,6 @@ ROW_TOL = 1e-9
 FEASIBLE_TOL = 1e-6
 #: Extra relaxation of the rows beyond the least violation in the second solve, m/s.
 LV_TOL = 1e-7
-#: Commands closer than this to the nominal one count as unchanged, m/s.
-UNCHANGED_TOL = 1e-9
 
 
 #: ``(velocity (N, 2) m/s, status (N,) int8, slack (N,) m/s)`` of a solve.

@@ -102,11 +102,6 @@ class StaticObstacles:
         return cls(discs, a.reshape(len(polys), a.shape[1], 2),
                    b.reshape(len(polys), b.shape[1], 2))
 
-    @property
-    def count(self) -> int:
-        """Number of obstacles (discs + polygons)."""
-        return len(self.discs) + len(self.edge_a)
-
     def nearest(self, points: FloatArray, max_count: int, reach: float) -> Nearest:
         """The ``max_count`` nearest obstacles of each point within ``reach`` (signed distance).
 

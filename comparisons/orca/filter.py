@@ -39,11 +39,14 @@ from dfcoa_opt.control.base import Filtered, FilterResult, Observation
 from dfcoa_opt.control.registry import register, register_filter
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.params import param
-from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_MODIFIED, STATUS_OK, STATUS_SOLVER_FAIL
+from dfcoa_opt.sim.log import (
+    STATUS_FALLBACK,
+    STATUS_MODIFIED,
+    STATUS_OK,
+    STATUS_SOLVER_FAIL,
+    UNCHANGED_TOL,
+)
 from dfcoa_opt.world.shapes import Circle
-
-#: Commands closer than this to the nominal one count as unchanged, m/s.
-UNCHANGED_TOL = 1e-9
 
 
 @register_filter("orca")

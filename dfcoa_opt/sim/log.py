@@ -26,6 +26,8 @@ STATUS_OK = 0          # nominal command passed unchanged
 STATUS_MODIFIED = 1    # filter changed the command, constraints met
 STATUS_FALLBACK = 2    # infeasible: the configured fallback policy was applied
 STATUS_SOLVER_FAIL = 3  # solver error: the configured fallback policy was applied
+#: A filtered command closer than this to the nominal one is unchanged (STATUS_OK), m/s.
+UNCHANGED_TOL = 1e-9
 
 
 #: Log fields that are measured wall-clock times (not part of a run's result).
