@@ -1,7 +1,8 @@
-"""Strategies, a cost model and a TOML writer for the loader fuzz tests.
+"""Strategies and mutations of real scenarios for the loader fuzz tests.
 
-Used by ``tests/test_fuzz_loader.py`` (see its docstring for what is fuzzed
-and why some legal but costly examples are skipped).
+Used by ``tests/test_fuzz_loader.py`` (see its docstring for what is fuzzed and
+why some legal but costly examples are skipped). The cost model and the schema's
+key names are in :mod:`tests.fuzz_schema`; TOML text in :mod:`tests.fuzz_toml`.
 """
 
 from __future__ import annotations
@@ -17,12 +18,7 @@ from typing import Any, Literal, get_args, get_origin, get_type_hints
 from hypothesis import event
 from hypothesis import strategies as st
 
-from dfcoa_opt.control.registry import available, available_filters, controller_class
 from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.localization import estimator_names
-from dfcoa_opt.localization.mcl import MonteCarloLocalization
-from dfcoa_opt.planning.astar_improved import ImprovedAStarParams
-from dfcoa_opt.planning.registry import planner_names
 from dfcoa_opt.sim.scenario import Scenario
 from dfcoa_opt.sim.schema import ScenarioSpec
 
@@ -31,134 +27,15 @@ try:
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
-ROOT = Path(__file__).resolve().parents[1]
-
-# ----------------------------------------------------------------- cost model
-CELL_CAP = 250_000  # grid cells (bench/large_100.toml: 240,000; 9e6 cells: 1.5 s)
-N_CAP = 1_000_000  # robots (10**7 on a line: 0.3 s; 10**8: > 4 GiB)
-DISC_CAP = 2_000  # expected clutter discs
-DISC_CELLS_CAP = 5e7  # expected clutter discs x grid cells (rasterisation)
-WINDOW_CAP = 60.0  # improved-A* window, cells (60: 0.5 s on dfcoa_s2; 200: 7.6 s)
-FAST_FAIL = 1e13  # numpy refuses allocations this large at once
-
-
-def _num(x: Any) -> float | None:
-    """``x`` as a float when it is a (non-bool) number, else None; huge ints give inf."""
-    if isinstance(x, bool) or not isinstance(x, (int, float)):
-        return None
-    try:
-        return float(x)
-    except OverflowError:
-        return math.inf if x > 0 else -math.inf
-
-
-def _table(data: Any, key: str) -> dict[str, Any]:
-    value = data.get(key) if isinstance(data, dict) else None
-    return value if isinstance(value, dict) else {}
-
-
-def _costly(value: float | None, cap: float) -> bool:
-    """In the skipped band: above the cap but not absurd enough to fail at once."""
-    return value is not None and cap < value < FAST_FAIL
-
-
-def _grid_cells(world: dict[str, Any], res: float) -> tuple[float, float] | None:
-    """Estimated ``(columns, rows)`` of the grid the loader would build, or None."""
-    ascii_map = world.get("map_ascii")
-    if isinstance(ascii_map, str):
-        lines = ascii_map.strip("\n").split("\n")
-        return float(max(len(ln) for ln in lines)), float(len(lines))
-    size = world.get("size")
-    if isinstance(size, list) and len(size) == 2:
-        w, h = (_num(s) for s in size)
-        if w is not None and h is not None and w > 0 and h > 0:
-            return max(1.0, w * res), max(1.0, h * res)
-    return None
-
-
-def too_costly(data: Any) -> bool:
-    """Whether loading ``data`` could legally build a world too large for a fuzz example.
-
-    See the module docstring; a conservative estimate read from the raw dict
-    (whatever its types), not a check of validity.
-    """
-    world = _table(data, "world")
-    res = _num(world.get("resolution", 10.0))
-    res = res if res is not None and res > 0.0 else 10.0
-    grid = _grid_cells(world, res)
-    cells = grid[0] * grid[1] if grid is not None else None
-    if _costly(cells, CELL_CAP):
-        return True
-    if _costly(_num(_table(data, "team").get("n")), N_CAP):
-        return True
-    window = _num(_table(_table(data, "leader"), "planner_options").get("window"))
-    if window is not None and _costly(window * res, WINDOW_CAP):
-        return True
-    clutter = _table(world, "clutter")
-    density = _num(clutter.get("density"))
-    r_min = _num(clutter.get("radius_min", 0.2))
-    if density is None or not density > 0.0 or r_min is None or not r_min > 0.0:
-        return False
-    region = clutter.get("region")
-    nums = [_num(v) for v in region] if isinstance(region, list) else []
-    if len(nums) == 4 and None not in nums:
-        x0, y0, x1, y1 = nums  # type: ignore[misc]
-        width, height = x1 - x0, y1 - y0
-    elif grid is not None:
-        width, height = grid[0] / res, grid[1] / res  # the grid's extent
-    else:
-        width = height = 0.0
-    if not (math.isfinite(width) and math.isfinite(height)):
-        return False  # numpy refuses the draw range at once
-    discs = density * abs(width * height) / math.pi / r_min / r_min  # may be inf
-    return discs > DISC_CAP or discs * (cells or CELL_CAP) > DISC_CELLS_CAP
-
-
-# ----------------------------------------------------------------- schema names
-def _walk_schema(cls: type, prefix: str, keys: set[str], names: set[str],
-                 tables: set[str], arrays: set[str]) -> None:
-    """Collect field names, literal choices and table paths of a dataclass tree."""
-    for f in dataclasses.fields(cls):
-        keys.add(f.name)
-        tp = get_type_hints(cls)[f.name]
-        path = f"{prefix}.{f.name}" if prefix else f.name
-        for arg in (tp, *get_args(tp), *(a for b in get_args(tp) for a in get_args(b))):
-            if get_origin(arg) is Literal:
-                names.update(str(c) for c in get_args(arg))
-        if dataclasses.is_dataclass(tp):
-            tables.add(path)
-            _walk_schema(tp, path, keys, names, tables, arrays)
-        elif get_origin(tp) is tuple and get_args(tp) and dataclasses.is_dataclass(
-                get_args(tp)[0]):
-            arrays.add(path)
-            _walk_schema(get_args(tp)[0], path, keys, names, tables, arrays)
-        elif get_origin(tp) is dict:
-            tables.add(path)
-
-
-def _filter_params() -> dict[str, type]:
-    from dfcoa_opt.control import registry
-
-    return {fid: registry._FILTERS[fid].Params for fid in available_filters()}
-
-
-CONTROLLER_PARAMS: dict[str, type] = {cid: controller_class(cid).Params for cid in available()}
-CONTROLLER_PARAMS.update(_filter_params())
-PLANNER_PARAMS = ImprovedAStarParams  # a superset of the astar options
-ESTIMATOR_PARAMS = MonteCarloLocalization.Params
-
-_keys: set[str] = set()
-_names: set[str] = {*CONTROLLER_PARAMS, *planner_names(), *estimator_names()}
-_tables: set[str] = set()
-_arrays: set[str] = set()
-_walk_schema(ScenarioSpec, "", _keys, _names, _tables, _arrays)
-for _cls in (*CONTROLLER_PARAMS.values(), PLANNER_PARAMS, ESTIMATOR_PARAMS):
-    _walk_schema(_cls, "", _keys, _names, set(), set())
-_tables.update(f"controllers.{cid}" for cid in CONTROLLER_PARAMS)
-SCHEMA_KEYS = sorted(_keys)
-NAMES = sorted(_names)
-TABLE_PATHS = sorted(_tables)
-ARRAY_PATHS = sorted(_arrays)
+from tests.fuzz_schema import (
+    CONTROLLER_PARAMS,
+    ESTIMATOR_PARAMS,
+    NAMES,
+    PLANNER_PARAMS,
+    ROOT,
+    SCHEMA_KEYS,
+    num,
+)
 
 # ----------------------------------------------------------------- strategies
 HUGE_INTS = [2**31, 2**53 + 1, 2**63 - 1, 2**63, -(2**63), 2**64, 10**30, 10**400, -(10**400)]
@@ -393,7 +270,7 @@ def _mutate(draw: Any, data: dict[str, Any]) -> None:
     nodes = _nodes(data)
     op = draw(st.sampled_from(["replace", "replace", "delete", "add", "append", "scale"]))
     lists = [p for p, v in nodes if isinstance(v, list)]
-    numbers = [p for p, v in nodes if _num(v) is not None and math.isfinite(_num(v))]
+    numbers = [p for p, v in nodes if num(v) is not None and math.isfinite(num(v))]
     if op == "add":
         path = draw(st.sampled_from([p for p, v in nodes if isinstance(v, dict)]))
         real = _keys_for(path)
@@ -425,82 +302,6 @@ def mutated_bases(draw: Any) -> tuple[str, dict[str, Any]]:
     for _ in range(draw(st.integers(1, 3))):
         _mutate(draw, data)
     return name, data
-
-
-# ------------------------------------------------------------ TOML writing
-def toml_string(s: str) -> str:
-    """A TOML basic string (control characters and DEL escaped)."""
-    out = []
-    for ch in s:
-        if ch in '"\\':
-            out.append("\\" + ch)
-        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
-            out.append(f"\\u{ord(ch):04X}")
-        else:
-            out.append(ch)
-    return '"' + "".join(out) + '"'
-
-
-def toml_value(v: Any) -> str:
-    """A TOML value on one line (inline tables and arrays)."""
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        if math.isnan(v):
-            return "nan"
-        return ("inf" if v > 0 else "-inf") if math.isinf(v) else repr(v)
-    if isinstance(v, str):
-        return toml_string(v)
-    if isinstance(v, list):
-        return "[" + ", ".join(toml_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{" + ", ".join(f"{toml_string(k)} = {toml_value(x)}" for k, x in v.items()) + "}"
-    raise TypeError(f"no TOML for {type(v).__name__}")
-
-
-def to_toml(data: dict[str, Any]) -> str:
-    """A whole TOML document: one ``"key" = value`` line per top-level key."""
-    return "".join(f"{toml_string(k)} = {toml_value(v)}\n" for k, v in data.items())
-
-
-TOML_LITERALS = st.one_of(
-    INTS.map(str), FLOATS.map(toml_value), TEXT.map(toml_string), st.sampled_from(NAMES).map(
-        toml_string),
-    st.sampled_from(["true", "false", "[]", "{}", "[1.0, 2.0]", "[[1.0, 2.0], [3.0, 4.0]]",
-                     "1e999", "0x10", "0o7", "1_000", "1979-05-27", "07:32:00", "'lit'",
-                     '"""a\nb"""', "'''\n#.\n.#\n'''", "nan", "-inf", "+inf", "-0", "[1, [2]]",
-                     '{x = 1}', "", "= 1", "[,]"]))
-TOML_LINES = st.one_of(
-    st.sampled_from(TABLE_PATHS).map(lambda p: f"[{p}]"),
-    st.sampled_from(ARRAY_PATHS).map(lambda p: f"[[{p}]]"),
-    st.tuples(st.one_of(st.sampled_from(SCHEMA_KEYS), TEXT.map(toml_string)),
-              TOML_LITERALS).map(lambda kv: f"{kv[0]} = {kv[1]}"),
-    TEXT)
-
-
-@st.composite
-def edited_texts(draw: Any) -> str:
-    """The text of a valid base with one to three lines inserted, deleted, replaced or cut."""
-    lines = BASES[draw(st.sampled_from(sorted(BASES)))][3].splitlines()
-    for _ in range(draw(st.integers(1, 3))):
-        i = draw(st.integers(0, len(lines)))
-        op = draw(st.sampled_from(["replace", "insert", "delete", "truncate"]))
-        if op == "insert":
-            lines.insert(i, draw(TOML_LINES))
-        elif i < len(lines):
-            if op == "replace":
-                lines[i] = draw(TOML_LINES)
-            elif op == "delete":
-                del lines[i]
-            else:
-                lines[i] = lines[i][:draw(st.integers(0, len(lines[i])))]
-    return "\n".join(lines) + "\n"
-
-
-TOML_TEXTS = st.one_of(st.text(CHARS, max_size=200),
-                       st.lists(TOML_LINES, max_size=25).map("\n".join), edited_texts())
 
 
 # ----------------------------------------------------------------- checks

@@ -14,7 +14,7 @@ Bounded cost. Some legal values make the loader build huge worlds: a map of
 ``size * resolution`` cells, ``team.n`` robots on a v/line/grid, a clutter
 field of many tiny discs, an improved-A* ``window`` of many cells. Examples
 that would build such a world *and* could take long are skipped with
-``assume`` (:func:`too_costly`): more than ``CELL_CAP`` cells, more than
+``assume`` (:func:`tests.fuzz_schema.too_costly`): more than ``CELL_CAP`` cells, more than
 ``N_CAP`` robots, more than ``DISC_CAP`` expected clutter discs (or
 ``DISC_CELLS_CAP`` discs x cells), a window of more than ``WINDOW_CAP``
 cells. Values so absurd that numpy refuses them at once (``>= FAST_FAIL``, or
@@ -44,17 +44,16 @@ from hypothesis import strategies as st
 
 from dfcoa_opt.sim.loader import load_scenario, scenario_from_dict
 from dfcoa_opt.sim.scenario import Scenario
+from tests.fuzz_schema import too_costly
 from tests.fuzz_strategies import (
     BASES,
     RANDOM_DICTS,
     SHAPED_DICTS,
-    TOML_TEXTS,
     check_outcome,
     mutated_bases,
     parses,
-    to_toml,
-    too_costly,
 )
+from tests.fuzz_toml import TOML_TEXTS, to_toml
 
 # an overflow or invalid value inside the loader is a bug even when it raises nothing
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
