@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from comparisons.nmpc import Nmpc, solve_time_stats
-from comparisons.nmpc_problem import NW
+from comparisons.nmpc.problem import NW
 from dfcoa_opt.control.registry import build_controller
 from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.simulator import Simulator

@@ -277,16 +277,18 @@ def findings() -> list[str]:
         "O(N (C + E)) per step, about 5 us for 4 robots in S1. "
         "O(N^2) when obstacles grow with the field (constant obstacle density); not measured "
         "here (open field).",
-        "`comparisons/lf_vo.py:LeaderFollowerVO.clearance` (numba `lf_vo_kernel.vo_clearance`)"
+        "`comparisons/lf_vo/controller.py:LeaderFollowerVO.clearance` "
+        "(numba `lf_vo.kernel.vo_clearance`)"
         " -- every robot rolls its samples out against every static circle "
         "(`scenario.world.circles`, not a local query): O(N C) per step, same caveat.",
-        "`comparisons/virtual_spring.py:VirtualSpring.spring` (`virtual_spring_core."
-        "disc_normals`, `polygon_normals`) -- every robot against every static circle and "
+        "`comparisons/virtual_spring/controller.py:VirtualSpring.spring` "
+        "(`virtual_spring.equations.disc_normals`, `polygon_normals`) -- every robot against "
+        "every static circle and "
         "polygon edge (edges built once at reset, vectorised): O(N (C + E)) per step. "
-        "`comparisons/virtual_spring_core.py:fig1_adjacency` (called by `reset`) builds a "
+        "`comparisons/virtual_spring/equations.py:fig1_adjacency` (called by `reset`) builds a "
         "dense N x N adjacency matrix with a Python loop: O(N^2) memory (8 MB at N = 1000, "
         "800 MB at N = 10 000) for a graph with 3 entries per row.",
-        "`comparisons/orca/ivo.py:ivo_lines` (`consensus_ivo`, orca filter mode 'ivo') -- "
+        "`comparisons/orca/ivo/polygons.py:ivo_lines` (`consensus_ivo`, orca filter mode 'ivo') -- "
         "(N, S + C) distances to every obstacle segment and static disc (a circle is one "
         "exact disc, not 32 edges) and an argsort per robot: O(N (S + C) log(S + C)) per "
         "step; `comparisons/orca/safe.py:segment_safety_lines` (modes "

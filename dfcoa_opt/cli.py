@@ -181,10 +181,10 @@ def _cmd_list(a: argparse.Namespace) -> int:
             print(f"{cid:20s} {doc[0] if doc else ''}")
         return 0
     if a.what == "recipes":
-        from dfcoa_opt.figures import recipes
+        from dfcoa_opt.bench.recipes import registered
 
-        for r in recipes():
-            print(f"{r.name:16s} {r.sweep:28s} {r.title}")
+        for r in registered():
+            print(f"{r.name:18s} {r.sweep or '(no sweep)':31s} {r.title}")
         return 0
     root = Path(a.dir)
     if not root.is_dir():

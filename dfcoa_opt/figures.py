@@ -1,114 +1,42 @@
 """``make figures``: every paper table and figure, through the benchmark harness.
 
-Each artefact group is a *figure recipe*: a sweep file (under
-``scenarios/sweeps/``) plus a renderer that turns the sweep's saved results
-into tables and figures. A recipe without a sweep (``sweep=None``, e.g. the
-planner comparison, which simulates nothing) computes its artefacts itself.
+The figure recipes (a sweep file and a renderer each) are registered in
+:mod:`dfcoa_opt.bench.recipes`, one module per paper or group.
 ``make_figures`` runs each recipe's sweep into a result cache
 (``.dfcoa-cache/<recipe>/``; runs already there are reused, so a second
 ``make figures`` only re-renders), renders into ``paper_figures/<recipe>/`` and
 writes the index ``paper_figures/README.md``. Renderers of sweep recipes read
 saved rows and logs only; they never simulate.
 
-Adding a recipe (what the method issues do)::
-
-    from dfcoa_opt.figures import Artefact, recipe
-
-    @recipe("dfcoa_tables", title="Paper 000: Table 5 and Figs 15, 20",
-            sweep="sweeps/dfcoa_paper.toml")
-    def render(store, dest):
-        ...                                    # read store.rows(), write into dest
-        return [Artefact("table5.md", "paper 000 Table 5", "metrics of S1 and S2")]
-
-and list the module in :data:`RECIPE_MODULES`.
+``Artefact``, ``recipe``, ``recipes`` and ``RECIPE_MODULES`` of release 0.1
+are still importable from here (they live in :mod:`dfcoa_opt.bench.recipes`).
 """
 
 from __future__ import annotations
 
-import importlib
 import json
 import multiprocessing
 import os
 import pickle
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
+from dfcoa_opt.bench.recipes import RECIPE_MODULES, Artefact, Recipe, Renderer, recipe, registered
 from dfcoa_opt.errors import DfcoaError, did_you_mean
 
-#: Modules whose import registers recipes, in index order.
-RECIPE_MODULES = ("dfcoa_opt.bench.recipes", "dfcoa_opt.bench.recipes_dfcoa",
-                  "dfcoa_opt.bench.recipes_astar", "dfcoa_opt.bench.recipes_paper001",
-                  "dfcoa_opt.bench.recipes_paper002", "dfcoa_opt.bench.recipes_paper004",
-                  "dfcoa_opt.bench.recipes_beyond")
+#: The 0.1 name of :func:`dfcoa_opt.bench.recipes.registered`.
+recipes = registered
 
-
-@dataclass(frozen=True)
-class Artefact:
-    """One generated file.
-
-    Attributes:
-        path: Path relative to the recipe's output folder.
-        paper: Its paper counterpart ("paper 000 Table 5"), or "-" if none.
-        what: One-line description.
-    """
-
-    path: str
-    paper: str
-    what: str
-
-
-#: ``render(store, dest)`` for a recipe with a sweep; ``render(scenarios, dest)``
-#: (the scenario root) for a recipe without one.
-Renderer = Callable[[Any, Path], list[Artefact]]
-
-
-@dataclass(frozen=True)
-class Recipe:
-    """A sweep and the renderer of its artefacts.
-
-    Attributes:
-        name: Recipe id, also the output sub-folder.
-        sweep: Sweep file, relative to the scenario root, or None for a recipe
-            that computes its artefacts without simulating.
-        title: Heading in the index.
-        render: ``render(store, dest) -> artefacts`` (with a sweep) or
-            ``render(scenarios, dest) -> artefacts`` (without).
-    """
-
-    name: str
-    sweep: str | None
-    title: str
-    render: Renderer
-
-
-_RECIPES: dict[str, Recipe] = {}
-
-
-def recipe(name: str, title: str, sweep: str | None = None) -> Callable[[Renderer], Renderer]:
-    """Decorator registering a renderer as the recipe ``name`` (see :class:`Recipe`)."""
-
-    def deco(fn: Renderer) -> Renderer:
-        if name in _RECIPES and _RECIPES[name].render is not fn:
-            raise ValueError(f"figure recipe {name!r} is already registered")
-        _RECIPES[name] = Recipe(name, sweep, title, fn)
-        return fn
-
-    return deco
-
-
-def recipes() -> list[Recipe]:
-    """Registered recipes, in registration order."""
-    for mod in RECIPE_MODULES:
-        importlib.import_module(mod)
-    return list(_RECIPES.values())
+__all__ = ["RECIPE_MODULES", "Artefact", "Recipe", "make_figures", "recipe", "recipes",
+           "write_index"]
 
 
 def make_figures(scenarios: Path, out: Path, cache: Path,
@@ -134,7 +62,7 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
     Raises:
         DfcoaError: Unknown recipe name, bad sweep or scenario file.
     """
-    todo = recipes()
+    todo = registered()
     names = [r.name for r in todo]
     for name in only or ():
         if name not in names:
@@ -243,7 +171,7 @@ def write_index(out: Path, order: Sequence[str]) -> Path:
     lines = ["# Generated tables and figures", "",
              "Everything in this folder is written by `make figures` (`dfcoa figures`); "
              "nothing here is edited by hand. Paper tables list the paper's value beside ours. "
-             "Each folder is one figure recipe (`dfcoa_opt/figures.py`): a sweep file under "
+             "Each folder is one figure recipe (`dfcoa_opt/bench/recipes/`): a sweep file under "
              "`scenarios/sweeps/` and a renderer that reads only the saved results.", ""]
     for name in order:
         meta = out / name / "artefacts.json"

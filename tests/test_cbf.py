@@ -13,7 +13,7 @@ import qpsolvers
 from shapely.geometry import Point
 from shapely.geometry import Polygon as ShapelyPolygon
 
-from comparisons.distance_constraints import (
+from comparisons.constraints.distance import (
     StaticObstacles,
     barrier,
     disc_nearest,

@@ -3,9 +3,10 @@
 import json
 from pathlib import Path
 
+from dfcoa_opt.bench import recipes as registry
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.cli import main
-from dfcoa_opt.figures import make_figures, recipes
+from dfcoa_opt.figures import make_figures
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 QUICK = {"t_max": 3.0}
@@ -16,7 +17,7 @@ def test_figures_smoke_renders_every_recipe_and_reuses_the_cache(tmp_path):
     cfg = ExecutorConfig("process", 2)
     index = make_figures(SCENARIOS, out, cache, cfg, seeds=1, progress=False, overrides=QUICK)
     text = index.read_text()
-    for r in recipes():
+    for r in registry.registered():
         meta = json.loads((out / r.name / "artefacts.json").read_text())
         assert meta["artefacts"], r.name
         for a in meta["artefacts"]:
@@ -50,20 +51,18 @@ def test_renders_overlap_in_a_process_and_local_renderers_run_inline(tmp_path, m
 
     import pytest
 
-    from dfcoa_opt import figures
-
     def local(scenarios, dest):  # a closure: cannot be pickled, so it renders inline
         (dest / "hello.md").write_text(str(scenarios))
-        return [figures.Artefact("hello.md", "-", "test")]
+        return [registry.Artefact("hello.md", "-", "test")]
 
-    recipes()  # register the real recipes first, so that they stay out of the patched table
-    monkeypatch.setattr(figures, "_RECIPES", {"local": figures.Recipe("local", None, "T", local)})
+    registry.registered()  # register the real recipes first, so that they stay out of the table
+    monkeypatch.setattr(registry, "_RECIPES", {"local": registry.Recipe("local", None, "T", local)})
     cfg = ExecutorConfig("process", 2)
     index = make_figures(SCENARIOS, tmp_path / "out", tmp_path / "cache", cfg, progress=False)
     assert (tmp_path / "out" / "local" / "hello.md").read_text() == str(SCENARIOS)
     assert "`local/hello.md`" in index.read_text()
     # operator.sub(Path, Path) raises in the render process; the error reaches the caller
-    monkeypatch.setattr(figures, "_RECIPES",
-                        {"bad": figures.Recipe("bad", None, "T", operator.sub)})
+    monkeypatch.setattr(registry, "_RECIPES",
+                        {"bad": registry.Recipe("bad", None, "T", operator.sub)})
     with pytest.raises(TypeError, match="unsupported operand"):
         make_figures(SCENARIOS, tmp_path / "out2", tmp_path / "cache", cfg, progress=False)

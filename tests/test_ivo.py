@@ -9,8 +9,8 @@ distance to an ellipse is Eberly's bisection on the closest-point equation, and
 import numpy as np
 import pytest
 
-from comparisons.orca.ellipse import Ellipse, ellipse_support, polygon_segments, segment_ellipse
 from comparisons.orca.ivo import ivo_line, ivo_lines
+from comparisons.orca.ivo.ellipse import Ellipse, ellipse_support, polygon_segments, segment_ellipse
 from comparisons.orca.lines import agent_lines
 from comparisons.orca.lp import FEASIBLE, solve_lines
 

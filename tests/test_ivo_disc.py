@@ -1,4 +1,4 @@
-"""The closed-form IVO of a static disc (comparisons/orca/ivo_disc.py) and its batching.
+"""The closed-form IVO of a static disc (comparisons/orca/ivo/discs.py) and its batching.
 
 A disc ``D(c, R)`` is its own eq-8 ellipse ``O' = D(c, R + m)``; its line must be
 the one the numerical ellipse path (:func:`comparisons.orca.ivo.ivo_line`) gives
@@ -9,10 +9,10 @@ nearest first within the range.
 import numpy as np
 import pytest
 
-from comparisons.orca.ellipse import Ellipse, polygon_segments, segment_ellipse
 from comparisons.orca.filter import OrcaFilter
 from comparisons.orca.ivo import ivo_line, ivo_lines
-from comparisons.orca.ivo_disc import disc_line
+from comparisons.orca.ivo.discs import disc_line
+from comparisons.orca.ivo.ellipse import Ellipse, polygon_segments, segment_ellipse
 from comparisons.orca.lines import agent_lines
 from comparisons.orca.lp import solve_lines
 from dfcoa_opt import metrics

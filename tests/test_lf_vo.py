@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from comparisons.lf_vo import LeaderFollowerVO
-from comparisons.lf_vo_core import (
+from comparisons.lf_vo.equations import (
     formation_target,
     path_clearance,
     reference_command,
@@ -14,7 +14,7 @@ from comparisons.lf_vo_core import (
     target_error,
     vo_cost,
 )
-from comparisons.lf_vo_kernel import vo_clearance
+from comparisons.lf_vo.kernel import vo_clearance
 from dfcoa_opt.control.base import MovingObstacles, Neighbours, Observation
 from dfcoa_opt.control.registry import available, make_controller
 from dfcoa_opt.errors import ScenarioError

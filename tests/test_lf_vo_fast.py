@@ -3,14 +3,14 @@
 Oracles: two calls of the numpy reference
 (``min(path_clearance(pts, far), path_clearance(pts[:, :, :h_r], near))``) and of
 the kernel itself with one horizon each; ``argmin``/``argmax`` over
-:func:`comparisons.lf_vo_core.vo_cost` for :func:`vo_choose`.
+:func:`comparisons.lf_vo.equations.vo_cost` for :func:`vo_choose`.
 """
 
 import numpy as np
 import pytest
 
-from comparisons.lf_vo_core import path_clearance, rollout, vo_cost
-from comparisons.lf_vo_kernel import vo_choose, vo_clearance
+from comparisons.lf_vo.equations import path_clearance, rollout, vo_cost
+from comparisons.lf_vo.kernel import vo_choose, vo_clearance
 from tests.test_lf_vo import random_world
 
 NV, NW, H = 11, 21, 30  # speed and turn-rate samples, prediction steps

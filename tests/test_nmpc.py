@@ -7,17 +7,17 @@ import casadi as ca
 import numpy as np
 import pytest
 
-import comparisons.nmpc_problem as nmpc_problem
-from comparisons.distance_constraints import StaticObstacles
+import comparisons.nmpc.problem as nmpc_problem
+from comparisons.constraints.distance import StaticObstacles
 from comparisons.nmpc import Nmpc, goto_command, solve_time_stats
-from comparisons.nmpc_geometry import (
+from comparisons.nmpc.geometry import (
     neighbour_predictions,
     obstacle_halfplanes,
     plan_positions,
     robot_halfplanes,
     slot_reference,
 )
-from comparisons.nmpc_problem import NW, arc_step, rollout
+from comparisons.nmpc.problem import NW, arc_step, rollout
 from dfcoa_opt.control.base import MovingObstacles, Observation, slot_velocity
 from dfcoa_opt.control.registry import available, build_controller, make_controller
 from dfcoa_opt.errors import ScenarioError

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from comparisons.orca import safe
 from comparisons.orca.crowd import goal_velocities
-from comparisons.orca.ellipse import polygon_segments
+from comparisons.orca.ivo.ellipse import polygon_segments
 from comparisons.orca.lp import FEASIBLE, LEAST_VIOLATION, SOLVER_FAIL, solve_lines
 from comparisons.orca.neighbours import knn_within
 from comparisons.orca.qp import solve_lines_qp

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from dfcoa_opt import metrics
-from dfcoa_opt.bench import recipes_astar, recipes_dfcoa
+from dfcoa_opt.bench.recipes import astar as recipes_astar
+from dfcoa_opt.bench.recipes import dfcoa as recipes_dfcoa
 from dfcoa_opt.planning.astar import plan
 from dfcoa_opt.planning.astar_improved import ImprovedAStarParams
 
@@ -117,9 +118,9 @@ def _recipe_run(tmp_path, name, overrides=None):
     """Run one paper recipe's real sweep (serially) and render it into ``tmp_path``."""
     from dfcoa_opt.bench.executors import ExecutorConfig
     from dfcoa_opt.bench.harness import run_sweep
-    from dfcoa_opt.figures import recipes
+    from dfcoa_opt.bench.recipes import registered
 
-    rec = next(r for r in recipes() if r.name == name)
+    rec = next(r for r in registered() if r.name == name)
     res = run_sweep(SCENARIOS / rec.sweep, tmp_path / "cache", ExecutorConfig("serial"),
                     progress=False, overrides=overrides)
     assert res.failed == 0
@@ -128,7 +129,7 @@ def _recipe_run(tmp_path, name, overrides=None):
 
 
 def test_paper001_table1_reports_each_obstacle_mode_beside_the_paper(tmp_path):
-    from dfcoa_opt.bench import recipes_paper001 as rp
+    from dfcoa_opt.bench.recipes import paper001 as rp
 
     arts, store = _recipe_run(tmp_path, "paper001_ivo")
     text = (tmp_path / "table1.md").read_text()
@@ -148,7 +149,7 @@ def test_paper001_table1_reports_each_obstacle_mode_beside_the_paper(tmp_path):
 
 
 def test_paper001_table2_has_every_variant_and_the_leader_arrival(tmp_path):
-    from dfcoa_opt.bench import recipes_paper001 as rp
+    from dfcoa_opt.bench.recipes import paper001 as rp
 
     arts, store = _recipe_run(tmp_path, "paper001_consensus", {"t_max": 1.0})
     text = (tmp_path / "table2.md").read_text()
@@ -163,7 +164,7 @@ def test_paper001_table2_has_every_variant_and_the_leader_arrival(tmp_path):
 
 
 def test_paper002_tables_put_the_papers_values_beside_the_logs_own(tmp_path):
-    from dfcoa_opt.bench import recipes_paper002 as rp
+    from dfcoa_opt.bench.recipes import paper002 as rp
 
     arts, store = _recipe_run(tmp_path, "paper002_tables", {"t_max": 2.0})
     text = (tmp_path / "tables.md").read_text()
@@ -188,7 +189,7 @@ def test_paper002_tables_put_the_papers_values_beside_the_logs_own(tmp_path):
 
 
 def test_paper004_tables_put_the_papers_values_beside_the_logs_own(tmp_path):
-    from dfcoa_opt.bench import recipes_paper004 as rp
+    from dfcoa_opt.bench.recipes import paper004 as rp
 
     arts, store = _recipe_run(tmp_path, "paper004_tables", {"t_max": 1.0})
     text = (tmp_path / "tables.md").read_text()
@@ -246,7 +247,7 @@ def test_beyond_recipe_reports_solve_times_of_cbf_and_nmpc(tmp_path):
     controller, whose robot-step count is that of the logs."""
     from dfcoa_opt.bench.executors import ExecutorConfig
     from dfcoa_opt.bench.harness import run_sweep
-    from dfcoa_opt.bench.recipes_beyond import render_beyond
+    from dfcoa_opt.bench.recipes.beyond import render_beyond
 
     tiny = Path(__file__).parent / "data" / "bench" / "tiny.toml"
     sweep = tmp_path / "beyond.toml"

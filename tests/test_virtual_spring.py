@@ -1,4 +1,4 @@
-"""Paper 004's virtual-spring consensus formation: comparisons/virtual_spring.py.
+"""Paper 004's virtual-spring consensus formation: comparisons/virtual_spring/controller.py.
 
 Oracles: hand evaluations of eq 4, 6, 7, 10-17; the composition of eq 8-10 in
 the controller recomputed from the pure functions; smoke runs on a small
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from comparisons.virtual_spring import VirtualSpring, VirtualSpringBasic
-from comparisons.virtual_spring_conflict import conflict_resolution, vo_conflict
-from comparisons.virtual_spring_core import (
+from comparisons.virtual_spring.conflict import conflict_resolution, vo_conflict
+from comparisons.virtual_spring.equations import (
     consensus_input,
     consistency_velocity,
     disc_normals,

@@ -9,8 +9,8 @@ plain numpy forms of eq 15-17 (``(a * b).sum(-1)``, ``norm(...) == 0``).
 import numpy as np
 import pytest
 
-from comparisons.virtual_spring_conflict import conflict_resolution, vo_conflict
-from comparisons.virtual_spring_core import (
+from comparisons.virtual_spring.conflict import conflict_resolution, vo_conflict
+from comparisons.virtual_spring.equations import (
     disc_normals,
     norm2,
     polygon_edge_table,

@@ -29,11 +29,11 @@ from typing import Literal
 
 import numpy as np
 
+from comparisons.constraints.solvers import check_solver
 from comparisons.orca import lp, safe
-from comparisons.orca.ellipse import polygon_segments
 from comparisons.orca.ivo import ivo_lines
+from comparisons.orca.ivo.ellipse import polygon_segments
 from comparisons.orca.obstacles import ObstacleSet, obstacle_lines, prepare_obstacles
-from comparisons.orca.qp_backend import check_solver
 from comparisons.orca.velocities import orca_velocities
 from dfcoa_opt.control.base import Filtered, FilterResult, Observation
 from dfcoa_opt.control.registry import register, register_filter
@@ -72,7 +72,7 @@ class OrcaFilter:
         obstacles: Literal["orca", "ivo", "next_step", "none"] = param(
             "orca", doc="Static obstacles: 'orca': RVO2's obstacle ORCA lines (mode a, horizon "
                         "time_horizon_obst); 'ivo': paper 001's improved VO (mode b, eq 8-10, "
-                        "comparisons/orca/ivo.py; circles as exact discs); 'next_step': hard "
+                        "comparisons/orca/ivo/; circles as exact discs); 'next_step': hard "
                         "half-planes that keep the robot off every polygon edge at the next step "
                         "(comparisons/orca/safe.py); 'none': ignored.")
         time_horizon_obst: float = param(2.0, doc="ORCA horizon of static obstacles (mode "
@@ -111,7 +111,7 @@ class OrcaFilter:
 
         Modes 'orca' and 'next_step' (and the safe mode) see every shape as a
         polygon (a circle as its circumscribed 32-gon); mode 'ivo' takes circles
-        as exact discs (one line each, :mod:`comparisons.orca.ivo_disc`) and the
+        as exact discs (one line each, :mod:`comparisons.orca.ivo.discs`) and the
         other shapes as polygon edges.
 
         Raises:

@@ -13,7 +13,7 @@ the pair separates within the step.
 Lines are written in the convention of :mod:`comparisons.orca.lp` (point,
 unit direction, allowed side on the left). The escape from a disc's truncated
 cone, :func:`disc_vo_escape`, is shared with the improved VO of a static disc
-(:mod:`comparisons.orca.ivo_disc`).
+(:mod:`comparisons.orca.ivo.discs`).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ A second, independent solving path for the problem of :func:`comparisons.orca.lp
     v_new = argmin ||v - v_pref||  s.t.  ||v|| <= v_max,  det(d_k, p_k - v) <= 0 for all k
 
 Every robot's problem goes to a general QP solver (``qpsolvers.solve_qp``, OSQP by default,
-:mod:`comparisons.orca.qp_backend`) instead of the incremental 2D LP, so the two paths share
+:mod:`comparisons.constraints.solvers`) instead of the incremental 2D LP, so the two paths share
 no solving code and check each other; one robot at a time, for tests and cross-checks.
 
 Lines are rows of ``G v <= h`` (plus the square ``|v_x|, |v_y| <= v_max``). The speed disc
@@ -29,13 +29,13 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from comparisons.orca.lp import FEASIBLE, LEAST_VIOLATION, SOLVER_FAIL
-from comparisons.orca.qp_backend import (  # noqa: F401 - solver_options is public here too
+from comparisons.constraints.solvers import (  # noqa: F401 - solver_options is public here too
     SolveFailed,
     Solver,
     scaled_tol,
     solver_options,
 )
+from comparisons.orca.lp import FEASIBLE, LEAST_VIOLATION, SOLVER_FAIL
 
 # The tolerances below are relative to max(1 m/s, v_max): m/s for v_max <= 1 m/s.
 

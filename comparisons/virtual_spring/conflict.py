@@ -1,6 +1,6 @@
 """Paper 004's velocity-obstacle conflict resolution (eq 15-17) for ``virtual_spring``.
 
-Pure, vectorised numpy, row by row like :mod:`comparisons.virtual_spring_core`
+Pure, vectorised numpy, row by row like :mod:`comparisons.virtual_spring.equations`
 (split from it to keep modules small):
 
 * :func:`vo_conflict` -- eq 15-16: is ``v_i`` in the velocity obstacle of robot ``c_k``;
@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from comparisons.virtual_spring_core import FloatArray, norm2, unit_vectors
+from comparisons.virtual_spring.equations import FloatArray, norm2, unit_vectors
 
 
 def vo_conflict(rel_pos: ArrayLike, rel_vel: ArrayLike, radius: ArrayLike,

@@ -1,8 +1,4 @@
-"""Built-in figure recipes: the example runs and the cross-method comparison.
-
-Method issues register their paper tables the same way, in their own modules
-(listed in :data:`dfcoa_opt.figures.RECIPE_MODULES`).
-"""
+"""Figure recipe "examples": every controller on the example scenarios, one seed."""
 
 from __future__ import annotations
 
@@ -12,9 +8,8 @@ from typing import Any
 from dfcoa_opt import plotting
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.plots import scenario_for_row
-from dfcoa_opt.bench.report import make_report
+from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.figures import Artefact, recipe
 from dfcoa_opt.sim.log import RunLog
 
 #: Columns of the example table.
@@ -59,34 +54,3 @@ def render_examples(store: ResultsStore, dest: Path) -> list[Artefact]:
         arts.append(Artefact(png, "-", f"{name} with {cid}: trajectories, slots, map"))
     atomic_write(dest / "summary.md", "\n".join(lines) + "\n")
     return [Artefact("summary.md", "-", "metrics of every example run"), *arts]
-
-
-@recipe("comparison", sweep="sweeps/comparison.toml",
-        title="Cross-method comparison on the common scenarios (scenarios/bench/)")
-def render_comparison(store: ResultsStore, dest: Path) -> list[Artefact]:
-    """Mean ± 95 % CI tables, per-metric box plots and one-seed trajectory overlays."""
-    return report_artefacts(store, dest, "paper 000 Table 6 (qualitative there)")
-
-
-def report_artefacts(store: ResultsStore, dest: Path, paper: str) -> list[Artefact]:
-    """The cross-method report of a sweep (:func:`make_report`) as artefacts.
-
-    Args:
-        store: The sweep's results.
-        dest: Output folder.
-        paper: What the main table corresponds to in the papers.
-    """
-    paths = make_report(store.root, dest)
-    arts = []
-    for p in paths:
-        rel = p.relative_to(dest).as_posix()
-        if p.suffix == ".md":
-            arts.append(Artefact(rel, paper, "every controller x scenario: mean ± 95 % CI over "
-                                             "seeds, success and collision rates"))
-        elif p.suffix == ".csv":
-            arts.append(Artefact(rel, "-", "the same table as CSV"))
-        elif p.name.startswith("traj_"):
-            arts.append(Artefact(rel, "-", "trajectories of every controller, one seed"))
-        else:
-            arts.append(Artefact(rel, "-", f"distribution over seeds: {p.stem}"))
-    return arts

@@ -21,8 +21,8 @@ from matplotlib.patches import Circle as CirclePatch
 from dfcoa_opt import metrics, plotting
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.plots import ok_runs, save_png, scenario_for_row
+from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.figures import Artefact, recipe
 from dfcoa_opt.metrics_robots import leader_follower_position_error
 from dfcoa_opt.sim.log import RunLog
 

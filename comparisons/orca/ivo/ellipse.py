@@ -1,7 +1,7 @@
 """The enclosing ellipse of an obstacle segment (paper 001 eq 8) and its support function.
 
 :func:`segment_ellipse` builds ``O'`` around a segment with a clearance ``m``
-(the reading of eq 8 is in :mod:`comparisons.orca.ivo`); :func:`ellipse_support`
+(the reading of eq 8 is in :mod:`comparisons.orca.ivo.polygons`); :func:`ellipse_support`
 is the exact support function of ``O' (+) D(0, r)`` used for the velocity
 obstacle of eq 9; :func:`polygon_segments` cuts polygons into the segments the
 ellipses enclose.

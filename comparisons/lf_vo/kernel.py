@@ -1,11 +1,11 @@
 """Fast sampled velocity obstacle of ``lf_vo``: rollout, clearance and choice in numba kernels.
 
 :func:`vo_clearance` returns the same ``(N, S)`` clearances as
-``path_clearance(rollout(...), ...)`` of :mod:`comparisons.lf_vo_core` (the
+``path_clearance(rollout(...), ...)`` of :mod:`comparisons.lf_vo.equations` (the
 numpy reference), without the dense ``(N, S, H, Q)`` arrays. Per robot:
 
 1. **Rollout.** Every sample's path is integrated with the same floating-point
-   operations as :func:`comparisons.lf_vo_core.rollout` (heading
+   operations as :func:`comparisons.lf_vo.equations.rollout` (heading
    ``theta + w * t_mid``, increments ``(v * step) * cos``, sequential sums).
    ``cos``/``sin`` are reused where the heading is bitwise the same: samples
    with the same ``w`` (the grid repeats the ``w`` values for every ``v``,
@@ -35,7 +35,7 @@ numpy reference), without the dense ``(N, S, H, Q)`` arrays. Per robot:
    lowered by :data:`SLACK` to absorb rounding.
 
 :func:`vo_choose` picks each robot's sample as ``lf_vo`` does with the numpy
-reference (:func:`comparisons.lf_vo_core.vo_cost`, ``argmin`` over the safe
+reference (:func:`comparisons.lf_vo.equations.vo_cost`, ``argmin`` over the safe
 samples, ``argmax`` of the clearance when none is safe), with the same
 floating-point operations per cost, computed for the safe samples only.
 """
@@ -336,7 +336,7 @@ def vo_choose(theta: ArrayLike, v: ArrayLike, w: ArrayLike, v_ref: ArrayLike, w_
     """Each robot's sample: the cheapest safe one, else the one with the largest clearance.
 
     The same choice as ``np.argmin(np.where(clear >= 0, vo_cost(...), inf), axis=1)``
-    with :func:`comparisons.lf_vo_core.vo_cost` (bit for bit the same costs:
+    with :func:`comparisons.lf_vo.equations.vo_cost` (bit for bit the same costs:
     the same operations in the same order), replaced by ``np.argmax(clear,
     axis=1)`` on the rows without a safe sample. Costs are computed for the
     safe samples only, the trigonometry once per distinct turn rate

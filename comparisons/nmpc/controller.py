@@ -1,7 +1,7 @@
 """Distributed nonlinear MPC formation controller: ``nmpc`` (not from the papers).
 
 Every robot solves its own small NLP each step (casadi, built once per run in
-:meth:`Nmpc.reset`, :mod:`comparisons.nmpc_problem`) and applies the first
+:meth:`Nmpc.reset`, :mod:`comparisons.nmpc.problem`) and applies the first
 control ``(v, omega)`` (``command = "unicycle"``):
 
 * **Model.** The unicycle over ``H`` stages of ``tau`` s (default the scenario's
@@ -12,9 +12,9 @@ control ``(v, omega)`` (``command = "unicycle"``):
   heading of the slot's path (``w_heading``), the deviation from the slot's
   feed-forward twist (``w_effort``) and the control rate (``w_rate``). The slot is
   predicted from the broadcast leader state moving at constant (v, omega)
-  (:func:`comparisons.nmpc_geometry.slot_reference`).
+  (:func:`comparisons.nmpc.geometry.slot_reference`).
 * **Constraints.** At each stage, half-planes ``n . (p_k - q) >= D`` from the
-  shared builders of :mod:`comparisons.distance_constraints`, linearised at the
+  shared builders of :mod:`comparisons.constraints.distance`, linearised at the
   position the previous (shifted) plan predicts for that stage: the ``M``
   nearest static shapes and moving discs (constant velocity), ``D = radius +
   margin``, and the ``K`` nearest neighbours along their plans of the previous
@@ -44,14 +44,14 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from comparisons.distance_constraints import StaticObstacles
-from comparisons.nmpc_geometry import (
+from comparisons.constraints.distance import StaticObstacles
+from comparisons.nmpc.geometry import (
     neighbour_predictions,
     obstacle_halfplanes,
     robot_halfplanes,
     slot_reference,
 )
-from comparisons.nmpc_problem import NW, NmpcProblem, ProblemSpec, SolveOutput, rollout
+from comparisons.nmpc.problem import NW, NmpcProblem, ProblemSpec, SolveOutput, rollout
 from dfcoa_opt.control.base import FilterResult, Observation
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.geometry import wrap_angle

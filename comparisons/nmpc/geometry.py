@@ -5,7 +5,7 @@ depends on row ``i`` of its inputs only (plus the neighbours' broadcast plans
 passed in explicitly), so the controller stays distributed.
 
 The half-planes come from the shared builders of
-:mod:`comparisons.distance_constraints`: for a linearisation point ``xbar`` and a
+:mod:`comparisons.constraints.distance`: for a linearisation point ``xbar`` and a
 thing to keep away from, the builder gives the nearest point ``q`` and the unit
 normal ``n`` from ``q`` towards ``xbar``; the constraint on the predicted position
 ``p`` is ``n . (p - q) >= D``, i.e. ``n . p >= c`` with ``c = n . q + D``.
@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from comparisons.distance_constraints import StaticObstacles, disc_nearest, pair_geometry
+from comparisons.constraints.distance import StaticObstacles, disc_nearest, pair_geometry
 from dfcoa_opt.control.base import MovingObstacles, Neighbours
 
 FloatArray = NDArray[np.float64]
@@ -150,9 +150,9 @@ def obstacle_halfplanes(lin: FloatArray, static: StaticObstacles, moving: Moving
     """Half-planes of the ``count`` nearest static and moving obstacles at each stage.
 
     Static shapes (discs and polygons) go through
-    :meth:`~comparisons.distance_constraints.StaticObstacles.nearest`; moving
+    :meth:`~comparisons.constraints.distance.StaticObstacles.nearest`; moving
     discs are predicted at constant velocity to each stage's time and go through
-    :func:`~comparisons.distance_constraints.disc_nearest`. The ``count`` nearest
+    :func:`~comparisons.constraints.distance.disc_nearest`. The ``count`` nearest
     of both (signed distance from the linearisation point) within ``reach`` are kept.
 
     Args:

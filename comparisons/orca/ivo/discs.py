@@ -3,7 +3,7 @@
 Paper 001 builds its ellipses ``O'`` (eq 8) around the segments of polygon
 obstacles only. A circular obstacle ``D(c, R)`` needs no segments: the smallest
 ellipse whose boundary keeps the clearance ``m`` from the disc (the eq-8 reading
-of :mod:`comparisons.orca.ivo`) is the disc ``O' = D(c, R + m)`` itself
+of :mod:`comparisons.orca.ivo.polygons`) is the disc ``O' = D(c, R + m)`` itself
 (``a = b = R + m``). Then ``K = O' (+) D(r_A) = D(c, R + m + r_A)``, the velocity
 obstacle of eq 9 is the classic truncated cone of a disc (paper 001 eq 7), and
 the smallest escape ``u`` from ``v_opt`` has the closed form of RVO2's
@@ -12,7 +12,7 @@ relative velocity ``v_opt`` (the obstacle is static), responsibility ``alpha``
 (1 for static obstacles, eq 10) and eq 9's horizon ``tau``. Inside ``K`` the
 line is the push-out line ``n . v >= push_speed``, ``n`` the outward normal
 from ``c`` to ``p_A``. This is the same half-plane as the numerical ellipse path
-of :mod:`comparisons.orca.ivo` with ``a = b`` (tested to 1e-6), at one line per
+of :mod:`comparisons.orca.ivo.polygons` with ``a = b`` (tested to 1e-6), at one line per
 disc instead of one per edge of its 32-gon.
 
 The pieces shared with the ellipse path also live here: eq 9's horizon rules
@@ -174,7 +174,7 @@ def disc_line(pos: ArrayLike, v_opt: ArrayLike, radius: float, centre: ArrayLike
     """The IVO half-plane of one robot against a static disc ``D(c, R)``, closed form.
 
     Eq 8 gives ``O' = D(c, R + m)`` (``a = b = R + m``), eq 9-10 the line of
-    :func:`comparisons.orca.ivo.ivo_line` for that ellipse (module docstring).
+    :func:`comparisons.orca.ivo.polygons.ivo_line` for that ellipse (module docstring).
 
     Args:
         pos: ``(2,)`` robot position ``p_A``, m.

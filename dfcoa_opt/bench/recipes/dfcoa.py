@@ -16,9 +16,9 @@ import numpy as np
 from dfcoa_opt import metrics, plotting
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.plots import save_png, scenario_for_row
+from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.report import aggregate
 from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.figures import Artefact, recipe
 from dfcoa_opt.sim.log import RunLog
 
 #: Table 5 rows: (summary key, label, unit as printed by the paper).

@@ -14,7 +14,7 @@ inputs only. Equation numbers are the paper's (``docs/methods/virtual_spring.md`
 * :func:`consistency_velocity` -- eq 10-11.
 * :func:`error_trend` and :func:`dynamic_speed_limit` -- eq 12-13.
 * :func:`ideal_positions`, :func:`ideal_position_error` -- eq 14.
-* eq 15-17 (conflict resolution): :mod:`comparisons.virtual_spring_conflict`.
+* eq 15-17 (conflict resolution): :mod:`comparisons.virtual_spring.conflict`.
 """
 
 from __future__ import annotations

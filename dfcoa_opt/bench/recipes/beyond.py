@@ -14,9 +14,9 @@ import numpy as np
 
 from dfcoa_opt import metrics
 from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench.recipes import report_artefacts
+from dfcoa_opt.bench.recipes import Artefact, recipe
+from dfcoa_opt.bench.recipes.comparison import report_artefacts
 from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.figures import Artefact, recipe
 from dfcoa_opt.sim.log import RunLog
 
 

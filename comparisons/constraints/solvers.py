@@ -1,4 +1,6 @@
-"""The ``qpsolvers`` plumbing of :mod:`comparisons.orca.qp`: options, retries, one call.
+"""The ``qpsolvers`` plumbing of the ``orca`` (:mod:`comparisons.orca.qp`) and ``cbf`` programs.
+
+Options, retries and one call per program.
 
 Tolerances are passed with every call (no global solver settings are changed);
 a solve that returns nothing for a problem known to be feasible is retried with

@@ -20,7 +20,7 @@ import numpy as np
 from dfcoa_opt import plotting
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.plots import save_png
-from dfcoa_opt.figures import Artefact, recipe
+from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.planning.astar import AStarParams, plan
 from dfcoa_opt.planning.astar_improved import (
     ImprovedAStarParams,

@@ -22,8 +22,8 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.optimize import linprog
 
+from comparisons.constraints.solvers import Solver
 from comparisons.orca import lp
-from comparisons.orca.qp_backend import Solver
 from dfcoa_opt.sim.log import (
     STATUS_FALLBACK,
     STATUS_MODIFIED,

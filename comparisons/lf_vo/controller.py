@@ -23,20 +23,20 @@ runs the same law on its own observation row:
    robot radius + ``safety_margin`` to a static disc (``scenario.world.circles``),
    another robot (``obs.neighbours``, constant velocity) or a moving human
    (``obs.obstacles``, constant velocity). The safe sample with the least
-   penalty (:func:`comparisons.lf_vo_core.vo_cost`) is applied.
+   penalty (:func:`comparisons.lf_vo.equations.vo_cost`) is applied.
 4. **Fallback.** When every sample is rejected: ``"least_penetration"``
    (default) applies the sample whose path keeps the largest clearance;
    ``"stop"`` applies (0, 0). ``last_fallbacks`` counts the robots that fell
    back at the latest step (the simulator does not log it).
 
 Speed: ``kernel = "numba"`` (default) computes step 3 with
-:func:`comparisons.lf_vo_kernel.vo_clearance` (one call and one rollout per
+:func:`comparisons.lf_vo.kernel.vo_clearance` (one call and one rollout per
 robot for robots, humans and discs, each checked over its own horizon; exact
 clearances with culling of obstacles that cannot be the nearest) and the choice
-with :func:`comparisons.lf_vo_kernel.vo_choose` (costs of the safe samples
+with :func:`comparisons.lf_vo.kernel.vo_choose` (costs of the safe samples
 only, trigonometry once per turn rate); ``kernel = "numpy"`` is the dense reference
-(:func:`comparisons.lf_vo_core.rollout`, :func:`~comparisons.lf_vo_core.path_clearance`,
-:func:`~comparisons.lf_vo_core.vo_cost`). Both give the same commands.
+(:func:`comparisons.lf_vo.equations.rollout`, :func:`~comparisons.lf_vo.equations.path_clearance`,
+:func:`~comparisons.lf_vo.equations.vo_cost`). Both give the same commands.
 
 Decisions (the paper's words, the choice and the reason; also in
 ``docs/methods/lf_vo.md``):
@@ -64,7 +64,7 @@ Decisions (the paper's words, the choice and the reason; also in
 * Penalties: "distance to the optimum selected velocity and consistency with
   the target direction" -- norms and weights are not given. We use the
   distance between world velocities and the shortfall of the progress towards
-  the target (:func:`comparisons.lf_vo_core.vo_cost`); an angle penalty made
+  the target (:func:`comparisons.lf_vo.equations.vo_cost`); an angle penalty made
   stopping in front of a static disc cheaper than going round it (deadlock).
 * The preferred command (eq 4) is added to the samples
   (``include_preferred``), so in free space the robot runs eq 4 exactly.
@@ -81,7 +81,7 @@ from typing import Literal
 
 import numpy as np
 
-from comparisons.lf_vo_core import (
+from comparisons.lf_vo.equations import (
     formation_target,
     path_clearance,
     reference_command,
@@ -89,7 +89,7 @@ from comparisons.lf_vo_core import (
     target_error,
     vo_cost,
 )
-from comparisons.lf_vo_kernel import vo_choose, vo_clearance
+from comparisons.lf_vo.kernel import vo_choose, vo_clearance
 from dfcoa_opt.control.base import Observation
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.params import param
@@ -152,7 +152,7 @@ class LeaderFollowerVO:
         fallback: Literal["least_penetration", "stop"] = param(
             "least_penetration", doc="Command when every sample is rejected.")
         kernel: Literal["numba", "numpy"] = param(
-            "numba", doc="Clearance code: the numba kernel (comparisons.lf_vo_kernel) or the "
+            "numba", doc="Clearance code: the numba kernel (comparisons.lf_vo.kernel) or the "
                          "numpy reference (rollout + path_clearance); same decisions.")
 
     def __init__(self, params: Params) -> None:

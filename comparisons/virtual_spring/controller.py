@@ -6,7 +6,7 @@ the adapter turns it into ``u_i(t) = (v_i(t+1) - v_i(t))/T`` and the model
 integrates eq 3 as printed (``p(t+1) = p(t) + T v(t)``, ``v(t+1) = v(t) + T u``);
 on ``"single_integrator"`` the new velocity moves the robot in the same step.
 One step, row i from row i of the observation (equations:
-:mod:`comparisons.virtual_spring_core`):
+:mod:`comparisons.virtual_spring.equations`):
 
 1. **Leader robot** (``leader_index``, slot offset (0, 0)): eq 6 towards
    ``obs.goal`` plus its spring force (eq 7), i.e. eq 8.
@@ -60,7 +60,7 @@ Decisions (the paper's words, the choice and the reason:
    direction of motion; a non-cooperating moving obstacle makes robot i take
    ``obstacle_share`` times its half.
 10. Eq 14's ideal position is ``p_l + E_i`` (leader robot, not the virtual
-    leader): :func:`comparisons.virtual_spring_core.ideal_position_error`.
+    leader): :func:`comparisons.virtual_spring.equations.ideal_position_error`.
 
 Measured (details in the doc): eq 12-13 lowers a follower's limit whenever its
 error shrinks, so followers of a leader at v_max keep their gaps; on the test
@@ -75,8 +75,8 @@ from typing import Literal
 
 import numpy as np
 
-from comparisons.virtual_spring_conflict import conflict_resolution, vo_conflict
-from comparisons.virtual_spring_core import (
+from comparisons.virtual_spring.conflict import conflict_resolution, vo_conflict
+from comparisons.virtual_spring.equations import (
     cap_speed,
     consensus_input,
     consistency_velocity,
@@ -264,7 +264,7 @@ class VirtualSpring:
 
         The sources are, in this order, the static circles, the polygons' nearest
         boundary points (edges built at reset), the neighbours and the moving
-        obstacles; the discs' normals (:func:`~comparisons.virtual_spring_core.disc_normals`)
+        obstacles; the discs' normals (:func:`~comparisons.virtual_spring.equations.disc_normals`)
         are computed all at once.
         """
         pos, r, n = obs.pose[:, :2], self._radius, obs.n

@@ -7,7 +7,7 @@ CBF-QP). Each robot's velocity ``u_i`` is the closest one to the nominal
     min sum_i ||u_i - u_hat_i||^2
     s.t. dh/dt >= -gamma h   for every barrier h,   |u_x|, |u_y| <= v_max.
 
-Barriers (:mod:`comparisons.distance_constraints`, shared with ``nmpc``):
+Barriers (:mod:`comparisons.constraints.distance`, shared with ``nmpc``):
 
 - robot pairs: ``h_ij = ||p_i - p_j||^2 - D_s^2``, ``D_s = 2 r + margin``;
 - static circles and polygons (through the nearest boundary point ``q``) and
@@ -50,19 +50,19 @@ from typing import Literal
 
 import numpy as np
 
-from comparisons.cbf_qp import (
+from comparisons.cbf.qp import (
     BarrierRows,
     solve_centralized,
     solve_distributed,
     solve_distributed_exact,
 )
-from comparisons.distance_constraints import (
+from comparisons.constraints.distance import (
     StaticObstacles,
     barrier,
     disc_nearest,
     pair_geometry,
 )
-from comparisons.orca.qp_backend import check_solver
+from comparisons.constraints.solvers import check_solver
 from dfcoa_opt.control.base import FilterResult, Observation
 from dfcoa_opt.control.registry import register_filter
 from dfcoa_opt.errors import ScenarioError

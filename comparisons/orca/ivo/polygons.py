@@ -1,6 +1,6 @@
 """The improved velocity obstacle (IVO) of paper 001, section III.B (eq 8-11), for polygons.
 
-Static discs take the closed form of :mod:`comparisons.orca.ivo_disc`, one line
+Static discs take the closed form of :mod:`comparisons.orca.ivo.discs`, one line
 per disc (see "Circular obstacles" below); :func:`ivo_lines` merges both kinds.
 
 Each polygon edge (optionally split into pieces) is a segment ``l``; it is
@@ -87,7 +87,7 @@ Decisions (the paper's words, then the reading taken here):
   ``a = b = R + m`` with the clearance ``m`` above, so it is treated exactly, as
   one disc, rather than as the 32 edges of its circumscribed polygon. Its VO is
   the truncated cone of a disc and ``u`` has a closed form
-  (:func:`comparisons.orca.ivo_disc.disc_pair_line`); the horizon, ``alpha``
+  (:func:`comparisons.orca.ivo.discs.disc_pair_line`); the horizon, ``alpha``
   and the push-out line are those above, and the line equals :func:`ivo_line`'s
   for ``a = b`` to ~1e-6 (``tests/test_ivo_disc.py``).
 
@@ -104,8 +104,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from comparisons.orca.ellipse import Ellipse, ellipse_axes, polygon_segments
-from comparisons.orca.ivo_disc import (
+from comparisons.orca.ivo.discs import (
     TAU_CENTER,
     IvoLine,
     as_line,
@@ -114,6 +113,7 @@ from comparisons.orca.ivo_disc import (
     eq9_horizon,
     tau_rule,
 )
+from comparisons.orca.ivo.ellipse import Ellipse, ellipse_axes, polygon_segments
 from dfcoa_opt.geometry import point_segment_distance
 
 FloatArray = NDArray[np.float64]
@@ -362,7 +362,7 @@ def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
         alpha: Responsibility ``alpha`` of eq 10 (1: static obstacles).
         push_speed: Outward speed required inside ``O' (+) D(r_A)``, m/s.
         discs: ``(C, 3)`` static discs ``(cx, cy, R)``, m, each treated exactly as the
-            ellipse ``O' = D(c, R + m)`` (:mod:`comparisons.orca.ivo_disc`); ``None``: none.
+            ellipse ``O' = D(c, R + m)`` (:mod:`comparisons.orca.ivo.discs`); ``None``: none.
 
     Returns:
         ``(points (N, H, 2) m/s, directions (N, H, 2), count (N,))`` in the

@@ -1,0 +1,20 @@
+"""Paper 001's improved velocity obstacle (IVO, section III.B, eq 8-11) of static obstacles.
+
+- :mod:`~comparisons.orca.ivo.polygons`: the IVO lines of polygon edges through
+  their enclosing ellipses, and :func:`ivo_lines`, which merges polygons and discs;
+- :mod:`~comparisons.orca.ivo.discs`: the closed form for a static disc and
+  eq 9's horizon rules;
+- :mod:`~comparisons.orca.ivo.ellipse`: the enclosing ellipse of a segment (eq 8)
+  and its support function.
+"""
+
+from comparisons.orca.ivo.polygons import (
+    BISECT_ITERS,
+    GOLDEN_ITERS,
+    N_REFINE,
+    N_SAMPLES,
+    ivo_line,
+    ivo_lines,
+)
+
+__all__ = ["BISECT_ITERS", "GOLDEN_ITERS", "N_REFINE", "N_SAMPLES", "ivo_line", "ivo_lines"]

@@ -1,0 +1,121 @@
+"""Figure recipes: the registry that ``make figures`` runs and ``dfcoa list recipes`` reads.
+
+A *figure recipe* is a sweep file (under ``scenarios/sweeps/``) plus a
+renderer that turns the sweep's saved results into tables and figures. A
+recipe without a sweep (``sweep=None``, e.g. the planner comparison, which
+simulates nothing) computes its artefacts itself. One module per paper or
+group registers its recipes, in index order (:data:`RECIPE_MODULES`):
+
+- :mod:`~dfcoa_opt.bench.recipes.examples`: every controller on the example scenarios;
+- :mod:`~dfcoa_opt.bench.recipes.comparison`: the cross-method comparison;
+- :mod:`~dfcoa_opt.bench.recipes.dfcoa`: paper 000 Table 5 and its figures;
+- :mod:`~dfcoa_opt.bench.recipes.astar`: traditional vs improved A* (paper 000 §4.1);
+- :mod:`~dfcoa_opt.bench.recipes.paper001`, :mod:`~dfcoa_opt.bench.recipes.paper002`,
+  :mod:`~dfcoa_opt.bench.recipes.paper004`: the companion papers' tables;
+- :mod:`~dfcoa_opt.bench.recipes.beyond`: ``nmpc`` and ``cbf`` beside the papers' methods.
+
+Adding a recipe::
+
+    from dfcoa_opt.bench.recipes import Artefact, recipe
+
+    @recipe("dfcoa_tables", title="Paper 000: Table 5 and Figs 15, 20",
+            sweep="sweeps/dfcoa_paper.toml")
+    def render(store, dest):
+        ...                                    # read store.rows(), write into dest
+        return [Artefact("table5.md", "paper 000 Table 5", "metrics of S1 and S2")]
+
+and list the module in :data:`RECIPE_MODULES`. :func:`dfcoa_opt.figures.make_figures`
+runs the sweeps and the renderers.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+#: Modules whose import registers recipes, in index order.
+RECIPE_MODULES = tuple(f"dfcoa_opt.bench.recipes.{m}" for m in (
+    "examples", "comparison", "dfcoa", "astar", "paper001", "paper002", "paper004", "beyond"))
+
+
+@dataclass(frozen=True)
+class Artefact:
+    """One generated file.
+
+    Attributes:
+        path: Path relative to the recipe's output folder.
+        paper: Its paper counterpart ("paper 000 Table 5"), or "-" if none.
+        what: One-line description.
+    """
+
+    path: str
+    paper: str
+    what: str
+
+
+#: ``render(store, dest)`` for a recipe with a sweep; ``render(scenarios, dest)``
+#: (the scenario root) for a recipe without one.
+Renderer = Callable[[Any, Path], list[Artefact]]
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """A sweep and the renderer of its artefacts.
+
+    Attributes:
+        name: Recipe id, also the output sub-folder.
+        sweep: Sweep file, relative to the scenario root, or None for a recipe
+            that computes its artefacts without simulating.
+        title: Heading in the index.
+        render: ``render(store, dest) -> artefacts`` (with a sweep) or
+            ``render(scenarios, dest) -> artefacts`` (without).
+    """
+
+    name: str
+    sweep: str | None
+    title: str
+    render: Renderer
+
+
+_RECIPES: dict[str, Recipe] = {}
+
+
+def recipe(name: str, title: str, sweep: str | None = None) -> Callable[[Renderer], Renderer]:
+    """Decorator registering a renderer as the recipe ``name`` (see :class:`Recipe`)."""
+
+    def deco(fn: Renderer) -> Renderer:
+        if name in _RECIPES and _RECIPES[name].render is not fn:
+            raise ValueError(f"figure recipe {name!r} is already registered")
+        _RECIPES[name] = Recipe(name, sweep, title, fn)
+        return fn
+
+    return deco
+
+
+def registered() -> list[Recipe]:
+    """Every registered recipe, in index order.
+
+    The recipes of :data:`RECIPE_MODULES` come in that module order, whatever
+    order the modules were imported in; recipes registered elsewhere follow, in
+    registration order.
+    """
+    for mod in RECIPE_MODULES:
+        importlib.import_module(mod)
+    rank = {m: i for i, m in enumerate(RECIPE_MODULES)}
+    return sorted(_RECIPES.values(),
+                  key=lambda r: rank.get(getattr(r.render, "__module__", ""), len(rank)))
+
+
+#: Names of the 0.1 module ``dfcoa_opt.bench.recipes`` -> the module that holds them now.
+_FORMER_NAMES = {"EXAMPLE_COLUMNS": "examples", "render_examples": "examples",
+                 "render_comparison": "comparison", "report_artefacts": "comparison"}
+
+
+def __getattr__(name: str) -> Any:
+    """The 0.1 names of this package's former module, from their new modules (until 0.3)."""
+    if name in _FORMER_NAMES:
+        return getattr(importlib.import_module(f"{__name__}.{_FORMER_NAMES[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

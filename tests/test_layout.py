@@ -1,0 +1,88 @@
+"""The package layout: one package per method, recipes in one package, old paths for one release."""
+
+import importlib
+import re
+import sys
+import warnings
+from pathlib import Path
+
+import pytest
+
+import comparisons
+from dfcoa_opt.cli import main
+from dfcoa_opt.control.registry import available, controller_class
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize("folder", ["comparisons", "dfcoa_opt/bench"])
+def test_no_module_has_prefixed_siblings(folder):
+    """A family `x.py`, `x_core.py` is a package `x/` instead."""
+    for d in [ROOT / folder, *(p for p in (ROOT / folder).rglob("*") if p.is_dir())]:
+        stems = {p.stem for p in d.glob("*.py")} - {"__init__"}
+        family = sorted(f"{a}.py / {b}.py" for a in stems for b in stems
+                        if b.startswith(f"{a}_"))
+        assert not family, f"{d.relative_to(ROOT)}: {family}"
+
+
+def test_each_multi_module_method_is_a_package_named_by_its_id():
+    for cid in available():
+        module = controller_class(cid).__module__
+        if not module.startswith("comparisons."):
+            continue
+        package = module.split(".")[1]
+        if (ROOT / "comparisons" / f"{package}.py").is_file():
+            continue  # a one-file method (consensus.py)
+        assert (ROOT / "comparisons" / package / "__init__.py").is_file(), cid
+        assert cid.startswith(package), (cid, module)  # virtual_spring_basic: virtual_spring/
+
+
+@pytest.mark.parametrize("old,new", sorted(comparisons.MOVED.items()) + [
+    (f"dfcoa_opt.bench.recipes_{m}", f"dfcoa_opt.bench.recipes.{m}")
+    for m in ("astar", "beyond", "dfcoa", "paper001", "paper002", "paper004")])
+def test_old_module_paths_import_the_new_modules_with_a_warning(old, new, monkeypatch):
+    monkeypatch.delitem(sys.modules, old, raising=False)
+    with pytest.warns(DeprecationWarning, match=re.escape(f"{old} moved to {new}")):
+        mod = importlib.import_module(old)
+    assert mod is importlib.import_module(new)
+    assert mod.__name__ == new and mod.__spec__.name == new  # the new module is untouched
+
+
+def test_old_public_names_still_import_without_warnings():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        from comparisons.cbf import CbfFilter
+        from comparisons.lf_vo import LeaderFollowerVO
+        from comparisons.nmpc import Nmpc, solve_time_stats
+        from comparisons.virtual_spring import VirtualSpring, VirtualSpringBasic
+        from dfcoa_opt.bench.recipes import report_artefacts
+        from dfcoa_opt.figures import RECIPE_MODULES, Artefact, recipe, recipes
+    assert {c.name for c in (CbfFilter, LeaderFollowerVO, Nmpc, VirtualSpring,
+                             VirtualSpringBasic)} == {"cbf", "lf_vo", "nmpc", "virtual_spring",
+                                                      "virtual_spring_basic"}
+    assert callable(solve_time_stats) and callable(report_artefacts) and callable(recipe)
+    assert Artefact("a", "-", "b").path == "a"
+    assert [r.render.__module__ for r in recipes()][0] == RECIPE_MODULES[0]
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        importlib.import_module("dfcoa_opt.bench.recipes").nothing  # noqa: B018
+
+
+def test_list_recipes_prints_every_recipe_including_those_without_a_sweep(capsys):
+    from dfcoa_opt.bench.recipes import registered
+
+    assert main(["list", "recipes"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [ln.split()[0] for ln in lines] == [r.name for r in registered()]
+    assert any("(no sweep)" in ln for ln in lines)  # astar_comparison used to crash the list
+
+
+_PATH = re.compile(r"`((?:comparisons|dfcoa_opt|benchmarks|tests)/[\w/]+\.py)")
+
+
+@pytest.mark.parametrize("doc", ["README.md", "docs/architecture.md",
+                                 *sorted(p.relative_to(ROOT).as_posix()
+                                         for p in (ROOT / "docs" / "methods").glob("*.md"))])
+def test_docs_name_only_files_that_exist(doc):
+    missing = [p for p in _PATH.findall((ROOT / doc).read_text(encoding="utf-8"))
+               if not (ROOT / p).is_file()]
+    assert not missing, f"{doc}: {missing}"
