@@ -3,6 +3,9 @@
 Bad input (scenario files, names, options) prints one line
 ``dfcoa: error: FILE: KEY: problem`` on stderr and exits with code 2, never a
 traceback. A run that fails (controller raised, returned NaN) exits with 1.
+Ctrl-C or SIGTERM during ``bench`` or ``figures`` stops the workers, prints one
+line saying how many runs are saved, and exits with 130 (SIGINT) or 143
+(SIGTERM); rerunning the same command resumes.
 """
 
 from __future__ import annotations
@@ -10,10 +13,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from dfcoa_opt.bench.lifecycle import Interrupted, SweepInterrupted
 from dfcoa_opt.errors import DfcoaError
 
 EXIT_BAD_INPUT = 2
@@ -163,8 +168,8 @@ def _cmd_run(a: argparse.Namespace) -> int:
     if a.json:
         print(json.dumps(result))
     else:
-        print(f"{scenario.name} / {a.controller} / seed {seed}: "
-              f"{'reached goal' if summary['success'] else 'did not reach goal'} "
+        print(f"{scenario.name} / {a.controller} / seed {seed}: {summary['outcome']} "
+              f"({'reached goal' if summary['reached'] else 'did not reach goal'}) "
               f"in {log.t[-1]:.1f} s simulated ({log.meta['wall_time']:.2f} s wall)")
         for k, v in summary.items():
             print(f"  {k:28s} {v}")
@@ -224,6 +229,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except DfcoaError as exc:
         print(f"dfcoa: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except SweepInterrupted as exc:  # every finished run is saved
+        print(f"dfcoa: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except (Interrupted, KeyboardInterrupt) as exc:
+        signum = getattr(exc, "signum", signal.SIGINT)
+        print("dfcoa: interrupted; every finished run is saved: run the same command to "
+              "resume", file=sys.stderr)
+        return 128 + int(signum)
     except BrokenPipeError:  # output piped into e.g. `head`, which stopped reading
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0

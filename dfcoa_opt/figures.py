@@ -29,6 +29,12 @@ from typing import Any
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
+from dfcoa_opt.bench.lifecycle import (
+    init_worker,
+    interruptible,
+    quiet_resource_tracker,
+    terminate,
+)
 from dfcoa_opt.bench.recipes import RECIPE_MODULES, Artefact, Recipe, Renderer, recipe, registered
 from dfcoa_opt.errors import DfcoaError, did_you_mean
 
@@ -71,7 +77,7 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
     start = time.perf_counter()
     config = config or ExecutorConfig()
     overlap = config.kind == "process" and (config.jobs or os.cpu_count() or 1) > 1
-    with _Renderer(overlap) as renderer:
+    with interruptible(), _Renderer(overlap) as renderer:
         for r in todo:
             if only and r.name not in only:
                 continue
@@ -117,8 +123,10 @@ class _Renderer:
     def __init__(self, overlap: bool) -> None:
         self.pool: ProcessPoolExecutor | None = None
         if overlap:
+            quiet_resource_tracker()
             ctx = multiprocessing.get_context("forkserver")
-            self.pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx)
+            self.pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx,
+                                            initializer=init_worker, initargs=(None,))
         self.pending: list[tuple[Recipe, Path, str, Future[tuple[list[Artefact], float]]]] = []
 
     def __enter__(self) -> _Renderer:
@@ -153,9 +161,15 @@ class _Renderer:
         try:
             if exc[0] is None:
                 self._collect(block=True)
-        finally:
+        except BaseException:
             if self.pool is not None:
+                terminate(self.pool)
+            raise
+        if self.pool is not None:
+            if exc[0] is None:
                 self.pool.shutdown(cancel_futures=True)
+            else:  # an error or an interrupt: do not wait for the render in progress
+                terminate(self.pool)
 
 
 def _picklable(obj: object) -> bool:

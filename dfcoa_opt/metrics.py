@@ -23,6 +23,7 @@ from dfcoa_opt.metrics_robots import (
     mse_per_robot,
     path_length_per_robot,
 )
+from dfcoa_opt.outcome import classify
 from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_MODIFIED, STATUS_SOLVER_FAIL, RunLog
 from dfcoa_opt.sim.schema import MetricSpec
 
@@ -287,11 +288,16 @@ def collision_risk_normalised(log: RunLog, spec: Settings = None) -> FloatArray:
         ``(T,)`` normalised risk, dimensionless.
     """
     cfg = _cfg(spec)
+    return normalise_risk(collision_risk(log, cfg), cfg)
+
+
+def normalise_risk(risk: FloatArray, spec: Settings = None) -> FloatArray:
+    """:func:`collision_risk_normalised` of an already computed raw risk ``(T,)`` (1/m^2)."""
+    cfg = _cfg(spec)
     weight = 2.0 * cfg.risk_lambda1 if cfg.risk_lambda1 > 0.0 else cfg.risk_lambda2
-    r = collision_risk(log, cfg)
     if weight == 0.0:
-        return np.zeros_like(r)
-    return np.clip(r * cfg.risk_reference_distance**2 / weight, 0.0, 1.0)
+        return np.zeros_like(risk)
+    return np.clip(risk * cfg.risk_reference_distance**2 / weight, 0.0, 1.0)
 
 
 def formation_stability_pct(log: RunLog, spec: Settings = None) -> float:
@@ -366,9 +372,10 @@ def summary(log: RunLog, spec: Settings = None) -> dict[str, Any]:
     fse = formation_shape_error(log)
     fste = formation_stability_error(log, cfg.fste_window)
     v_rms, w_rms = rms_velocities(log)
-    risk = collision_risk_normalised(log, cfg)
+    raw = collision_risk(log, cfg)
+    risk = normalise_risk(raw, cfg)
     ttg = log.meta.get("time_to_goal")
-    reached = bool(log.meta.get("reached_goal", False))
+    end = classify(log, cfg)
     return {
         "fce_rms": _rms(fce),
         "fce_mean": _mean(fce),
@@ -385,6 +392,9 @@ def summary(log: RunLog, spec: Settings = None) -> dict[str, Any]:
         "w_rms": _mean(w_rms),
         "risk_mean": _mean(risk),
         "risk_max": _max(risk),
+        "risk_clip_pct": 100.0 * _mean(risk >= 1.0),
+        "risk_raw_mean": _mean(raw),
+        "risk_raw_max": _max(raw),
         "min_inter_robot_distance": min_inter_robot_distance(log),
         "min_obstacle_clearance": min_obstacle_clearance(log),
         "collisions": int(np.sum(log.collision_events)),
@@ -393,8 +403,12 @@ def summary(log: RunLog, spec: Settings = None) -> dict[str, Any]:
             (log.obstacle_contacts > 0) | (log.dynamic_contacts > 0))),
         "dynamic_contact_steps": int(np.count_nonzero(log.dynamic_contacts > 0)),
         "path_length_mean": _mean(path_length_per_robot(log)),
-        "time_to_goal": float(ttg) if reached and ttg is not None else math.nan,
-        "success": reached,
+        "time_to_goal": float(ttg) if end["reached"] and ttg is not None else math.nan,
+        "outcome": end["outcome"],
+        "success": end["outcome"] == "success",
+        "reached": end["reached"],
+        "first_contact_time": end["first_contact_time"],
+        "deadlock_time": end["deadlock_time"],
         **filter_counts(log),
         "mse_mean": _mean(mse_per_robot(log)),
         "lf_error_mean": _mean(leader_follower_position_error(log)),

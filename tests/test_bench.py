@@ -49,7 +49,11 @@ def test_expansion_counts_keys_and_controller_specific_overrides(tmp_path):
     assert len(sw.runs) == 3 * 2 * 2
     assert {r.seed for r in sw.runs} == {5, 6, 7}
     assert len({r.key for r in sw.runs}) == len(sw.runs)
-    assert all(r.key.startswith("tiny__goto_slot__") for r in sw.runs)
+    # readable names and keys: the varying grid keys, no hash
+    assert {r.variant_name for r in sw.runs} == {
+        f"goto_slot[kp={kp:g},n={n}]" for kp in (0.5, 2.0) for n in (2, 3)}
+    assert {r.key for r in sw.runs} == {f"tiny__goto_slot_kp_{kp:g}_n_{n}__s{s}"
+                                        for kp in (0.5, 2.0) for n in (2, 3) for s in (5, 6, 7)}
     # an override for another controller does not multiply the runs of this one
     other = _sweep(tmp_path, 'controllers = ["goto_slot"]\nseeds = 2\n'
                    '[grid]\n"controllers.nonexistent.kp" = [1.0, 2.0]\n', "other.toml")

@@ -10,7 +10,8 @@ from dfcoa_opt.cli import main
 ROOT = Path(__file__).resolve().parents[1]
 REQUIRED = ("fce_rms fce_mean fce_max fce_x_rms fce_y_rms fse_rms fse_mean stability_pct vce_rms "
             "v_rms w_rms risk_mean risk_max min_inter_robot_distance min_obstacle_clearance "
-            "collisions path_length_mean time_to_goal success filter_fallbacks").split()
+            "collisions path_length_mean time_to_goal success filter_fallbacks outcome reached "
+            "first_contact_time deadlock_time risk_raw_mean risk_raw_max").split()
 
 
 def test_run_json_prints_exactly_one_object(tmp_path):
@@ -23,7 +24,9 @@ def test_run_json_prints_exactly_one_object(tmp_path):
     assert set(obj) == {"scenario", "controller", "seed", "metrics"}
     assert obj["scenario"] == "example_empty" and obj["seed"] == 5
     assert all(k in obj["metrics"] for k in REQUIRED)
-    assert obj["metrics"]["success"] is True
+    assert obj["metrics"]["success"] is True and obj["metrics"]["reached"] is True
+    assert obj["metrics"]["outcome"] == "success"
+    assert obj["metrics"]["first_contact_time"] is None  # NaN -> null: no contact
     assert (tmp_path / "example_empty-goto_slot-s5.npz").exists()
 
 

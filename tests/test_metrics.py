@@ -13,6 +13,7 @@ from hypothesis.extra.numpy import arrays
 
 from dfcoa_opt import metrics as m
 from dfcoa_opt import metrics_robots as mr
+from dfcoa_opt.outcome import OUTCOMES
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.sim.schema import MetricSpec
 
@@ -306,7 +307,8 @@ REQUIRED = """fce_rms fce_mean fce_max fce_x_rms fce_y_rms fse_rms fse_mean fste
 stability_pct vce_rms v_rms w_rms risk_mean risk_max min_inter_robot_distance
 min_obstacle_clearance collisions robot_contact_steps obstacle_contact_steps path_length_mean
 time_to_goal success filter_interventions filter_fallbacks filter_solver_failures mse_mean
-lf_error_mean steps""".split()
+lf_error_mean steps outcome reached first_contact_time deadlock_time risk_raw_mean risk_raw_max
+risk_clip_pct""".split()
 
 
 def test_summary_keys_types_and_json():
@@ -315,7 +317,8 @@ def test_summary_keys_types_and_json():
     assert set(REQUIRED) <= set(s)
     assert set(m.PAPER_000_TABLE5) <= set(s)
     for k, v in s.items():
-        assert type(v) in (float, int, bool), (k, type(v))
+        assert type(v) in ((str,) if k == "outcome" else (float, int, bool)), (k, type(v))
+    assert s["outcome"] in OUTCOMES
     assert s["steps"] == 4 and isinstance(s["steps"], int)
     text = json.dumps(s, allow_nan=True)
     back = json.loads(text)

@@ -8,6 +8,7 @@ import io
 import json
 import math
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,7 @@ import pytest
 
 from dfcoa_opt import environment
 from dfcoa_opt import metrics as run_metrics
-from dfcoa_opt.bench import plots, report
+from dfcoa_opt.bench import plots, report, stats, tables, trajectories
 from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.sim.loader import read_toml, scenario_from_dict
 from dfcoa_opt.sim.simulator import run_scenario
@@ -28,25 +29,29 @@ SHA = "0123456789abcdef" * 4
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
-def row(key, controller="ctl_a", status="ok", scenario="sc", seed=0, overrides_hash="base",
+def row(key, controller="ctl_a", status="ok", scenario="sc", seed=0, variant=None,
         finished="2024-05-01T10:00:00Z", error=None, **mets):
     return {"key": key, "scenario": scenario, "scenario_file": "/nonexistent.toml",
-            "controller": controller, "seed": seed, "overrides": {},
-            "overrides_hash": overrides_hash, "status": status, "error": error,
+            "controller": controller, "variant": variant or controller, "seed": seed,
+            "overrides": {}, "status": status, "error": error,
             "metrics": mets if status == "ok" else None, "digest": None, "log": None,
             "provenance": {"wall_time": 1.0, "finished": finished, "host": "h1", "pid": 1}}
 
 
 def synthetic_rows():
-    """ctl_a: 3 ok runs (2 reach the goal, 1 collides) + 1 failed; ctl_b: 1 ok run."""
+    """ctl_a: 3 ok runs (1 success, 1 collision after arriving, 1 deadlock) + 1 failed;
+    ctl_b: 1 ok run (timeout)."""
     return [
-        row("a0", seed=0, success=True, collisions=0, time_to_goal=10.0, fce_rms=1.0),
-        row("a1", seed=1, success=True, collisions=2, time_to_goal=12.0, fce_rms=2.0),
-        row("a2", seed=2, success=False, collisions=0, time_to_goal=None, fce_rms=3.0),
+        row("a0", seed=0, outcome="success", reached=True, collisions=0, time_to_goal=10.0,
+            fce_rms=1.0),
+        row("a1", seed=1, outcome="collision", reached=True, collisions=2, time_to_goal=12.0,
+            fce_rms=2.0),
+        row("a2", seed=2, outcome="deadlock", reached=False, collisions=0, time_to_goal=None,
+            fce_rms=3.0),
         row("a3", seed=3, status="failed", error="controller 'ctl_a' returned NaN at t=1.0 s",
             finished="2024-05-01T11:00:00-02:00"),  # 13:00 UTC: the newest instant
-        row("b0", controller="ctl_b", success=False, collisions=0, time_to_goal=None,
-            fce_rms=0.5, finished="2024-05-01T12:00:00+00:00"),
+        row("b0", controller="ctl_b", outcome="timeout", reached=False, collisions=0,
+            time_to_goal=None, fce_rms=0.5, finished="2024-05-01T12:00:00+00:00"),
     ]
 
 
@@ -75,27 +80,32 @@ def test_ci_skips_null_nan_and_needs_two_values():
     assert n == 0 and math.isnan(mean) and math.isnan(half)
 
 
-def test_aggregate_rates_counts_and_groups():
+def test_aggregate_outcome_rates_wilson_intervals_and_groups():
     groups = report.aggregate(synthetic_rows(), metrics=("time_to_goal", "fce_rms"))
-    assert [(g["scenario"], g["controller"], g["overrides_hash"]) for g in groups] == [
-        ("sc", "ctl_a", "base"), ("sc", "ctl_b", "base")]
+    assert [(g["scenario"], g["variant"]) for g in groups] == [("sc", "ctl_a"), ("sc", "ctl_b")]
     a = groups[0]
     assert (a["runs"], a["failed"], a["ok"]) == (4, 1, 3)
-    assert a["success_rate"] == 2 / 4  # the failed run counts as unsuccessful
-    assert a["collision_rate"] == 1 / 3  # among the ok runs only
+    assert a["outcomes"] == {"success": 1, "collision": 1, "deadlock": 1, "timeout": 0}
+    # rates of all runs: the failed run is none of the outcomes
+    assert (a["success_rate"], a["collision_rate"], a["deadlock_rate"]) == (0.25, 0.25, 0.25)
+    assert a["reached_rate"] == 2 / 4  # the old "success": reached, contacts or not
+    assert a["success_ci"] == pytest.approx(stats.wilson_interval(1, 4))
+    assert a["dominant_failure"] == "collision"  # tie of collision, deadlock, failed: order
     ttg = a["stats"]["time_to_goal"]
     assert (ttg["mean"], ttg["n"]) == (11.0, 2)  # the null of a2 is skipped
     assert ttg["ci95"] == pytest.approx(T975[1] * math.sqrt(2.0) / math.sqrt(2.0))
     assert a["stats"]["fce_rms"]["n"] == 3 and a["stats"]["fce_rms"]["mean"] == 2.0
+    assert a["stats"]["fce_rms"]["distinct"] == 3
     assert a["errors"] == ["controller 'ctl_a' returned NaN at t=1.0 s"]
     b = groups[1]
+    assert b["timeout_rate"] == 1.0 and b["dominant_failure"] == "timeout"
     assert b["stats"]["time_to_goal"]["n"] == 0
     assert math.isnan(b["stats"]["fce_rms"]["ci95"])
 
 
 def test_aggregate_by_controller_only_merges_scenarios():
-    rows = synthetic_rows() + [row("c0", scenario="other", fce_rms=5.0, success=True,
-                                   collisions=1)]
+    rows = synthetic_rows() + [row("c0", scenario="other", fce_rms=5.0, outcome="success",
+                                   collisions=0)]
     groups = report.aggregate(rows, metrics=("fce_rms",), by=("controller",))
     assert [g["controller"] for g in groups] == ["ctl_a", "ctl_b"]
     assert groups[0]["runs"] == 5 and groups[0]["stats"]["fce_rms"]["mean"] == 2.75
@@ -104,31 +114,47 @@ def test_aggregate_by_controller_only_merges_scenarios():
 # ---------------------------------------------------------------------------- tables
 def test_markdown_cells():
     groups = report.aggregate(synthetic_rows(), metrics=("time_to_goal", "fce_rms"))
-    md = report.markdown_table(groups, ("time_to_goal", "fce_rms"))
+    md = tables.markdown_table(groups, ("time_to_goal", "fce_rms"))
     lines = md.splitlines()
-    assert lines[0] == ("| scenario | controller | overrides | runs | failed | success | "
-                        "collisions | Time to goal (s) | FCE RMS (m) |")
-    assert lines[2] == ("| sc | ctl_a | `base` | 4 | 1 | 50% (2/4) | 33% (1/3) | "
-                        "11.000 ± 12.706 (n=2) | 2.000 ± 2.484 |")
-    assert lines[3] == "| sc | ctl_b | `base` | 1 | 0 | 0% (0/1) | 0% (0/1) | — (n=0) | 0.500 |"
-    assert "- sc / ctl_a / base: controller 'ctl_a' returned NaN at t=1.0 s" in lines
-    hidden = report.markdown_table(groups, ("fce_rms",), hide=("scenario",))
-    assert hidden.splitlines()[0].startswith("| controller | overrides | runs |")
+    assert lines[0] == ("| scenario | variant | runs | failed | success | collision | deadlock "
+                        "| timeout | Time to goal (s) | FCE RMS (m) |")
+    assert lines[2] == ("| sc | ctl_a | 4 | 1 | 25% [5, 70] (1/4) | 25% [5, 70] (1/4) | "
+                        "25% [5, 70] (1/4) | 0% [0, 49] (0/4) | 11.000 ± 12.706 (n=2) | "
+                        "2.000 ± 2.484 |")
+    assert lines[3] == ("| sc | ctl_b | 1 | 0 | 0% [0, 79] (0/1) | 0% [0, 79] (0/1) | "
+                        "0% [0, 79] (0/1) | 100% [21, 100] (1/1) | — (n=0) | 0.500 |")
+    assert "- sc / ctl_a: controller 'ctl_a' returned NaN at t=1.0 s" in lines
+    hidden = tables.markdown_table(groups, ("fce_rms",), hide=("scenario",))
+    assert hidden.splitlines()[0].startswith("| variant | runs |")
 
 
-def test_csv_parses_with_numbers():
+def test_one_distinct_value_and_uninformative_columns_are_said_so():
+    rows = [row(f"{c}{s}", controller=c, seed=s, outcome="collision", risk=1.0, fce_rms=s + 0.5)
+            for c in ("a", "b") for s in range(3)]
+    groups = report.aggregate(rows, metrics=("risk", "fce_rms"))
+    md = tables.markdown_table(groups, ("risk", "fce_rms"))
+    assert "| 1.000 (1 distinct run) |" in md and "± 0.000" not in md
+    assert tables.uninformative(groups, ("risk", "fce_rms")) == ["risk"]
+    assert "risk ⚠" in md.splitlines()[0] and "separates nothing here: risk." in md
+
+
+def test_csv_has_the_four_outcome_rates_with_intervals():
     groups = report.aggregate(synthetic_rows(), metrics=("time_to_goal", "fce_rms"))
-    table = list(csv.DictReader(io.StringIO(report.csv_table(groups, ("time_to_goal",
+    table = list(csv.DictReader(io.StringIO(tables.csv_table(groups, ("time_to_goal",
                                                                       "fce_rms")))))
-    assert [r["controller"] for r in table] == ["ctl_a", "ctl_b"]
+    assert [r["variant"] for r in table] == ["ctl_a", "ctl_b"]
     a, b = table
     assert (int(a["runs"]), int(a["failed"]), int(a["ok"])) == (4, 1, 3)
-    assert float(a["success_rate"]) == 0.5 and float(a["collision_rate"]) == 1 / 3
+    for o in ("success", "collision", "deadlock", "timeout"):
+        lo, hi = stats.wilson_interval(groups[0]["outcomes"][o], 4)
+        assert float(a[f"{o}_ci_low"]) == pytest.approx(lo)
+        assert float(a[f"{o}_ci_high"]) == pytest.approx(hi)
+    assert float(a["success_rate"]) == 0.25 and float(a["reached_rate"]) == 0.5
     assert float(a["time_to_goal_mean"]) == 11.0 and int(a["time_to_goal_n"]) == 2
     assert float(a["time_to_goal_ci95"]) == pytest.approx(T975[1])
     assert float(a["fce_rms_ci95"]) == pytest.approx(T975[2] * 1.0 / math.sqrt(3))
     assert b["time_to_goal_mean"] == "" and b["fce_rms_ci95"] == ""  # NaN -> empty cell
-    assert float(b["fce_rms_mean"]) == 0.5
+    assert float(b["fce_rms_mean"]) == 0.5 and float(b["timeout_rate"]) == 1.0
 
 
 # ----------------------------------------------------------------------- environment
@@ -191,12 +217,13 @@ def results(tmp_path_factory) -> Path:
                 for k, v in run_metrics.summary(log, scenario).items()}
         rows.append({
             "key": key, "scenario": "example_empty", "scenario_file": str(SCENARIO),
-            "controller": "goto_slot", "seed": seed, "overrides": overrides,
-            "overrides_hash": "t2", "status": "ok", "error": None, "metrics": mets,
+            "controller": "goto_slot", "variant": "goto_slot", "seed": seed,
+            "overrides": overrides, "status": "ok", "error": None, "metrics": mets,
             "digest": log.digest(), "log": f"logs/{key}.npz",
             "provenance": {"wall_time": 0.3, "finished": f"2024-06-0{seed + 1}T08:00:00Z",
                            "host": "testhost", "pid": 42}})
     rows.append({**rows[0], "key": "example_empty__broken__t2__s0", "controller": "broken",
+                 "variant": "broken",
                  "status": "failed", "error": "unknown controller 'broken'", "metrics": None,
                  "digest": None, "log": None})
     folder = write_results(folder, [])
@@ -210,19 +237,24 @@ def test_make_report_end_to_end(results, tmp_path):
     paths = report.make_report(results, out, metrics=("fce_rms", "time_to_goal"))
     names = [p.name for p in paths]
     assert names == ["report.md", "report.csv", "box_fce_rms.png", "box_time_to_goal.png",
-                     "traj_example_empty_s0.png"]
+                     "traj_example_empty_s0.png", "fail_example_empty_goto_slot_s0.png"]
     for p in paths[2:]:
         assert p.stat().st_size > 1000 and p.read_bytes()[:8] == PNG_MAGIC
     md = (out / "report.md").read_text()
     assert "## Scenario `example_empty`" in md and "sha256 `0123456789ab`" in md
     assert "Date (newest finished run): 2024-06-02T08:00:00Z" in md
-    assert "| goto_slot | `t2` | 2 | 0 | 0% (0/2) | 0% (0/2) |" in md
-    assert "| broken | `t2` | 1 | 1 | 0% (0/1) | — | — | — |" in md
-    assert "- broken / t2: unknown controller 'broken'" in md
-    assert '- `t2`: `{"t_max": 2.0}`' in md and "![trajectories example_empty]" in md
+    # 2 s runs never arrive: timeouts, explained with a snapshot at their end
+    assert "| goto_slot | 2 | 0 | 0% [0, 66] (0/2) | 0% [0, 66] (0/2) | 0% [0, 66] (0/2) | " \
+           "100% [34, 100] (2/2) |" in md
+    assert "| broken | 1 | 1 | 0% [0, 79] (0/1) |" in md
+    assert "- broken: unknown controller 'broken'" in md
+    assert "most runs end in **timeout** (2/2); first: seed 0, [end](fail_example_empty" in md
+    assert "most runs end in **failed** (1/1)" in md
+    assert "- every variant: `t_max = 2.0`" in md and "![trajectories example_empty]" in md
+    assert not re.search(r"[0-9a-f]{10}", md.split("## Scenario")[1])  # no hash anywhere
     rows = report.load_rows(results)
-    table = {r["controller"]: r for r in csv.DictReader(io.StringIO((out / "report.csv")
-                                                                   .read_text()))}
+    table = {r["variant"]: r for r in csv.DictReader(io.StringIO((out / "report.csv")
+                                                                .read_text()))}
     fce = [r["metrics"]["fce_rms"] for r in rows if r["status"] == "ok"]
     assert float(table["goto_slot"]["fce_rms_mean"]) == pytest.approx(np.mean(fce))
     assert int(table["goto_slot"]["fce_rms_n"]) == 2 and table["goto_slot"]["failed"] == "0"
@@ -234,27 +266,27 @@ def test_make_report_end_to_end(results, tmp_path):
 def test_default_out_dir_and_explicit_overlay_seed(results):
     paths = report.make_report(results, metrics=("fce_rms",), overlay_seed=1)
     assert paths[0] == results / "report" / "report.md"
-    assert paths[-1].name == "traj_example_empty_s1.png"
+    assert "traj_example_empty_s1.png" in [p.name for p in paths]
 
 
-def test_overlay_rejects_mixed_seeds_and_notes_missing_scenario(results, tmp_path):
+def test_panels_reject_mixed_seeds_and_overlays_note_a_missing_scenario(results, tmp_path):
     rows = [r for r in report.load_rows(results) if r["log"]]
     with pytest.raises(ValueError, match="mix"):
-        plots.trajectory_overlay(rows, results, tmp_path / "x.png")
+        trajectories.panels_figure(rows, results)
     moved = [{**r, "scenario_file": str(tmp_path / "gone.toml")} for r in rows]
-    written, notes = plots.overlay_figures(moved, results, tmp_path)
+    written, notes = trajectories.overlay_figures(moved, results, tmp_path)
     assert written == {} and len(notes) == 1 and "gone.toml: file not found" in notes[0]
 
 
 def test_overlay_notes_a_scenario_file_changed_since_the_run(results, tmp_path):
     rows = [{**r, "scenario_sha256": "0" * 16} for r in report.load_rows(results)
             if r["log"] and r["seed"] == 0]
-    written, notes = plots.overlay_figures(rows, results, tmp_path)
+    written, notes = trajectories.overlay_figures(rows, results, tmp_path)
     assert len(written["example_empty"]) == 1
-    assert len(notes) == 1 and "changed since the run" in notes[0]
+    assert len(notes) == 1 and "changed since the runs" in notes[0]
     real = hashlib.sha256(SCENARIO.read_bytes()).hexdigest()[:16]
-    assert plots.overlay_figures([{**rows[0], "scenario_sha256": real}], results,
-                                 tmp_path)[1] == []
+    assert trajectories.overlay_figures([{**rows[0], "scenario_sha256": real}], results,
+                                        tmp_path)[1] == []
 
 
 def test_boxplot_without_finite_values_still_writes(tmp_path):

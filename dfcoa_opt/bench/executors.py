@@ -22,6 +22,7 @@ from collections.abc import Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 
+from dfcoa_opt.bench.lifecycle import init_worker, quiet_resource_tracker, terminate
 from dfcoa_opt.bench.runner import Outcome, execute
 from dfcoa_opt.bench.sweep import RunSpec
 from dfcoa_opt.control.registry import BUILTIN_MODULES
@@ -77,23 +78,28 @@ def _processes(runs: Sequence[RunSpec], jobs: int) -> Iterator[Outcome]:
     Workers start from a fork server, not by forking this process: once this
     process has run a parallel numba kernel, GNU OpenMP's threads are up and a
     forked child dies ("fork() called from a process already using GNU
-    OpenMP"); ``make figures`` runs such kernels between sweeps.
+    OpenMP"); ``make figures`` runs such kernels between sweeps. Each worker runs
+    :func:`~dfcoa_opt.bench.lifecycle.init_worker` (one numba thread, SIGINT
+    ignored, exit with the main process). An interrupt or an abandoned
+    generator terminates the workers at once instead of waiting for their runs.
     """
     queue = iter(runs)
+    quiet_resource_tracker()
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(list(WORKER_PRELOAD))
-    with ProcessPoolExecutor(max_workers=min(jobs, len(runs)), mp_context=ctx,
-                             initializer=_one_numba_thread) as pool:
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(runs)), mp_context=ctx,
+                               initializer=init_worker)
+    try:
         active = {pool.submit(execute, r) for r in itertools.islice(queue, 2 * jobs)}
-        try:
-            while active:
-                done, active = wait(active, return_when=FIRST_COMPLETED)
-                active |= {pool.submit(execute, r) for r in itertools.islice(queue, len(done))}
-                for fut in done:
-                    yield fut.result()
-        finally:
-            for fut in active:
-                fut.cancel()
+        while active:
+            done, active = wait(active, return_when=FIRST_COMPLETED)
+            active |= {pool.submit(execute, r) for r in itertools.islice(queue, len(done))}
+            for fut in done:
+                yield fut.result()
+    except BaseException:  # an interrupt, or the consumer stopped: stop the workers now
+        terminate(pool)
+        raise
+    pool.shutdown(wait=True)
 
 
 #: Imported once by the fork server (when it starts), so that every pool worker
@@ -102,18 +108,6 @@ def _processes(runs: Sequence[RunSpec], jobs: int) -> Iterator[Outcome]:
 #: numba kernel, so no OpenMP thread exists yet when the server forks.
 WORKER_PRELOAD = ("dfcoa_opt.bench.runner", "dfcoa_opt.sim.simulator", "dfcoa_opt.metrics",
                   "dfcoa_opt.localization.mcl", *BUILTIN_MODULES)
-
-
-def _one_numba_thread() -> None:
-    """Pool workers run one numba thread each: the runs are already spread over the cores.
-
-    With one OpenMP thread per core in every worker, ``jobs`` workers put
-    ``jobs x cores`` spinning threads on the cores; measured on the comparison
-    sweep (2 workers, 2 cores), runs with parallel kernels took 3-4x longer.
-    """
-    import numba
-
-    numba.set_num_threads(1)
 
 
 def _dask(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome]:

@@ -6,14 +6,17 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from dfcoa_opt.bench import precision
 from dfcoa_opt.bench.executors import ExecutorConfig, run_all
+from dfcoa_opt.bench.lifecycle import Interrupted, SweepInterrupted, interruptible
 from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.bench.sweep import Sweep, describe_runs, load_sweep
+from dfcoa_opt.bench.sweep import RunSpec, Sweep, describe_runs, load_sweep
 
 
 @dataclass(frozen=True)
@@ -55,6 +58,10 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
               overrides: dict[str, Any] | None = None) -> SweepResult:
     """Run every pending run of a sweep and store the rows.
 
+    With ``max_seeds`` in the sweep, cells whose success rate is not yet precise
+    enough get more seeds after each round (:mod:`dfcoa_opt.bench.precision`),
+    and the manifest lists them.
+
     Args:
         sweep: Sweep file (or an already loaded :class:`Sweep`).
         out: Results folder.
@@ -69,21 +76,59 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
 
     Raises:
         ScenarioError: Bad sweep file (before any run starts).
+        SweepInterrupted: SIGINT or SIGTERM arrived; every finished run is saved.
     """
     sw = sweep if isinstance(sweep, Sweep) else load_sweep(sweep, seeds, overrides)
     store = ResultsStore(out)
     store.write_manifest(sw)
     todo = store.pending(sw.runs, rerun)
-    failed = 0
+    ran = failed = 0
     bar = _progress(len(todo), sw.name, progress)
     try:
-        for outcome in run_all(todo, config or ExecutorConfig()):
-            store.write(outcome)
-            failed += outcome.row["status"] != "ok"
-            bar.update()
-            if failed:
-                bar.set_postfix(failed=failed, refresh=False)
+        with interruptible():
+            while True:
+                with contextlib.closing(run_all(todo, config or ExecutorConfig())) as outcomes:
+                    for outcome in outcomes:
+                        store.write(outcome)
+                        ran += 1
+                        failed += outcome.row["status"] != "ok"
+                        bar.update()
+                        if failed:
+                            bar.set_postfix(failed=failed, refresh=False)
+                grown, todo = _grow(sw, store, rerun)
+                if grown is not sw:
+                    sw = grown
+                    store.write_manifest(sw)
+                    bar.total += len(todo)
+                    bar.refresh()
+                if not todo:
+                    break
+    except Interrupted as exc:
+        saved = sum(store.read_row(r.key) is not None for r in sw.runs)
+        raise SweepInterrupted(saved, len(sw.runs), store.root, exc.signum) from None
     finally:
         bar.close()
         store.write_csv()
-    return SweepResult(store, sw, len(todo), failed, len(sw.runs) - len(todo))
+    return SweepResult(store, sw, ran, failed, len(sw.runs) - ran)
+
+
+def _grow(sw: Sweep, store: ResultsStore, rerun: bool) -> tuple[Sweep, list[RunSpec]]:
+    """Add the seeds that cells need until some are to run (none without ``max_seeds``).
+
+    Seeds added by an earlier, interrupted call may already have rows: they join
+    the sweep without running, and the next seeds are decided from them.
+
+    Returns:
+        The sweep with its added runs (``sw`` itself when none) and the runs to execute.
+    """
+    while sw.max_seeds:
+        rows = [row for r in sw.runs if (row := store.read_row(r.key)) is not None]
+        extra = precision.extra_runs(sw.runs, precision.success_by_key(rows),
+                                     sw.spec.max_half_width, sw.max_seeds)
+        if not extra:
+            break
+        sw = sw.extended(extra)
+        todo = store.pending(extra, rerun)
+        if todo:
+            return sw, todo
+    return sw, []

@@ -1,10 +1,9 @@
-"""Headless figures of a results folder: metric box plots and trajectory overlays.
+"""Headless figures of a results folder: metric box plots and ladder curves, and their helpers.
 
-Built on :mod:`dfcoa_opt.plotting` (bare ``Figure`` + Agg canvas, never pyplot;
-its ``draw_world`` draws the map). Inputs are rows (dicts of the harness's row
-schema, see :mod:`dfcoa_opt.bench.report`) and the saved logs; nothing is
-simulated. The map of an overlay is rebuilt from the row's scenario file with the
-row's seed and overrides, because maps may depend on both.
+Built on :mod:`dfcoa_opt.plotting` (bare ``Figure`` + Agg canvas, never pyplot).
+Inputs are rows (dicts of the harness's row schema, see
+:mod:`dfcoa_opt.bench.runner`); nothing is simulated. The map figures of single
+runs (trajectory panels, failure snapshots) are in :mod:`dfcoa_opt.bench.trajectories`.
 """
 
 from __future__ import annotations
@@ -18,10 +17,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench.store import ResultsStore, file_sha256
-from dfcoa_opt.bench.sweep import safe_name
-from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.plotting import draw_world, new_figure, robot_colors
+from dfcoa_opt.bench.store import ResultsStore
+from dfcoa_opt.plotting import new_figure, robot_colors
 from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.log import RunLog
 
@@ -39,7 +36,10 @@ METRIC_INFO: dict[str, tuple[str, str]] = {
     "fse_mean": ("FSE mean", "m"), "fste_max": ("FStE max", "m"), "fste_final": ("FStE final", "m"),
     "stability_pct": ("Stability", "%"), "vce_rms": ("VCE RMS", "m/s, rad/s mixed"),
     "v_rms": ("RMS v", "m/s"), "w_rms": ("RMS ω", "rad/s"), "risk_mean": ("Risk mean", ""),
-    "risk_max": ("Risk max", ""), "min_inter_robot_distance": ("Min robot distance", "m"),
+    "risk_max": ("Risk max", ""), "risk_raw_mean": ("Risk mean, eq 11", "1/m²"),
+    "risk_raw_max": ("Risk max, eq 11", "1/m²"), "risk_clip_pct": ("Risk at clip", "%"),
+    "first_contact_time": ("First contact", "s"), "deadlock_time": ("Deadlock onset", "s"),
+    "min_inter_robot_distance": ("Min robot distance", "m"),
     "min_obstacle_clearance": ("Min obstacle clearance", "m"), "collisions": ("Collisions", ""),
     "robot_contact_steps": ("Robot contacts", "steps"),
     "obstacle_contact_steps": ("Obstacle contacts", "steps"),
@@ -85,9 +85,9 @@ def save_png(fig: Figure, path: str | Path) -> Path:
     return atomic_write(path, buf.getvalue())
 
 
-def _variant(row: Row) -> tuple[str, str]:
-    """(controller, overrides hash) of a row."""
-    return str(row["controller"]), str(row.get("overrides_hash", "base"))
+def variant_name(row: Row) -> str:
+    """A row's variant name (its controller id for rows written before variants had names)."""
+    return str(row.get("variant") or row["controller"])
 
 
 def as_number(value: Any) -> float:
@@ -99,9 +99,8 @@ def metric_boxplots(rows: Sequence[Row], metric: str, path: str | Path,
                     label: str | None = None) -> Path:
     """Save box plots of one metric over seeds: one panel per scenario, one box per variant.
 
-    A variant is a controller, suffixed with the overrides hash when a scenario has
-    several. Only ok rows with a finite value count; every value is also drawn as
-    a dot, and the tick label gives the number of values.
+    Only ok rows with a finite value count; every value is also drawn as a dot,
+    and the tick label gives the variant's name and the number of values.
 
     Args:
         rows: Result rows (any scenarios).
@@ -115,15 +114,14 @@ def metric_boxplots(rows: Sequence[Row], metric: str, path: str | Path,
     ok = [r for r in rows if r.get("status") == "ok"]
     scenarios = sorted({str(r["scenario"]) for r in rows})
     n_panels = max(1, len(scenarios))
-    fig = new_figure((max(4.5, 4.0 * n_panels), 4.0))
+    fig = new_figure((max(4.5, 4.0 * n_panels), 4.5))
     axes = fig.subplots(1, n_panels, squeeze=False)[0]
     for ax, scen in zip(axes, scenarios, strict=False):
-        variants = sorted({_variant(r) for r in rows if str(r["scenario"]) == scen})
-        several = len({h for _, h in variants}) > 1
+        variants = sorted({variant_name(r) for r in rows if str(r["scenario"]) == scen})
         data = []
         for var in variants:
             x = np.array([as_number((r.get("metrics") or {}).get(metric)) for r in ok
-                          if str(r["scenario"]) == scen and _variant(r) == var])
+                          if str(r["scenario"]) == scen and variant_name(r) == var])
             data.append(x[np.isfinite(x)])
         pos = np.arange(1, len(variants) + 1)
         filled = [i for i, x in enumerate(data) if x.size]
@@ -134,8 +132,8 @@ def metric_boxplots(rows: Sequence[Row], metric: str, path: str | Path,
             spread = np.linspace(-0.12, 0.12, x.size) if x.size > 1 else np.zeros(x.size)
             ax.plot(pos[i] + spread, x, "o", color=robot_colors(1)[0], alpha=0.6,
                     markersize=4, zorder=3)
-        ax.set_xticks(pos, [f"{c}\n{h}\n(n={x.size})" if several else f"{c}\n(n={x.size})"
-                            for (c, h), x in zip(variants, data, strict=True)], fontsize="small")
+        ax.set_xticks(pos, [f"{v}\n(n={x.size})" for v, x in zip(variants, data, strict=True)],
+                      fontsize="small", rotation=60, ha="right")
         ax.set_xlim(0.4, len(variants) + 0.6)
         ax.set_title(scen)
         ax.grid(True, axis="y", alpha=0.3)
@@ -147,135 +145,49 @@ def metric_boxplots(rows: Sequence[Row], metric: str, path: str | Path,
     return save_png(fig, path)
 
 
-def _load_log(results_dir: Path, row: Row) -> RunLog:
-    """The row's saved log; a one-line :class:`DfcoaError` when it cannot be read."""
-    path = results_dir / str(row["log"])
-    try:
-        return RunLog.load(path)
-    except FileNotFoundError:
-        raise DfcoaError(f"{path}: log file not found") from None
-    except Exception as exc:  # noqa: BLE001 - numpy/zip/json errors of a damaged file
-        problem = " ".join(str(exc).split()) or type(exc).__name__
-        raise DfcoaError(f"{path}: cannot read the log ({problem})") from None
+#: Line styles and markers of the ladder curves (cycled), so overlapping lines stay readable.
+_STYLES = ("-", "--", "-.", ":")
+_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 
 
-def trajectory_overlay(rows: Sequence[Row], results_dir: str | Path, path: str | Path) -> Path:
-    """Save the trajectories of several controllers on one map (one scenario and seed).
-
-    The map (with the leader's start and goal) is drawn once from the first row's
-    scenario, loaded with its seed and overrides. Per controller, all robot
-    trajectories (``pose[:, i, :2]``) share one colour and one legend entry, with a
-    dot at each final position; the leader path (``leader[:, :2]``) is dashed black.
-    Rows without a log (failed runs) are skipped.
+def ladder_figure(series: Mapping[str, Sequence[tuple[float, float, float, float, int]]],
+                  xlabel: str, path: str | Path, title: str, log_x: bool = False) -> Path:
+    """Success rate against a ladder's value, one line per variant, with Wilson intervals.
 
     Args:
-        rows: Rows of one scenario, seed and overrides variant, e.g. one per controller.
-        results_dir: The results folder the rows' ``log`` paths are relative to.
-        path: Output ``.png``; parent folders are created.
+        series: Variant -> points ``(value, rate, low, high, n)``: the rung's value,
+            the success rate and its interval bounds (fractions), the runs.
+        xlabel: The ladder's label.
+        path: Output ``.png``.
+        title: Figure title.
+        log_x: Log scale for the value axis (e.g. team sizes 4 -> 100).
 
     Returns:
         The written path.
-
-    Raises:
-        ValueError: If the rows mix scenarios, seeds or overrides, or none has a log.
-        DfcoaError: If the scenario file or a log cannot be read.
     """
-    rows = sorted((r for r in rows if r.get("log")), key=lambda r: str(r["key"]))
-    if not rows:
-        raise ValueError("no row with a log to draw")
-    ids = {(str(r["scenario"]), int(r["seed"]), str(r.get("overrides_hash", "base")))
-           for r in rows}
-    if len(ids) > 1:
-        raise ValueError(f"rows mix scenarios, seeds or overrides: {sorted(ids)}")
-    scen, seed, var = ids.pop()
-    scenario = scenario_for_row(rows[0])
-    spec = scenario.spec.leader
-    fig = new_figure((8.0, 6.0))
+    fig = new_figure((8.0, 4.8))
     ax = fig.add_subplot()
-    draw_world(ax, scenario.world.grid, spec.goal, spec.start, shapes=scenario.world.shapes)
-    controllers = sorted({str(r["controller"]) for r in rows})
-    colors = dict(zip(controllers, robot_colors(len(controllers)), strict=True))
-    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
-    lo, hi = np.array([x0, y0]), np.array([x1, y1])
-    labelled: set[str] = set()
-    for row in rows:
-        log = _load_log(Path(results_dir), row)
-        ctrl, color = str(row["controller"]), colors[str(row["controller"])]
-        pose = np.asarray(log.pose, dtype=float)
-        for i in range(pose.shape[1]):
-            ax.plot(pose[:, i, 0], pose[:, i, 1], "-", color=color, linewidth=1.5, zorder=3,
-                    label=ctrl if ctrl not in labelled and i == 0 else None)
-        labelled.add(ctrl)
-        if len(pose):
-            ax.plot(pose[-1, :, 0], pose[-1, :, 1], "o", color=color, markersize=4, zorder=4)
-        leader = np.asarray(log.leader, dtype=float)[:, :2]
-        ax.plot(leader[:, 0], leader[:, 1], "--", color="black", linewidth=1.0, zorder=4)
-        pts = np.concatenate([pose[..., :2].reshape(-1, 2), leader])
-        pts = pts[np.isfinite(pts).all(axis=1)]
-        if len(pts):  # widen the view to runs that left the map
-            lo, hi = np.minimum(lo, pts.min(axis=0)), np.maximum(hi, pts.max(axis=0))
-    ax.plot([], [], "--", color="black", linewidth=1.0, label="leader")  # last in legend
-    ax.set_xlim(lo[0], hi[0])
-    ax.set_ylim(lo[1], hi[1])
-    suffix = "" if var == "base" else f" - overrides {var}"
-    ax.set_title(f"{scen} - seed {seed}{suffix}")
+    names = list(series)
+    colors = robot_colors(max(1, len(names)))
+    shift = 0.012 if log_x else 0.0
+    for i, name in enumerate(names):
+        pts = sorted(series[name])
+        x = np.array([p[0] for p in pts], dtype=float)
+        x = x * (1.0 + shift * (i - (len(names) - 1) / 2)) if log_x else x
+        y = 100.0 * np.array([p[1] for p in pts])
+        lo = 100.0 * np.array([p[2] for p in pts])
+        hi = 100.0 * np.array([p[3] for p in pts])
+        runs = sorted({p[4] for p in pts})
+        n = f"n={runs[0]}" if len(runs) == 1 else f"n={runs[0]}-{runs[-1]}"
+        ax.errorbar(x, y, yerr=[y - lo, hi - y], color=colors[i], capsize=3,
+                    linestyle=_STYLES[i % len(_STYLES)], marker=_MARKERS[i % len(_MARKERS)],
+                    label=f"{name} ({n})")
+    if log_x:
+        ax.set_xscale("log")
+    ax.set_ylim(-3, 103)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("success rate (%)")
+    ax.set_title(title)
+    ax.grid(True, alpha=0.3)
     fig.legend(loc="outside right upper", fontsize="small")
     return save_png(fig, path)
-
-
-def _changed(row: Row) -> bool:
-    """True if the row records ``scenario_sha256`` and the file's hash now differs."""
-    want = row.get("scenario_sha256")
-    if not want:
-        return False
-    try:
-        return file_sha256(str(row["scenario_file"])) != want
-    except OSError:
-        return True
-
-
-def overlay_figures(rows: Sequence[Row], results_dir: str | Path, out_dir: str | Path,
-                    seed: int | None = None) -> tuple[dict[str, list[Path]], list[str]]:
-    """Draw :func:`trajectory_overlay` for every scenario (and overrides variant).
-
-    Files are ``traj_<scenario>_s<seed>.png``, or ``traj_<scenario>_<hash>_s<seed>.png``
-    when a scenario has several overrides variants.
-
-    Args:
-        rows: Result rows of any scenarios.
-        results_dir: The results folder.
-        out_dir: Output folder.
-        seed: Seed to draw; default each scenario's smallest seed with a log.
-
-    Returns:
-        ``({scenario: written paths}, notes)``: one note per figure that could not
-        be drawn (no run with a log for that seed, unreadable scenario file or log)
-        or whose scenario file no longer matches the row's ``scenario_sha256``.
-    """
-    written: dict[str, list[Path]] = {}
-    notes: list[str] = []
-    for scen in sorted({str(r["scenario"]) for r in rows}):
-        mine = [r for r in rows if str(r["scenario"]) == scen and r.get("log")]
-        seeds = sorted({int(r["seed"]) for r in mine})
-        pick = seeds[0] if seed is None and seeds else seed
-        chosen = [r for r in mine if pick is not None and int(r["seed"]) == int(pick)]
-        if not chosen:
-            notes.append(f"{scen}: no run with a log for seed {pick}, no trajectory figure")
-            continue
-        variants = sorted({str(r.get("overrides_hash", "base")) for r in mine})
-        for var in variants:
-            part = [r for r in chosen if str(r.get("overrides_hash", "base")) == var]
-            if not part:
-                continue
-            tag = "" if len(variants) == 1 else f"_{safe_name(var)}"
-            path = Path(out_dir) / f"traj_{safe_name(scen)}{tag}_s{pick}.png"
-            try:
-                done = trajectory_overlay(part, results_dir, path)
-            except DfcoaError as exc:
-                notes.append(f"{scen} ({var}): trajectory figure skipped: {exc}")
-                continue
-            written.setdefault(scen, []).append(done)
-            if _changed(part[0]):
-                notes.append(f"{scen} ({var}): {part[0]['scenario_file']} changed since the "
-                             f"run; the map of {done.name} may differ from the one driven")
-    return written, notes

@@ -1,10 +1,17 @@
-"""Tables, statistics and figures of a finished sweep, read from its results folder.
+"""The report of a finished sweep, read from its results folder.
 
 A results folder (written by the harness) holds ``manifest.json``, ``rows/<key>.json``
 and ``logs/<key>.npz``. Only those files (and, for map backgrounds, the scenario files)
 are read; nothing is simulated, so re-rendering gives a byte-identical ``report.md``.
-Statistics are over seeds: the mean of a metric per group of runs and the half-width of
-its Student-t 95 % confidence interval. Use: ``make_report("results/my_sweep")``.
+
+Per scenario (and per rung of a ladder) and variant: the outcome of every run
+(success, collision, deadlock, timeout; :mod:`dfcoa_opt.outcome`) as rates with
+Wilson 95 % intervals, and the mean of each metric over seeds with the
+half-width of its Student-t 95 % confidence interval (:mod:`dfcoa_opt.bench.tables`);
+with a ``baseline``, paired comparisons and a ranking
+(:mod:`dfcoa_opt.bench.paired`); for every variant below 50 % success, why it
+fails (:mod:`dfcoa_opt.bench.failures`); trajectory panels, box plots and the
+ladders' curves (:mod:`dfcoa_opt.bench.plots`). Use: ``make_report("results/my_sweep")``.
 """
 
 from __future__ import annotations
@@ -19,23 +26,25 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
+from scipy.stats import t as student_t
 
 from dfcoa_opt import environment
 from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench import plots
+from dfcoa_opt.bench import failures, paired, plots, stats, tables, trajectories
+from dfcoa_opt.bench.sweep import safe_name
 from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.outcome import OUTCOMES
 
 #: Metrics tabulated and box-plotted by default (keys of ``dfcoa_opt.metrics.summary``).
 DEFAULT_METRICS: tuple[str, ...] = (
-    "time_to_goal", "fce_rms", "fse_rms", "stability_pct", "vce_rms", "risk_mean",
-    "min_inter_robot_distance", "min_obstacle_clearance", "path_length_mean",
+    "time_to_goal", "fce_rms", "fse_rms", "stability_pct", "vce_rms", "risk_raw_mean",
+    "risk_raw_max", "min_inter_robot_distance", "min_obstacle_clearance", "path_length_mean",
 )
 
-DEFAULT_BY: tuple[str, ...] = ("scenario", "controller", "overrides_hash")
+DEFAULT_BY: tuple[str, ...] = ("scenario", "variant")
+#: Grouping of a ladder sweep: one group per rung too.
+LADDER_BY: tuple[str, ...] = ("scenario", "ladder", "ladder_value", "variant")
 _REQUIRED = ("key", "scenario", "controller", "seed", "status")
-_MAX_ERRORS = 5  # distinct error messages listed under a table
-_ERROR_CHARS = 160  # an error message is cut to this length in report.md
 
 
 # --------------------------------------------------------------------------- loading
@@ -118,7 +127,7 @@ def mean_ci95(values: Iterable[Any]) -> tuple[float, float, int]:
     n = int(x.size)
     if n == 0:
         return math.nan, math.nan, 0
-    half = stats.t.ppf(0.975, n - 1) * np.std(x, ddof=1) / math.sqrt(n) if n > 1 else math.nan
+    half = student_t.ppf(0.975, n - 1) * np.std(x, ddof=1) / math.sqrt(n) if n > 1 else math.nan
     return float(np.mean(x)), float(half), n
 
 
@@ -128,30 +137,38 @@ def _sort_key(values: tuple[Any, ...]) -> tuple[tuple[int, Any], ...]:
                  else (1, str(v)) for v in values)
 
 
+def _field(row: Mapping[str, Any], name: str) -> Any:
+    """A grouping field of a row (``variant`` falls back to the controller id)."""
+    if name == "variant":
+        return plots.variant_name(row)
+    return row.get(name, "base" if name == "overrides_hash" else None)
+
+
 def aggregate(rows: Sequence[Mapping[str, Any]], metrics: Sequence[str] = DEFAULT_METRICS,
               by: Sequence[str] = DEFAULT_BY) -> list[dict[str, Any]]:
-    """Group runs and compute rates and per-metric statistics over seeds.
+    """Group runs; outcome rates with Wilson intervals and per-metric statistics over seeds.
 
     Args:
         rows: Rows as returned by :func:`load_rows`.
         metrics: Summary keys to compute statistics for.
-        by: Row fields that define a group (a missing ``overrides_hash`` counts as
-            ``"base"``).
+        by: Row fields that define a group (``variant`` falls back to the controller).
 
     Returns:
         One dict per group, sorted by the ``by`` values, with: each ``by`` field;
         ``by`` (the field names); ``runs``, ``failed`` and ``ok`` (counts);
-        ``success_rate`` (fraction of all runs that are ok and report success; a
-        failed run counts as unsuccessful); ``collision_rate`` (fraction of ok runs
-        with ``collisions > 0``, NaN without ok runs); ``successes`` and ``collided``
-        (the counts behind both rates); ``stats``: metric ->
-        ``{"mean", "ci95", "n"}`` over the finite values of the ok runs (see
-        :func:`mean_ci95`); ``overrides`` (the overrides of the group's first run);
-        ``errors`` (distinct error messages of failed runs, in key order).
+        ``outcomes`` (outcome -> count); per outcome ``<outcome>_rate`` (fraction of
+        all runs; a failed run is none of them) and ``<outcome>_ci`` (its Wilson 95 %
+        interval); ``reached_rate`` (the goal condition, contacts or not);
+        ``success_rate``/``successes`` and ``collision_rate``/``collided``;
+        ``dominant_failure`` (the most frequent non-success outcome, or ``failed``);
+        ``stats``: metric -> ``{"mean", "ci95", "n", "distinct", "value"}`` over the
+        finite values of the ok runs (see :func:`mean_ci95`; ``distinct``: number of
+        different values, ``value``: the value when there is one); ``overrides``
+        (of the group's first run); ``errors`` (distinct errors of failed runs).
     """
     groups: dict[tuple[Any, ...], list[Mapping[str, Any]]] = {}
     for row in rows:
-        values = tuple(row.get(b, "base" if b == "overrides_hash" else None) for b in by)
+        values = tuple(_field(row, b) for b in by)
         values = tuple(json.dumps(v, sort_keys=True) if isinstance(v, (dict, list)) else v
                        for v in values)  # hashable
         groups.setdefault(values, []).append(row)
@@ -162,131 +179,26 @@ def aggregate(rows: Sequence[Mapping[str, Any]], metrics: Sequence[str] = DEFAUL
         mets = [r.get("metrics") or {} for r in ok]
         errors = list(dict.fromkeys(str(r["error"]) for r in members
                                     if r.get("status") == "failed" and r.get("error")))
+        counts = {o: sum(failures.run_outcome(r) == o for r in members) for o in OUTCOMES}
+        n = len(members)
         group: dict[str, Any] = dict(zip(by, values, strict=True))
-        wins = sum(m.get("success") is True for m in mets)
-        collided = sum(plots.as_number(m.get("collisions")) > 0 for m in mets)
-        group.update(
-            by=tuple(by), runs=len(members), failed=len(members) - len(ok), ok=len(ok),
-            successes=wins, success_rate=wins / len(members), collided=collided,
-            collision_rate=collided / len(ok) if ok else math.nan,
-            stats={}, overrides=dict(members[0].get("overrides") or {}), errors=errors)
+        group.update(by=tuple(by), runs=n, failed=n - len(ok), ok=len(ok), outcomes=counts,
+                     reached_rate=sum(m.get("reached") is True for m in mets) / n,
+                     successes=counts["success"], collided=counts["collision"],
+                     dominant_failure=failures.dominant_failure(members),
+                     stats={}, overrides=dict(members[0].get("overrides") or {}), errors=errors)
+        for o in OUTCOMES:
+            group[f"{o}_rate"] = counts[o] / n
+            group[f"{o}_ci"] = stats.wilson_interval(counts[o], n)
         for metric in metrics:
-            mean, half, n = mean_ci95(m.get(metric) for m in mets)
-            group["stats"][metric] = {"mean": mean, "ci95": half, "n": n}
+            x = [plots.as_number(m.get(metric)) for m in mets]
+            finite = sorted({v for v in x if math.isfinite(v)})
+            mean, half, k = mean_ci95(x)
+            group["stats"][metric] = {"mean": mean, "ci95": half, "n": k,
+                                      "distinct": len(finite),
+                                      "value": finite[0] if len(finite) == 1 else None}
         out.append(group)
     return out
-
-
-# ---------------------------------------------------------------------------- tables
-def _rate(rate: float, count: int, total: int) -> str:
-    """``"67% (2/3)"``, or an em dash when the rate is undefined."""
-    return f"{100.0 * rate:.0f}% ({count}/{total})" if math.isfinite(rate) else "—"
-
-
-def _cell(stat: Mapping[str, Any], ok: int) -> str:
-    """``"mean ± ci"`` with ``" (n=k)"`` when fewer than ``ok`` values were finite."""
-    mean, half, n = float(stat["mean"]), float(stat["ci95"]), int(stat["n"])
-    text = "—" if not math.isfinite(mean) else (
-        f"{mean:.3f} ± {half:.3f}" if math.isfinite(half) else f"{mean:.3f}")
-    return f"{text} (n={n})" if n < ok else text
-
-
-def _id_columns(groups: Sequence[Mapping[str, Any]], hide: Iterable[str]) -> list[str]:
-    """The ``by`` fields of the groups, without ``hide``."""
-    by = groups[0].get("by", DEFAULT_BY) if groups else DEFAULT_BY
-    return [b for b in by if b not in set(hide)]
-
-
-def _md_escape(text: Any) -> str:
-    """Text safe inside a Markdown table cell (one line, no bare pipes)."""
-    return " ".join(str(text).split()).replace("|", "\\|")
-
-
-def markdown_table(groups: Sequence[Mapping[str, Any]], metrics: Sequence[str] = DEFAULT_METRICS,
-                   hide: Iterable[str] = ()) -> str:
-    """Markdown table of :func:`aggregate` groups, with notes below it.
-
-    Metric cells: ``mean ± 95 % CI half-width``, three decimals (``—`` if undefined,
-    no ``±`` for one value), ``(n=k)`` when only k of the ok runs had a finite
-    value. Rates are percentages of all runs (success) and of ok runs (collisions).
-    Notes: the overrides behind each hash and up to five distinct run errors.
-
-    Args:
-        groups: Output of :func:`aggregate`.
-        metrics: Summary keys, one column each (must have been aggregated).
-        hide: Grouping fields not to show as columns (e.g. ``("scenario",)`` for a
-            per-scenario table).
-
-    Returns:
-        The Markdown text, ending with a newline.
-    """
-    ids = _id_columns(groups, hide)
-    names = {"overrides_hash": "overrides"}
-    head = [names.get(b, b) for b in ids] + ["runs", "failed", "success", "collisions"]
-    head += [plots.metric_header(m) for m in metrics]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for g in groups:
-        ok = int(g["ok"])
-        cells = [f"`{_md_escape(g[b])}`" if b == "overrides_hash" else _md_escape(g[b])
-                 for b in ids]
-        cells += [str(g["runs"]), str(g["failed"]),
-                  _rate(g["success_rate"], g["successes"], g["runs"]),
-                  _rate(g["collision_rate"], g["collided"], ok)]
-        cells += [_cell(g["stats"][m], ok) for m in metrics]
-        lines.append("| " + " | ".join(cells) + " |")
-    notes = sorted({(g.get("overrides_hash"), json.dumps(g.get("overrides") or {},
-                                                          sort_keys=True)) for g in groups
-                    if g.get("overrides")}, key=lambda x: str(x))
-    if notes:
-        lines += ["", "Overrides:"] + [f"- `{h}`: `{o}`" for h, o in notes]
-    failed = [(g, e) for g in groups for e in g.get("errors", [])]
-    if failed:
-        lines += ["", "Errors of failed runs:"]
-        for g, err in failed[:_MAX_ERRORS]:
-            who = " / ".join(_md_escape(g[b]) for b in ids)
-            short = _md_escape(err)
-            short = short if len(short) <= _ERROR_CHARS else short[:_ERROR_CHARS - 1] + "…"
-            lines.append(f"- {who}: {short}")
-        if len(failed) > _MAX_ERRORS:
-            lines.append(f"- … and {len(failed) - _MAX_ERRORS} more distinct error(s)")
-    return "\n".join(lines) + "\n"
-
-
-def _csv_num(value: Any) -> str:
-    """A number as CSV text: shortest round-trip float, empty for NaN/inf."""
-    if not isinstance(value, float):
-        return str(value)
-    return repr(value) if math.isfinite(value) else ""
-
-
-def csv_table(groups: Sequence[Mapping[str, Any]],
-              metrics: Sequence[str] = DEFAULT_METRICS) -> str:
-    """CSV of :func:`aggregate` groups, one numeric column per statistic.
-
-    Columns: the ``by`` fields, ``overrides`` (JSON), ``runs``, ``failed``, ``ok``,
-    ``success_rate`` and ``collision_rate`` (fractions in [0, 1]), then
-    ``<metric>_mean``, ``<metric>_ci95`` and ``<metric>_n`` per metric (in the
-    metric's unit; empty cells for NaN).
-
-    Args:
-        groups: Output of :func:`aggregate`.
-        metrics: Summary keys (must have been aggregated).
-
-    Returns:
-        The CSV text (one line per group after the header, newline-terminated).
-    """
-    ids = _id_columns(groups, ())
-    head = ids + ["overrides", "runs", "failed", "ok", "success_rate", "collision_rate"]
-    head += [f"{m}_{s}" for m in metrics for s in ("mean", "ci95", "n")]
-    buf = io.StringIO()
-    writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(head)
-    for g in groups:
-        row = [g[b] for b in ids] + [json.dumps(g.get("overrides") or {}, sort_keys=True)]
-        row += [g[k] for k in ("runs", "failed", "ok", "success_rate", "collision_rate")]
-        row += [g["stats"][m][s] for m in metrics for s in ("mean", "ci95", "n")]
-        writer.writerow([_csv_num(v) for v in row])
-    return buf.getvalue()
 
 
 # ------------------------------------------------------------------------ environment
@@ -343,9 +255,20 @@ def environment_header(results_dir: str | Path) -> str:
 
 
 # ----------------------------------------------------------------------------- report
+LEGEND = ("Outcome of every run (docs/metrics.md, outcomes): **success** = the goal reached with "
+          "no contact of any kind; **collision** = at least one contact (robot-robot, "
+          "robot-obstacle, robot-moving obstacle); **deadlock** = not reached, no contact, no "
+          "progress over the final window; **timeout** = the rest. Rates are % of all runs with "
+          "the Wilson 95 % interval and the counts; a run that raised (failed) is none of them. "
+          "Metric cells: mean ± half-width of the Student-t 95 % confidence interval over the "
+          "seeds whose run did not fail; `(n=k)`: only k of them had a value (time to goal exists "
+          "only for runs that reached the goal); — : undefined. Risk is paper 000's eq 11 "
+          "without normalisation (1/m²).")
+
+
 def make_report(results_dir: str | Path, out_dir: str | Path | None = None,
                 metrics: Sequence[str] = DEFAULT_METRICS,
-                overlay_seed: int | None = None) -> list[Path]:
+                overlay_seed: int | None = None, baseline: str | None = None) -> list[Path]:
     """Write ``report.md``, ``report.csv`` and the figures of a results folder.
 
     Reads only rows, logs and scenario files (for map backgrounds); never simulates.
@@ -354,12 +277,15 @@ def make_report(results_dir: str | Path, out_dir: str | Path | None = None,
         results_dir: The results folder.
         out_dir: Output folder; default ``results_dir/report``.
         metrics: Summary keys to tabulate, one box plot each (``box_<metric>.png``).
-        overlay_seed: Seed of the trajectory overlays (``traj_<scenario>_s<seed>.png``,
-            one per scenario and overrides variant); default: each scenario's
-            smallest seed with a log.
+        overlay_seed: Seed of the trajectory panels (``traj_<scenario>_s<seed>.png``);
+            default: each scenario's smallest seed with a log.
+        baseline: Variant to compare the others to; default the sweep's ``baseline``
+            (manifest), none when empty.
 
     Returns:
-        The written files: report.md, report.csv, box plots, overlays.
+        The written files: report.md, report.csv (ladders.csv, paired.csv when there
+        are ladders or a baseline), box plots, trajectory panels, failure snapshots,
+        ladder curves.
 
     Raises:
         DfcoaError: If the folder, a row or the manifest cannot be read.
@@ -368,25 +294,107 @@ def make_report(results_dir: str | Path, out_dir: str | Path | None = None,
     out_dir = results_dir / "report" if out_dir is None else Path(out_dir)
     rows = load_rows(results_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    groups = aggregate(rows, metrics)
-    name = _read_manifest(results_dir).get("name", results_dir.name)
-    boxes = [plots.metric_boxplots(rows, m, out_dir / f"box_{plots.safe_name(m)}.png")
-             for m in metrics]
-    trajs, notes = plots.overlay_figures(rows, results_dir, out_dir, overlay_seed)
-    md = [f"# Benchmark report: {name}", "", environment_header(results_dir).rstrip("\n"), "",
-          "Cells: mean ± half-width of the Student-t 95 % confidence interval over seeds, "
-          "among the runs that did not fail; `(n=k)`: only k of them had a value (e.g. time "
-          "to goal exists only for runs that reached the goal); — : undefined. Success: % "
-          "of all runs; collisions: % of non-failed runs with at least one collision.", ""]
+    manifest = _read_manifest(results_dir)
+    baseline = str(manifest.get("baseline") or "") if baseline is None else baseline
+    plain = [r for r in rows if r.get("ladder_value") is None]
+    laddered = [r for r in rows if r.get("ladder_value") is not None]
+    groups = aggregate(plain, metrics)
+    comparisons = paired.compare(rows, baseline) if baseline else []
+    md = [f"# Benchmark report: {manifest.get('name', results_dir.name)}", "",
+          environment_header(results_dir).rstrip("\n"), "", LEGEND, ""]
+    if baseline:
+        md += [f"Baseline of the paired comparisons: `{baseline}`.", ""]
+    written: list[Path] = []
+    trajs, notes = trajectories.overlay_figures(plain, results_dir, out_dir, overlay_seed)
     for scen in sorted({str(g["scenario"]) for g in groups}):
         mine = [g for g in groups if str(g["scenario"]) == scen]
-        md += [f"## Scenario `{scen}`", "", markdown_table(mine, metrics, hide=("scenario",))]
+        md += _scenario_section(scen, mine, [r for r in plain if str(r["scenario"]) == scen],
+                                [c for c in comparisons if c.table == (scen, "", None)],
+                                baseline, metrics, results_dir, out_dir, written)
         md += [f"![trajectories {scen}]({p.name})\n" for p in trajs.get(scen, [])]
     if notes:
         md += ["Notes:", *[f"- {n}" for n in notes], ""]
-    md += ["## Distributions over seeds", ""] + [f"![{m}]({p.name})\n"
-                                                 for m, p in zip(metrics, boxes, strict=True)]
+    lgroups = aggregate(laddered, metrics, LADDER_BY) if laddered else []
+    md += _ladder_sections(lgroups, manifest, out_dir, written)
+    boxes = [plots.metric_boxplots(plain, m, out_dir / f"box_{safe_name(m)}.png")
+             for m in metrics] if plain else []
+    if boxes:
+        md += ["## Distributions over seeds", ""] + [
+            f"![{m}]({p.name})\n" for m, p in zip(metrics, boxes, strict=True)]
+    overrides = tables.overrides_note(groups + lgroups)
+    if overrides:
+        md += ["## What each variant sets", "", *overrides, ""]
     md_path, csv_path = out_dir / "report.md", out_dir / "report.csv"
     atomic_write(md_path, "\n".join(md).rstrip("\n") + "\n")
-    atomic_write(csv_path, csv_table(groups, metrics))
-    return [md_path, csv_path, *boxes, *[p for s in sorted(trajs) for p in trajs[s]]]
+    atomic_write(csv_path, tables.csv_table(groups, metrics))
+    extra = []
+    if lgroups:
+        extra.append(atomic_write(out_dir / "ladders.csv", tables.csv_table(lgroups, metrics)))
+    if comparisons:
+        extra.append(atomic_write(out_dir / "paired.csv", _paired_csv(comparisons)))
+    return [md_path, csv_path, *extra, *boxes, *[p for s in sorted(trajs) for p in trajs[s]],
+            *written]
+
+
+def _scenario_section(scen: str, groups: Sequence[Mapping[str, Any]],
+                      rows: Sequence[Mapping[str, Any]], comparisons: Sequence[Any],
+                      baseline: str, metrics: Sequence[str], results_dir: Path,
+                      out_dir: Path, written: list[Path]) -> list[str]:
+    """Markdown of one scenario: outcomes and metrics, ranking, paired table, failures."""
+    md = [f"## Scenario `{scen}`", "", tables.markdown_table(groups, metrics, hide=("scenario",))]
+    if baseline and comparisons:
+        md += ["### Ranking", "", tables.ranking_table(groups, comparisons, baseline),
+               f"### Paired differences against `{baseline}`", "",
+               tables.paired_table(comparisons, paired.PAIRED_METRICS, baseline)]
+    lines, shots = failures.explain(groups, rows, results_dir, out_dir)
+    written += shots
+    if lines:
+        md += ["### Why it fails", "", "Every variant below 50 % success: its most frequent "
+               "failure and a snapshot of the first seed that failed so.", "", *lines, ""]
+    return md
+
+
+def _ladder_sections(groups: Sequence[Mapping[str, Any]], manifest: Mapping[str, Any],
+                     out_dir: Path, written: list[Path]) -> list[str]:
+    """Markdown and figures of every ladder: success rate against the rung's value."""
+    log_x = {str(lad.get("label")): bool(lad.get("log_x"))
+             for lad in manifest.get("ladders") or [] if isinstance(lad, Mapping)}
+    md: list[str] = []
+    for label in dict.fromkeys(str(g["ladder"]) for g in groups):
+        for scen in sorted({str(g["scenario"]) for g in groups if str(g["ladder"]) == label}):
+            mine = [g for g in groups if str(g["ladder"]) == label and str(g["scenario"]) == scen]
+            series: dict[str, list[tuple[float, float, float, float, int]]] = {}
+            for g in sorted(mine, key=lambda g: float(g["ladder_value"])):
+                lo, hi = g["success_ci"]
+                series.setdefault(str(g["variant"]), []).append(
+                    (float(g["ladder_value"]), g["success_rate"], lo, hi, int(g["runs"])))
+            name = f"ladder_{safe_name(label)}_{safe_name(scen)}.png"
+            written.append(plots.ladder_figure(series, label, out_dir / name,
+                                               f"{scen}: success rate against {label}",
+                                               log_x=log_x.get(label, False)))
+            widest = max(((hi - lo) / 2 for g in mine for lo, hi in [g["success_ci"]]),
+                         default=math.nan)
+            md += [f"## Ladder `{label}` on `{scen}`", "", tables.ladder_table(mine, label),
+                   f"Success rate with its Wilson 95 % interval; the widest interval is "
+                   f"±{100 * widest:.0f} points.", "", f"![ladder {label}]({name})", ""]
+            fails = [f"- `{g['variant']}` at {float(g['ladder_value']):g}: "
+                     f"{g['dominant_failure']} ({100 * g['success_rate']:.0f}% success)"
+                     for g in mine if g["success_rate"] < failures.EXPLAIN_BELOW
+                     and g["dominant_failure"]]
+            if fails:
+                md += ["Where each variant breaks (most frequent failure below 50 % success):",
+                       "", *fails, ""]
+    return md
+
+
+def _paired_csv(comparisons: Sequence[Any]) -> str:
+    """CSV of every paired comparison (one row per table, variant and metric)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["scenario", "ladder", "ladder_value", "variant", "metric", "n", "estimate",
+                "ci_low", "ci_high", "p_value", "p_holm", "verdict"])
+    for c in comparisons:
+        w.writerow([*c.table[:2], "" if c.table[2] is None else c.table[2], c.variant, c.metric,
+                    c.n, *(repr(v) if math.isfinite(v) else "" for v in
+                           (c.estimate, c.ci_low, c.ci_high, c.p_value, c.p_holm)), c.verdict])
+    return buf.getvalue()

@@ -11,8 +11,14 @@ Row fields (JSON):
 
 - ``key``, ``scenario``, ``scenario_file``, ``controller``, ``seed``,
   ``overrides`` (dotted key -> value), ``overrides_hash``;
+- ``variant`` (the readable name of the method configuration), ``ladder`` and
+  ``ladder_value`` (the difficulty ladder's label and rung; ``""``/null outside
+  a ladder);
 - ``status`` (``ok`` | ``failed``), ``error`` (one line or null);
-- ``metrics``: :func:`dfcoa_opt.metrics.summary` with NaN/inf as null;
+- ``metrics``: :func:`dfcoa_opt.metrics.summary` with NaN/inf as null; among
+  them ``outcome`` (success, collision, deadlock or timeout,
+  :mod:`dfcoa_opt.outcome`) and ``reached`` (the goal condition, whatever the
+  contacts);
 - ``digest``: SHA-256 over the log arrays (bit-identical runs <=> equal);
 - ``log``: the ``.npz`` path relative to the results folder, or null;
 - ``provenance``: wall time, finish time, host, pid, and a traceback for
@@ -28,6 +34,7 @@ import os
 import socket
 import time
 import traceback
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,7 +43,8 @@ from dfcoa_opt.errors import DfcoaError
 
 #: Keys of a row that must be identical whichever executor ran it.
 DETERMINISTIC_KEYS = ("key", "scenario", "scenario_file", "controller", "seed", "overrides",
-                      "overrides_hash", "status", "error", "metrics", "digest", "log")
+                      "overrides_hash", "variant", "ladder", "ladder_value", "status", "error",
+                      "metrics", "digest", "log")
 
 
 @dataclass(frozen=True)
@@ -45,6 +53,11 @@ class Outcome:
 
     row: dict[str, Any]
     npz: bytes | None
+
+
+def is_success(row: Mapping[str, Any]) -> bool:
+    """Whether a row's run is a success (collision-free arrival); a failed run is not."""
+    return row.get("status") == "ok" and (row.get("metrics") or {}).get("outcome") == "success"
 
 
 def jsonable(x: Any) -> Any:
@@ -79,7 +92,8 @@ def execute(run: RunSpec) -> Outcome:
     row: dict[str, Any] = {
         "key": run.key, "scenario": run.scenario, "scenario_file": run.scenario_file,
         "controller": run.controller, "seed": run.seed, "overrides": run.overrides_dict,
-        "overrides_hash": run.overrides_hash, "status": "failed", "error": None,
+        "overrides_hash": run.overrides_hash, "variant": run.variant_name,
+        "ladder": run.ladder, "ladder_value": run.ladder_value, "status": "failed", "error": None,
         "metrics": None, "digest": None, "log": None,
     }
     prov: dict[str, Any] = {}

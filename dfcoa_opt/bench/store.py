@@ -3,7 +3,8 @@
 Layout::
 
     RESULTS/
-      manifest.json     sweep name, file, SHA-256, code fingerprint, the run keys
+      manifest.json     sweep name, file, SHA-256, code fingerprint, the run keys,
+                        variants, baseline and ladders
       sweep.toml        copy of the sweep file
       rows/<key>.json   one row per run (see dfcoa_opt.bench.runner)
       logs/<key>.npz    the run's log
@@ -14,11 +15,12 @@ row, so a row file exists only for a run whose log is complete. A sweep killed
 at any moment (even by SIGKILL) therefore resumes without losing or
 duplicating a row: the rerun skips every run that has a row.
 
-A row counts as done only if it was produced by the same code and the same
-scenario file: each row records ``code`` (a fingerprint of the installed
-``dfcoa_opt`` and ``comparisons`` sources) and ``scenario_sha256``; rows from
-other code are run again. Controllers from other packages (entry points) are
-not part of the fingerprint; use ``--rerun`` after changing one.
+A row counts as done only if it was produced by the same code, the same
+scenario file and the same overrides: each row records ``code`` (a fingerprint
+of the installed ``dfcoa_opt`` and ``comparisons`` sources),
+``scenario_sha256`` and ``overrides``; other rows are run again. Controllers
+from other packages (entry points) are not part of the fingerprint; use
+``--rerun`` after changing one.
 """
 
 from __future__ import annotations
@@ -39,8 +41,8 @@ from dfcoa_opt.bench.sweep import RunSpec, Sweep
 from dfcoa_opt.errors import DfcoaError
 
 #: Row fields written as CSV columns before the metrics.
-CSV_FIELDS = ("key", "scenario", "controller", "seed", "overrides_hash", "overrides", "status",
-              "error", "digest")
+CSV_FIELDS = ("key", "scenario", "variant", "controller", "seed", "ladder", "ladder_value",
+              "overrides", "status", "error", "digest")
 
 
 @functools.lru_cache(maxsize=1)
@@ -102,10 +104,11 @@ class ResultsStore:
             return None
 
     def is_done(self, run: RunSpec) -> bool:
-        """A row exists for ``run`` from this code and this scenario file."""
+        """A row exists for ``run`` from this code, this scenario file and these overrides."""
         row = self.read_row(run.key)
         return (row is not None and row.get("code") == code_fingerprint()
-                and row.get("scenario_sha256") == file_sha256(run.scenario_file))
+                and row.get("scenario_sha256") == file_sha256(run.scenario_file)
+                and row.get("overrides") == run.overrides_dict)
 
     def pending(self, runs: Iterable[RunSpec], rerun: bool = False) -> list[RunSpec]:
         """The runs to execute: all with ``rerun``, else those not done."""
@@ -129,7 +132,7 @@ class ResultsStore:
             "name": sweep.name, "sweep_file": _display_path(sweep.source),
             "sweep_sha256": sweep.sha256, "code": code_fingerprint(),
             "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-            "keys": [r.key for r in sweep.runs],
+            "keys": [r.key for r in sweep.runs], **sweep.describe(),
         }
         atomic_write(self.root / "manifest.json", json.dumps(manifest, indent=1) + "\n")
 

@@ -1,4 +1,4 @@
-"""Sweep files: controllers x scenarios x seeds x parameter overrides.
+"""Sweep files: scenarios x variants x seeds, with parameter grids and difficulty ladders.
 
 A sweep file (TOML)::
 
@@ -6,21 +6,26 @@ A sweep file (TOML)::
     scenarios = ["../bench/*.toml"]        # files or globs, relative to this file
     controllers = ["*"]                    # ids; "*" = every registered controller
     seeds = 20                             # seeds first_seed .. first_seed + seeds - 1
+    baseline = "dfcoa"                     # optional: the variant the others are compared to
+    [variants.dfcoa_compensated]           # optional: named method configurations
+    controller = "dfcoa"
+    "controllers.dfcoa.compensate_tracking_offset" = true
     [grid]                                 # optional: Cartesian product of values
     "world.clutter.density" = [0.05, 0.1]
-    "controllers.goto_slot.kp" = [0.5, 1.0]
-    [[variants]]                           # optional: explicit override sets
-    "team.n" = 6
+    [ladder]                               # optional: a difficulty ladder
+    key = "world.clutter.density"
+    values = [0.02, 0.04, 0.08]
 
-Overrides are dotted scenario keys (``a.b.c``, ``a.b[2].c`` for arrays of
-tables), applied to the scenario file's contents before validation, so a
-controller parameter is ``controllers.<id>.<param>``, the same key a scenario
-file uses. A ``controllers.<id>.*`` override only reaches runs of controller
-``<id>``; runs that it does not reach are not duplicated. Each run's seed
-replaces the scenario's ``seed``, so seeded parts of the scenario (random
-clutter, start noise) change with it.
+Variants, grids and ladders: :mod:`dfcoa_opt.bench.variants`. Overrides are
+dotted scenario keys (``a.b.c``, ``a.b[2].c`` for arrays of tables), applied to
+the scenario file's contents before validation, so a controller parameter is
+``controllers.<id>.<param>``, the same key a scenario file uses. A
+``controllers.<id>.*`` override only reaches runs of controller ``<id>``; runs
+that it does not reach are not duplicated. Each run's seed replaces the
+scenario's ``seed``, so seeded parts of the scenario (random clutter, start
+noise) change with it.
 
-Every run gets a key ``<scenario>__<controller>__<overrides hash>__s<seed>``
+Every run gets a readable key ``<scenario>__<variant>[__<ladder>_<value>]__s<seed>``
 that names its result files.
 """
 
@@ -31,12 +36,20 @@ import hashlib
 import itertools
 import json
 import re
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from dfcoa_opt.errors import DfcoaError, ScenarioError
+from dfcoa_opt.bench.variants import (
+    Ladder,
+    Variant,
+    named_variants,
+    parse_ladders,
+    reaches,
+    suffix,
+)
+from dfcoa_opt.errors import DfcoaError, ScenarioError, did_you_mean
 from dfcoa_opt.params import build, param
 from dfcoa_opt.sim.loader import load_scenario, read_toml
 from dfcoa_opt.sim.scenario import Scenario
@@ -46,24 +59,38 @@ _UNSAFE = re.compile(r"[^A-Za-z0-9_.+-]+")
 
 def safe_name(name: Any) -> str:
     """A file-name-safe form of a name: runs of other characters become ``_``."""
-    return _UNSAFE.sub("_", str(name)) or "_"
+    return _UNSAFE.sub("_", str(name)).strip("_") or "_"
 
 
 @dataclass(frozen=True)
 class SweepSpec:
     """A whole sweep file."""
 
-    scenarios: tuple[str, ...] = param(doc="Scenario files or globs, relative to the sweep file.")
+    scenarios: tuple[str, ...] = param((), doc="Scenario files or globs, relative to the sweep "
+                                               "file.")
     name: str = param("", doc="Sweep name; default: the file name without .toml.")
     description: str = param("", doc="Free text.")
-    controllers: tuple[str, ...] = param(("*",), doc="Controller ids; '*' = every registered "
-                                                     "controller.")
-    seeds: int = param(20, doc="Seeds per (scenario, controller, overrides).", ge=1)
+    controllers: tuple[str, ...] | None = param(
+        None, doc="Controller ids, each a variant named by its id; '*' = every registered "
+                  "controller. Default: '*', or none when [variants] names variants.")
+    seeds: int = param(20, doc="Seeds per (scenario, variant, ladder rung); with max_seeds, "
+                               "the first seeds of each.", ge=1)
+    max_seeds: int = param(0, doc="With > 0: add seeds to each (scenario, variant, rung) until "
+                                  "its success rate's Wilson 95 % interval is within "
+                                  "+-max_half_width, at most this many seeds "
+                                  "(dfcoa_opt.bench.precision).", ge=0)
+    max_half_width: float = param(0.15, doc="Target half-width of the success rate's interval "
+                                            "with max_seeds (fraction).", gt=0.0, le=0.5)
     first_seed: int = param(0, doc="The first seed.", ge=0)
     grid: dict[str, Any] = param(default_factory=dict, doc="Dotted scenario key -> list of "
                                                            "values; runs take every combination.")
-    variants: tuple[dict[str, Any], ...] = param((), doc="Explicit override sets (dotted key -> "
-                                                         "value), combined with the grid.")
+    variants: Any = param(None, doc="[variants] name = { controller = id, dotted key = value }; "
+                                    "or [[variants]] override sets combined with every "
+                                    "controller.")
+    baseline: str = param("", doc="Variant the report compares every other variant to (paired "
+                                  "statistics).")
+    ladder: Any = param(None, doc="[ladder] (key and values, or [[ladder.rungs]]) or [[ladder]] "
+                                  "(each with its own scenarios): a difficulty ladder.")
 
 
 @dataclass(frozen=True)
@@ -83,6 +110,9 @@ class RunSpec:
     controller: str
     seed: int
     overrides: str = "{}"  # canonical(...) form
+    variant: str = ""
+    ladder: str = ""
+    ladder_value: float | None = None
 
     @property
     def overrides_dict(self) -> dict[str, Any]:
@@ -97,10 +127,16 @@ class RunSpec:
         return hashlib.sha256(self.overrides.encode()).hexdigest()[:10]
 
     @property
+    def variant_name(self) -> str:
+        """The variant's name (the controller id when none was given)."""
+        return self.variant or self.controller
+
+    @property
     def key(self) -> str:
-        """File-name-safe unique id of the run."""
-        return (f"{safe_name(self.scenario)}__{safe_name(self.controller)}__"
-                f"{self.overrides_hash}__s{self.seed}")
+        """File-name-safe unique id of the run (readable: no hash)."""
+        rung = ("" if self.ladder_value is None
+                else f"__{safe_name(self.ladder)}_{self.ladder_value:g}")
+        return f"{safe_name(self.scenario)}__{safe_name(self.variant_name)}{rung}__s{self.seed}"
 
 
 @dataclass(frozen=True)
@@ -120,11 +156,35 @@ class Sweep:
     sha256: str
     text: str
     runs: tuple[RunSpec, ...]
+    variants: tuple[Variant, ...] = ()
+    ladders: tuple[Ladder, ...] = ()
+    max_seeds: int = 0
+
+    def extended(self, runs: Iterable[RunSpec]) -> Sweep:
+        """The same sweep with ``runs`` added (e.g. seeds of :mod:`dfcoa_opt.bench.precision`)."""
+        have = set(self.runs)
+        return replace(self, runs=self.runs + tuple(r for r in runs if r not in have))
 
     @property
     def name(self) -> str:
         """Sweep name."""
         return self.spec.name
+
+    @property
+    def baseline(self) -> str:
+        """The baseline variant's name ("" without one)."""
+        return self.spec.baseline
+
+    def describe(self) -> dict[str, Any]:
+        """Variants, baseline and ladders as JSON data (for the manifest and the report)."""
+        names = list(dict.fromkeys(r.variant_name for r in self.runs))
+        ctrl = {r.variant_name: (r.controller, r.overrides_dict) for r in self.runs}
+        return {
+            "variants": [{"name": n, "controller": ctrl[n][0]} for n in names],
+            "baseline": self.baseline,
+            "ladders": [{"label": lad.label, "log_x": lad.log_x,
+                         "values": [r.value for r in lad.rungs]} for lad in self.ladders],
+        }
 
 
 def _flatten(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -144,42 +204,65 @@ def load_run_scenario(run: RunSpec) -> Scenario:
     return load_scenario(run.scenario_file, run.seed, run.overrides_dict)
 
 
-def _combinations(spec: SweepSpec, src: str) -> list[dict[str, Any]]:
+def _grid(spec: SweepSpec, src: str) -> tuple[list[dict[str, Any]], list[str]]:
+    """Grid points (with the older ``[[variants]]`` override sets) and the keys that vary."""
     grid = _flatten(spec.grid)
     for k, v in grid.items():
         if not isinstance(v, list) or not v:
             raise ScenarioError(src, f"grid.{k}", "must be a non-empty array of values")
-    variants = [_flatten(v) for v in spec.variants] or [{}]
+    sets: list[dict[str, Any]] = [{}]
+    if isinstance(spec.variants, list):
+        if not all(isinstance(v, Mapping) for v in spec.variants):
+            raise ScenarioError(src, "variants", "[[variants]] must be tables of dotted keys")
+        sets = [_flatten(v) for v in spec.variants] or [{}]
     points = [dict(zip(grid, combo, strict=True)) for combo in itertools.product(*grid.values())]
-    return [{**v, **p} for v in variants for p in points]
+    varying = [k for k, v in grid.items() if len(v) > 1]
+    for k in dict.fromkeys(k for s in sets for k in s):
+        if len({json.dumps(s.get(k), sort_keys=True) for s in sets}) > 1 and k not in varying:
+            varying.append(k)
+    return [{**v, **p} for v in sets for p in points], varying
 
 
-def _controllers(spec: SweepSpec, src: str) -> list[str]:
+def _variants(spec: SweepSpec, src: str) -> list[Variant]:
+    """Plain controllers (named by id) and the ``[variants]`` table, in file order."""
     from dfcoa_opt.control.registry import available, controller_class
     from dfcoa_opt.errors import UnknownNameError
 
+    named = (named_variants(spec.variants, _flatten, src)
+             if isinstance(spec.variants, Mapping) else [])
+    if spec.variants is not None and not isinstance(spec.variants, (Mapping, list)):
+        raise ScenarioError(src, "variants", "must be a table ([variants]) or an array of "
+                                             "tables ([[variants]])")
+    ids = spec.controllers if spec.controllers is not None else (() if named else ("*",))
     known = available()
-    out: list[str] = []
-    for i, cid in enumerate(spec.controllers):
-        if cid == "*":
-            out += [c for c in known if c not in out]
-            continue
+    out: list[Variant] = []
+    for i, cid in enumerate(ids):
+        for c in (known if cid == "*" else [cid]):
+            try:
+                controller_class(c)
+            except UnknownNameError as exc:
+                raise ScenarioError(src, f"controllers[{i}]", str(exc)) from None
+            if all(v.name != c for v in out):
+                out.append(Variant(c, c))
+    for v in named:
         try:
-            controller_class(cid)
+            controller_class(v.controller)
         except UnknownNameError as exc:
-            raise ScenarioError(src, f"controllers[{i}]", str(exc)) from None
-        if cid not in out:
-            out.append(cid)
+            raise ScenarioError(src, f"variants.{v.name}.controller", str(exc)) from None
+        if any(o.name == v.name for o in out):
+            raise ScenarioError(src, f"variants.{v.name}", "is also a plain controller of "
+                                                           "this sweep; choose another name")
+        out.append(v)
     return out
 
 
-def _scenario_files(spec: SweepSpec, src: str, base: Path) -> list[Path]:
+def _scenario_files(patterns: Sequence[str], src: str, base: Path, key: str) -> list[Path]:
     files: list[Path] = []
-    for i, pattern in enumerate(spec.scenarios):
+    for i, pattern in enumerate(patterns):
         hits = sorted(Path(p) for p in glob.glob(str(base / pattern)))
         if not hits:
-            raise ScenarioError(src, f"scenarios[{i}]", f"'{pattern}' matches no file "
-                                                        f"(relative to {base})")
+            raise ScenarioError(src, f"{key}[{i}]", f"'{pattern}' matches no file "
+                                                    f"(relative to {base})")
         files += [h.resolve() for h in hits if h.resolve() not in files]
     return files
 
@@ -189,19 +272,13 @@ def canonical(overrides: Mapping[str, Any]) -> str:
     return json.dumps(dict(overrides), sort_keys=True, separators=(",", ":"))
 
 
-def _for_controller(overrides: Mapping[str, Any], cid: str) -> str:
-    """Canonical JSON of the overrides that reach controller ``cid``."""
-    parts = cid.split("+")  # "a+filter": both parts' tables reach it
-    return canonical({k: v for k, v in overrides.items()
-                      if not k.startswith("controllers.") or k.split(".")[1] in parts})
-
-
 def load_sweep(path: str | Path, seeds: int | None = None,
                overrides: Mapping[str, Any] | None = None) -> Sweep:
     """Read, validate and expand a sweep file.
 
-    Every scenario is loaded once per override set (with the first seed), so a
-    bad scenario, override or controller parameter fails here, before any run.
+    Every scenario is loaded once per distinct override set (with the first
+    seed), so a bad scenario, override or controller parameter fails here,
+    before any run.
 
     Args:
         path: The sweep ``.toml``.
@@ -217,40 +294,89 @@ def load_sweep(path: str | Path, seeds: int | None = None,
     data = read_toml(path)
     data.setdefault("name", path.stem)
     spec = build(SweepSpec, data, src)
-    if not spec.scenarios:
+    if spec.max_seeds and spec.max_seeds < spec.seeds:
+        raise ScenarioError(src, "max_seeds", f"must be 0 or >= seeds ({spec.seeds}), got "
+                                              f"{spec.max_seeds}")
+    variants = _variants(spec, src)
+    ladders = parse_ladders(spec.ladder, _flatten, src)
+    points, varying = _grid(spec, src)
+    groups: list[tuple[list[Path], Ladder | None]] = []
+    own = [lad for lad in ladders if lad.scenarios]
+    if spec.scenarios:
+        shared = next((lad for lad in ladders if not lad.scenarios), None)
+        groups.append((_scenario_files(spec.scenarios, src, path.parent, "scenarios"), shared))
+    for i, lad in enumerate(own):
+        groups.append((_scenario_files(lad.scenarios, src, path.parent,
+                                       f"ladder[{i}].scenarios"), lad))
+    if not groups:
         raise ScenarioError(src, "scenarios", "lists no scenario")
-    raw = path.read_bytes()
-    files = _scenario_files(spec, src, path.parent)
-    ctrls = _controllers(spec, src)
-    combos = [{**c, **(overrides or {})} for c in _combinations(spec, src)]
-    names: dict[str, Path] = {}
-    runs: list[RunSpec] = []
     n_seeds = spec.seeds if seeds is None else seeds
-    for f in files:
-        for combo in combos:
-            probe = RunSpec(str(f), f.stem, "", spec.first_seed, canonical(combo))
-            try:
-                sc = load_run_scenario(probe)
-            except DfcoaError as exc:
-                hint = f" (with overrides {json.dumps(combo)})" if combo else ""
-                raise ScenarioError(src, "scenarios", f"{exc}{hint}") from None
-            if names.setdefault(sc.name, f) != f:
-                raise ScenarioError(src, "scenarios", f"two scenarios are named '{sc.name}': "
-                                                      f"{names[sc.name]} and {f}")
-            for cid in ctrls:
-                ov = _for_controller(combo, cid)
-                for seed in range(spec.first_seed, spec.first_seed + n_seeds):
-                    runs.append(RunSpec(str(f), sc.name, cid, seed, ov))
+    names: dict[str, Path] = {}
+    probed: dict[tuple[str, str], str] = {}
+    runs: list[RunSpec] = []
+    for files, lad in groups:
+        for f, rung, point, v in itertools.product(files, lad.rungs if lad else (None,), points,
+                                                   variants):
+            base = {**point, **dict(rung.overrides if rung else ()), **(overrides or {})}
+            _probe(f, base, spec.first_seed, src, probed)  # every grid key, whoever it reaches
+            ov = {k: x for k, x in {**base, **dict(v.overrides)}.items()
+                  if reaches(k, v.controller)}
+            scen = _probe(f, ov, spec.first_seed, src, probed)
+            if names.setdefault(scen, f) != f:
+                raise ScenarioError(src, "scenarios", f"two scenarios are named '{scen}': "
+                                                      f"{names[scen]} and {f}")
+            name = v.name + suffix({k: x for k, x in point.items() if reaches(k, v.controller)},
+                                   varying)
+            runs += [RunSpec(str(f), scen, v.controller, seed, canonical(ov), name,
+                             lad.label if lad else "", rung.value if rung else None)
+                     for seed in range(spec.first_seed, spec.first_seed + n_seeds)]
     unique = list(dict.fromkeys(runs))  # controller-specific keys can make duplicates
-    return Sweep(spec, src, hashlib.sha256(raw).hexdigest(), raw.decode("utf-8"), tuple(unique))
+    _check_unique(unique, src)
+    sweep = Sweep(spec, src, hashlib.sha256(path.read_bytes()).hexdigest(),
+                  path.read_bytes().decode("utf-8"), tuple(unique), tuple(variants),
+                  tuple(ladders), spec.max_seeds if seeds is None else 0)
+    names_run = list(dict.fromkeys(r.variant_name for r in unique))
+    if spec.baseline and spec.baseline not in names_run:
+        raise ScenarioError(src, "baseline", f"'{spec.baseline}' is not a variant of this sweep"
+                            + did_you_mean(spec.baseline, names_run)
+                            + "; variants: " + ", ".join(names_run))
+    return sweep
+
+
+def _probe(file: Path, overrides: Mapping[str, Any], seed: int, src: str,
+           probed: dict[tuple[str, str], str]) -> str:
+    """Load ``file`` with ``overrides`` once (validation); the scenario's name.
+
+    ``probed`` caches the names of the (file, overrides) pairs already loaded.
+    """
+    probe = RunSpec(str(file), file.stem, "", seed, canonical(overrides))
+    if (str(file), probe.overrides) not in probed:
+        try:
+            probed[(str(file), probe.overrides)] = load_run_scenario(probe).name
+        except DfcoaError as exc:
+            hint = f" (with overrides {json.dumps(dict(overrides))})" if overrides else ""
+            raise ScenarioError(src, "scenarios", f"{exc}{hint}") from None
+    return probed[(str(file), probe.overrides)]
+
+
+def _check_unique(runs: Sequence[RunSpec], src: str) -> None:
+    """Two runs with one key would share result files: name the variants apart."""
+    seen: dict[str, RunSpec] = {}
+    for r in runs:
+        other = seen.setdefault(r.key, r)
+        if other is not r:
+            raise ScenarioError(src, "variants", f"two configurations of variant "
+                                                 f"'{r.variant_name}' on {r.scenario} "
+                                                 f"({other.overrides} and {r.overrides}); give "
+                                                 "them different names")
 
 
 def describe_runs(runs: Iterable[RunSpec]) -> str:
-    """``12 runs: 2 scenarios x 3 controllers x 2 seeds`` style summary."""
+    """``12 runs: 2 scenarios x 3 variants x 2 seeds`` style summary."""
     runs = list(runs)
     sc = {r.scenario for r in runs}
-    ct = {r.controller for r in runs}
+    var = {r.variant_name for r in runs}
     sd = {r.seed for r in runs}
-    ov = {r.overrides for r in runs}
-    text = f"{len(runs)} runs: {len(sc)} scenarios x {len(ct)} controllers x {len(sd)} seeds"
-    return text + (f" x {len(ov)} override sets" if len(ov) > 1 else "")
+    rungs = {(r.scenario, r.ladder, r.ladder_value) for r in runs if r.ladder_value is not None}
+    text = f"{len(runs)} runs: {len(sc)} scenarios x {len(var)} variants x {len(sd)} seeds"
+    return text + (f" ({len(rungs)} ladder rungs)" if rungs else "")

@@ -61,6 +61,24 @@ class PurePursuit:
         return _project_kernel(self.path, self._seg_len, self._cum, float(p[0]), float(p[1]),
                                self._s)
 
+    def arc_length(self, points: FloatArray) -> FloatArray:
+        """Arc length of the closest path point of each point, anywhere on the path.
+
+        Unlike the tracker's own projection this one may go back along the path
+        (no monotonic progress), so it measures where each point is.
+
+        Args:
+            points: ``(K, 2)`` points, m.
+
+        Returns:
+            ``(K,)`` arc lengths from the path's start, m (0 for a one-point path).
+        """
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        if len(self.path) == 1:
+            return np.zeros(len(pts))
+        return np.array([_project_kernel(self.path, self._seg_len, self._cum, float(x),
+                                         float(y), 0.0) for x, y in pts])
+
     def command(self, pose: FloatArray) -> tuple[float, float, FloatArray]:
         """Speed, turn rate and look-ahead point for the current pose.
 

@@ -305,6 +305,15 @@ class MetricSpec:
                                         unit="m", gt=0.0)
     clearance_cap: float = param(5.0, doc="Obstacle clearances above this are reported as this.",
                                  unit="m", gt=0.0)
+    deadlock_window: float = param(10.0, doc="A run is stalled at t when nothing progressed over "
+                                             "[t - window, t] (docs/metrics.md, outcomes).",
+                                   unit="s", gt=0.0)
+    deadlock_advance: float = param(0.2, doc="No progress: the formation centroid advanced less "
+                                             "than this along the leader's path in the window.",
+                                    unit="m", gt=0.0)
+    deadlock_displacement: float = param(0.2, doc="No progress: every robot away from its slot "
+                                                  "moved less than this in the window.",
+                                         unit="m", gt=0.0)
 
 
 @dataclass(frozen=True)
@@ -320,6 +329,8 @@ class ScenarioSpec:
     t_max: float = param(60.0, doc="Time limit.", unit="s", gt=0.0)
     seed: int = param(0, doc="Seed of the run's random generator (CLI --seed overrides).", ge=0)
     stop_on_collision: bool = param(False, doc="End the run at the first collision.")
+    stop_on_deadlock: bool = param(False, doc="End the run once it is stalled (metrics."
+                                              "deadlock_*): its outcome is then deadlock.")
     robots: RobotSpec = field(default_factory=RobotSpec, metadata={"doc": "Robot model."})
     formation: FormationSpec = field(default_factory=FormationSpec,
                                      metadata={"doc": "Formation shape."})

@@ -13,7 +13,9 @@ One step at ``t_k = k dt``:
 
 The run ends when the leader is within ``goal_radius`` of the goal and (unless
 ``leader.wait_for_formation`` is false) every robot is within
-``settle_tolerance`` of its slot, or at ``t_max``.
+``settle_tolerance`` of its slot, or at ``t_max`` -- or earlier at the first
+collision with ``stop_on_collision``, or once the run is stalled
+(:class:`dfcoa_opt.outcome.StallMonitor`) with ``stop_on_deadlock``.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.formation import slot_positions
 from dfcoa_opt.geometry import wrap_angle
 from dfcoa_opt.localization import make_estimator
+from dfcoa_opt.outcome import StallMonitor
 from dfcoa_opt.robots.models import RobotState, make_model
 from dfcoa_opt.sim.leader import VirtualLeader
 from dfcoa_opt.sim.log import RunLog
@@ -122,6 +125,8 @@ class Simulator:
                                            np.zeros(0))
         goal = np.asarray(spec.leader.goal, dtype=float)
         reached, t_goal = False, math.nan
+        monitor = (StallMonitor(sc.leader_path, steps, dt, spec.leader.settle_tolerance,
+                                spec.metrics) if spec.stop_on_deadlock else None)
         wall0 = time.perf_counter()
         k = 0
         for k in range(steps):
@@ -191,6 +196,8 @@ class Simulator:
                 break
             if spec.stop_on_collision and events:
                 break
+            if monitor is not None and monitor.update(k, buf.pose[..., :2], buf.slots):
+                break
             state = new_state
             leader.advance(dt)
         wall = time.perf_counter() - wall0
@@ -204,6 +211,7 @@ class Simulator:
             "reached_goal": reached, "time_to_goal": t_goal, "steps": end,
             "wall_time": wall, "version": __version__,
             "leader_path": sc.leader_path.tolist(), "goal": list(spec.leader.goal),
+            "settle_tolerance": spec.leader.settle_tolerance,
         }
         return buf.truncated(end)
 

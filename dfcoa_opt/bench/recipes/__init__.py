@@ -8,6 +8,7 @@ group registers its recipes, in index order (:data:`RECIPE_MODULES`):
 
 - :mod:`~dfcoa_opt.bench.recipes.examples`: every controller on the example scenarios;
 - :mod:`~dfcoa_opt.bench.recipes.comparison`: the cross-method comparison;
+- :mod:`~dfcoa_opt.bench.recipes.ladders`: difficulty ladders (where each method breaks);
 - :mod:`~dfcoa_opt.bench.recipes.dfcoa`: paper 000 Table 5 and its figures;
 - :mod:`~dfcoa_opt.bench.recipes.astar`: traditional vs improved A* (paper 000 §4.1);
 - :mod:`~dfcoa_opt.bench.recipes.paper001`, :mod:`~dfcoa_opt.bench.recipes.paper002`,
@@ -38,7 +39,8 @@ from typing import Any
 
 #: Modules whose import registers recipes, in index order.
 RECIPE_MODULES = tuple(f"dfcoa_opt.bench.recipes.{m}" for m in (
-    "examples", "comparison", "dfcoa", "astar", "paper001", "paper002", "paper004", "beyond"))
+    "examples", "comparison", "ladders", "dfcoa", "astar", "paper001", "paper002", "paper004",
+    "beyond"))
 
 
 @dataclass(frozen=True)

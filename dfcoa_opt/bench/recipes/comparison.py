@@ -16,6 +16,22 @@ def render_comparison(store: ResultsStore, dest: Path) -> list[Artefact]:
     return report_artefacts(store, dest, "paper 000 Table 6 (qualitative there)")
 
 
+#: File-name prefix -> what the file shows (report artefacts other than tables).
+_FIGURES = {
+    "traj_": "trajectories of every variant, one panel each, one seed",
+    "fail_": "snapshot of the first failing seed (first contact, deadlock onset or end)",
+    "ladder_": "success rate (Wilson 95 % interval) against the ladder's value, per variant",
+    "box_": "distribution over seeds",
+}
+_TABLES = {
+    "report.md": "every variant x scenario: outcome rates (Wilson 95 %), metrics (mean ± 95 % "
+                 "CI over seeds), ranking, paired differences, why it fails",
+    "report.csv": "the outcome rates and metrics as CSV",
+    "ladders.csv": "the ladders' outcome rates and metrics as CSV",
+    "paired.csv": "every paired comparison with the baseline (estimate, CI, p, Holm, verdict)",
+}
+
+
 def report_artefacts(store: ResultsStore, dest: Path, paper: str) -> list[Artefact]:
     """The cross-method report of a sweep (:func:`make_report`) as artefacts.
 
@@ -24,17 +40,12 @@ def report_artefacts(store: ResultsStore, dest: Path, paper: str) -> list[Artefa
         dest: Output folder.
         paper: What the main table corresponds to in the papers.
     """
-    paths = make_report(store.root, dest)
     arts = []
-    for p in paths:
+    for p in make_report(store.root, dest):
         rel = p.relative_to(dest).as_posix()
-        if p.suffix == ".md":
-            arts.append(Artefact(rel, paper, "every controller x scenario: mean ± 95 % CI over "
-                                             "seeds, success and collision rates"))
-        elif p.suffix == ".csv":
-            arts.append(Artefact(rel, "-", "the same table as CSV"))
-        elif p.name.startswith("traj_"):
-            arts.append(Artefact(rel, "-", "trajectories of every controller, one seed"))
-        else:
-            arts.append(Artefact(rel, "-", f"distribution over seeds: {p.stem}"))
+        if p.name in _TABLES:
+            arts.append(Artefact(rel, paper if p.name == "report.md" else "-", _TABLES[p.name]))
+            continue
+        what = next((w for k, w in _FIGURES.items() if p.name.startswith(k)), "figure")
+        arts.append(Artefact(rel, "-", f"{what}: {p.stem}" if what.startswith("distr") else what))
     return arts

@@ -13,9 +13,9 @@ from dfcoa_opt.bench.store import ResultsStore
 from dfcoa_opt.sim.log import RunLog
 
 #: Columns of the example table.
-EXAMPLE_COLUMNS = ("success", "time_to_goal", "fce_rms", "fse_rms", "stability_pct", "vce_rms",
-                   "risk_mean", "min_inter_robot_distance", "min_obstacle_clearance",
-                   "collisions")
+EXAMPLE_COLUMNS = ("outcome", "reached", "time_to_goal", "fce_rms", "fse_rms", "stability_pct",
+                   "vce_rms", "risk_raw_mean", "min_inter_robot_distance",
+                   "min_obstacle_clearance", "collisions")
 
 
 def _fmt(v: Any) -> str:

@@ -1,0 +1,212 @@
+"""Statistics that let a report rank methods: rates with intervals, paired tests, Holm.
+
+Every variant of a sweep runs on the same seeds, so a variant and the baseline
+are compared seed by seed (paired). Conventions:
+
+- rates are fractions in [0, 1] with Wilson score intervals (good coverage at
+  small n and at rates near 0 or 1, where the normal interval fails);
+- a paired metric is summarised by the median of the per-seed differences
+  ``x - y`` with a percentile bootstrap CI (:func:`scipy.stats.bootstrap`; the
+  median is not smooth, and BCa's jackknife acceleration is unreliable for it
+  with few seeds and many ties) and tested with the two-sided Wilcoxon
+  signed-rank test (:func:`scipy.stats.wilcoxon`, ``zero_method="wilcox"``:
+  seeds with equal values carry no sign information and are dropped);
+- paired success is tested with McNemar's exact test (a binomial test on the
+  discordant seeds, :func:`scipy.stats.binomtest`);
+- the p-values of one table are corrected together by Holm's step-down method.
+
+Everything is deterministic: the bootstrap draws from a ``np.random.Generator``
+seeded by the caller.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats as sps
+
+#: Two-sided 95 % standard normal quantile.
+Z95 = 1.959963984540054
+
+
+def _z(confidence: float) -> float:
+    return Z95 if confidence == 0.95 else float(sps.norm.ppf(0.5 + confidence / 2.0))
+
+
+def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion.
+
+    Args:
+        successes: Successes, ``0 <= successes <= n``.
+        n: Trials.
+        confidence: Two-sided confidence level.
+
+    Returns:
+        ``(low, high)`` as fractions; ``(nan, nan)`` when ``n == 0``.
+
+    Raises:
+        ValueError: ``successes`` outside ``[0, n]``.
+    """
+    if not 0 <= successes <= n:
+        raise ValueError(f"successes must be in [0, {n}], got {successes}")
+    if n == 0:
+        return math.nan, math.nan
+    z = _z(confidence)
+    p = successes / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def wilson_half_width(successes: int, n: int, confidence: float = 0.95) -> float:
+    """Half the width of :func:`wilson_interval` (fraction; NaN when ``n == 0``)."""
+    lo, hi = wilson_interval(successes, n, confidence)
+    return (hi - lo) / 2.0
+
+
+def _finite_pairs(x: Sequence[Any], y: Sequence[Any]) -> tuple[NDArray[np.float64],
+                                                                NDArray[np.float64]]:
+    """The pairs where both values are finite numbers (None, NaN, inf dropped)."""
+    if len(x) != len(y):
+        raise ValueError(f"paired samples differ in length: {len(x)} and {len(y)}")
+    a = np.array([np.nan if v is None else float(v) for v in x], dtype=float)
+    b = np.array([np.nan if v is None else float(v) for v in y], dtype=float)
+    keep = np.isfinite(a) & np.isfinite(b)
+    return a[keep], b[keep]
+
+
+@dataclass(frozen=True)
+class PairedDifference:
+    """Median paired difference ``x - y``, its bootstrap CI and the Wilcoxon p-value.
+
+    Attributes:
+        n: Pairs used (both values finite).
+        median: Median of the differences, in the values' unit (NaN when n = 0).
+        ci_low: Lower end of the percentile bootstrap CI of the median (NaN when n < 2).
+        ci_high: Upper end.
+        p_value: Two-sided Wilcoxon signed-rank p-value (1 when every difference is
+            zero, NaN when n = 0).
+    """
+
+    n: int
+    median: float
+    ci_low: float
+    ci_high: float
+    p_value: float
+
+
+def paired_difference(x: Sequence[Any], y: Sequence[Any], *, seed: int = 0,
+                      n_resamples: int = 9999, confidence: float = 0.95) -> PairedDifference:
+    """Compare paired samples (aligned by seed): median difference, CI, Wilcoxon test.
+
+    Args:
+        x: The variant's values, one per seed.
+        y: The baseline's values on the same seeds.
+        seed: Seed of the bootstrap's generator (results are reproducible bit for bit).
+        n_resamples: Bootstrap resamples.
+        confidence: Confidence level of the CI.
+
+    Returns:
+        The :class:`PairedDifference`. With identical differences the CI is that
+        value (no resampling can change it); with fewer than two pairs it is NaN.
+    """
+    a, b = _finite_pairs(x, y)
+    d = a - b
+    n = int(d.size)
+    if n == 0:
+        return PairedDifference(0, math.nan, math.nan, math.nan, math.nan)
+    med = float(np.median(d))
+    if np.all(d == d[0]):
+        lo = hi = med if n >= 2 else math.nan
+        return PairedDifference(n, med, lo, hi, 1.0 if d[0] == 0 else _wilcoxon(d))
+    lo = hi = math.nan
+    if n >= 2:
+        res = sps.bootstrap((d,), np.median, n_resamples=n_resamples, vectorized=True,
+                            confidence_level=confidence, method="percentile",
+                            rng=np.random.default_rng(seed))
+        lo, hi = float(res.confidence_interval.low), float(res.confidence_interval.high)
+    return PairedDifference(n, med, lo, hi, _wilcoxon(d))
+
+
+def _wilcoxon(d: NDArray[np.float64]) -> float:
+    """Two-sided Wilcoxon signed-rank p-value of differences ``d`` (zeros dropped)."""
+    nz = d[d != 0]
+    if nz.size == 0:
+        return 1.0
+    with warnings.catch_warnings():
+        # scipy warns that the exact distribution is unavailable with ties and
+        # falls back to the normal approximation: expected with repeated values.
+        warnings.simplefilter("ignore", UserWarning)
+        return float(sps.wilcoxon(nz, zero_method="wilcox", alternative="two-sided").pvalue)
+
+
+@dataclass(frozen=True)
+class McNemar:
+    """McNemar's exact test of paired binary outcomes (a: variant, b: baseline).
+
+    Attributes:
+        n: Pairs.
+        b01: Pairs where a failed and b succeeded.
+        b10: Pairs where a succeeded and b failed.
+        p_value: Exact two-sided p-value (1 without discordant pairs; NaN when n = 0).
+        difference: ``(sum(a) - sum(b)) / n``, the difference of the success rates.
+    """
+
+    n: int
+    b01: int
+    b10: int
+    p_value: float
+    difference: float
+
+
+def mcnemar_exact(a: Sequence[bool], b: Sequence[bool]) -> McNemar:
+    """McNemar's exact test: binomial test of ``b10`` among the discordant pairs, p = 1/2."""
+    if len(a) != len(b):
+        raise ValueError(f"paired samples differ in length: {len(a)} and {len(b)}")
+    x, y = np.asarray(a, dtype=bool), np.asarray(b, dtype=bool)
+    n = int(x.size)
+    b01, b10 = int(np.sum(~x & y)), int(np.sum(x & ~y))
+    if n == 0:
+        return McNemar(0, 0, 0, math.nan, math.nan)
+    p = 1.0 if b01 + b10 == 0 else float(sps.binomtest(b10, b01 + b10, 0.5).pvalue)
+    return McNemar(n, b01, b10, p, (b10 - b01) / n)
+
+
+def holm(p_values: Sequence[float]) -> NDArray[np.float64]:
+    """Holm-Bonferroni adjusted p-values (step-down, monotone, capped at 1).
+
+    NaN entries stay NaN and do not count among the ``m`` tests.
+    """
+    p = np.asarray(p_values, dtype=float)
+    out = np.full(p.shape, np.nan)
+    idx = np.flatnonzero(np.isfinite(p))
+    m = idx.size
+    if m == 0:
+        return out
+    order = idx[np.argsort(p[idx], kind="stable")]
+    adjusted = np.minimum(1.0, np.maximum.accumulate((m - np.arange(m)) * p[order]))
+    out[order] = adjusted
+    return out
+
+
+def verdict(difference: float, adjusted_p: float, higher_is_better: bool,
+            alpha: float = 0.05) -> str:
+    """``"better"``, ``"worse"`` or ``"no difference"`` for a variant against the baseline.
+
+    Significant (``adjusted_p < alpha``) with a positive difference is better when
+    higher is better, worse otherwise; a NaN difference or p-value, a zero
+    difference or a p-value at or above ``alpha`` is ``"no difference"`` (an
+    untestable cell, e.g. no paired values, says nothing either way).
+    """
+    if not (math.isfinite(difference) and math.isfinite(adjusted_p)) or difference == 0:
+        return "no difference"
+    if adjusted_p >= alpha:
+        return "no difference"
+    return "better" if (difference > 0) == higher_is_better else "worse"
