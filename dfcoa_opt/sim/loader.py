@@ -9,7 +9,9 @@ planner, the localization mode and every ``[controllers.<id>]`` table must be
 known, and the planner must find a path. Whatever the planner, the goal must
 be in the start's free region of the map (a grid search), and no robot may
 start on a formation slot inside an obstacle (an error; a robot body that only
-overlaps an obstacle at the start is allowed and counted as a contact).
+overlaps an obstacle at the start is allowed and counted as a contact), and no
+formation slot may lie within a robot radius of an obstacle at the goal (it
+could never be reached without a contact).
 Sizes are bounded so that no legal-looking number exhausts memory or overflows:
 a map of at most :data:`MAX_CELLS` cells, and every position and length within
 :data:`MAX_EXTENT` m of the origin (``team.n`` <= 100,000 is a schema bound).
@@ -141,6 +143,11 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
     if isinstance(data.get("localization"), str):  # shorthand: localization = "mcl"
         data = {**data, "localization": {"mode": data["localization"]}}
     spec = build(ScenarioSpec, data, source)
+    for i, disc in enumerate(spec.world.dynamic_obstacles):
+        if disc.speed > 0 and disc.start_time >= spec.t_max:
+            raise ScenarioError(source, f"world.dynamic_obstacles[{i}].start_time",
+                                f"{disc.start_time:g} s is not before t_max = {spec.t_max:g} s: "
+                                "the disc told to move never does")
     offsets = formation_offsets(spec.formation, spec.team.n)
     _check_extents(spec, offsets, source)
     world = _build_world(spec, source, Path(base_dir), offsets)
@@ -175,6 +182,7 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
         pose = np.column_stack((xy, np.full(spec.team.n, heading)))
     _check_start_clear(world, pose, spec, source)
     _check_connected(world.grid, spec, source)
+    _check_goal_clear(world, np.asarray(path, dtype=float), offsets, spec, source)
     return Scenario(spec=spec, source=source, world=world, offsets=offsets, initial_pose=pose,
                     leader_heading=float(heading), leader_path=np.asarray(path, dtype=float))
 
@@ -215,6 +223,43 @@ def _check_start_clear(world: World, pose: Any, spec: ScenarioSpec, source: str)
         raise ScenarioError(source, "formation", f"robot {i} starts on its slot ({x:g}, {y:g}), "
                                                  f"inside an obstacle; move leader.start or "
                                                  f"the formation")
+
+
+#: Leader positions checked on the final approach, from ``goal_radius`` before the goal to it.
+GOAL_SAMPLES = 5
+#: A goal slot this close to one robot radius from an obstacle counts as touching it, m: at
+#: exactly one radius, rounding decides whether the simulator sees a contact.
+GOAL_TOLERANCE = 1e-6
+
+
+def _check_goal_clear(world: World, path: np.ndarray, offsets: np.ndarray, spec: ScenarioSpec,
+                      source: str) -> None:
+    """No formation slot may lie within a robot radius of a static obstacle at the goal.
+
+    The run succeeds only when every robot settles on its slot around the
+    leader's final pose; a slot whose centre is within the robot radius of an
+    obstacle (``World.clearance < radius`` is the simulator's contact rule; at
+    exactly one radius, within :data:`GOAL_TOLERANCE`, rounding decides) can
+    never be reached without a contact, so every controller would fail there. The leader ends its path heading along the path's last segment and
+    stops anywhere within ``leader.goal_radius`` before the goal, so the slots
+    are checked for :data:`GOAL_SAMPLES` leader positions on that stretch.
+    """
+    end = path[-1] if len(path) else np.asarray(spec.leader.goal, dtype=float)
+    before = [q for q in path[::-1] if np.hypot(*(q - end)) > 1e-9]
+    d = end - before[0] if before else np.array([1.0, 0.0])
+    heading = math.atan2(d[1], d[0])
+    unit = d / np.hypot(*d)
+    radius = spec.robots.radius
+    for back in np.linspace(0.0, spec.leader.goal_radius, GOAL_SAMPLES):
+        xy = slot_positions(np.array([*(end - back * unit), heading]), offsets)
+        clear = world.clearance(xy)
+        for i in np.flatnonzero(clear <= radius + GOAL_TOLERANCE):
+            x, y = xy[i]
+            raise ScenarioError(source, "leader.goal", f"robot {i}'s formation slot at the goal "
+                                                       f"({x:.3g}, {y:.3g}) is {clear[i]:.3g} m "
+                                                       f"from an obstacle, within the robot "
+                                                       f"radius {radius:g} m: no controller can "
+                                                       f"settle there; move the goal")
 
 
 def _check_connected(grid: OccupancyGrid, spec: ScenarioSpec, source: str) -> None:

@@ -57,8 +57,26 @@ class DynamicObstacleSpec:
     end: Literal["stop", "loop", "bounce"] = param("stop", doc="Behaviour at the last waypoint.")
 
     def check(self, src: str, key: str) -> None:
-        """At least one waypoint."""
+        """At least one waypoint, and a motion that means something.
+
+        A disc told to move (``speed > 0``) needs a path of positive length; a
+        disc that never moves (``speed = 0``) makes further waypoints and a
+        ``loop``/``bounce`` end meaningless. A parked disc (one waypoint, speed
+        0, ``end = "stop"``) is fine.
+        """
         _need(src, f"{key}.waypoints", self.waypoints, "(at least one point)")
+        moves = any(p != self.waypoints[0] for p in self.waypoints[1:])
+        if self.speed > 0 and not moves:
+            raise ScenarioError(src, f"{key}.speed", f"the disc is told to move ({self.speed:g} "
+                                                     "m/s) but its waypoints are a single "
+                                                     "point: add a waypoint or set speed = 0")
+        if self.speed == 0 and moves:
+            raise ScenarioError(src, f"{key}.waypoints", "the disc never moves (speed = 0), so "
+                                                         "the waypoints after the first are never"
+                                                         " reached: set a speed or keep one")
+        if self.speed == 0 and self.end != "stop":
+            raise ScenarioError(src, f"{key}.end", f"'{self.end}' needs a moving disc "
+                                                   "(speed > 0); a parked disc ends with 'stop'")
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,72 @@
+"""Scenario values that make part of a scenario meaningless: goal slots, moving discs."""
+
+import numpy as np
+import pytest
+
+from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.formation import slot_positions
+from dfcoa_opt.sim.loader import load_scenario, scenario_from_dict
+
+BASE = {"world": {"size": [20.0, 10.0]}, "team": {"n": 4},
+        "formation": {"shape": "line", "spacing": 1.0},
+        "leader": {"start": [2.0, 5.0], "goal": [15.0, 5.0], "goal_radius": 0.5}}
+
+
+def _with_circle(center, radius):
+    return {**BASE, "world": {**BASE["world"], "obstacles": [
+        {"type": "circle", "center": list(center), "radius": radius}]}}
+
+
+def _goal_slots():
+    sc = scenario_from_dict(BASE)
+    return slot_positions(np.array([15.0, 5.0, 0.0]), sc.offsets)
+
+
+def test_a_goal_slot_within_or_at_a_robot_radius_of_an_obstacle_is_an_error():
+    slot = _goal_slots()[0]  # a line abreast: slots across the heading at the goal
+    centre = slot + [0.0, 0.0]
+    gap = 0.5
+    # a circle whose surface lies just inside one robot radius (0.2 m) of the slot
+    with pytest.raises(ScenarioError, match=r"leader\.goal: robot 0's formation slot at the goal"):
+        scenario_from_dict(_with_circle(centre + [1.0, 0.0], 1.0 - 0.19))
+    # exactly one radius away: rounding would decide the contact, so it is rejected too ...
+    with pytest.raises(ScenarioError, match="within the robot radius 0.2 m"):
+        scenario_from_dict(_with_circle(centre + [1.0 + 0.2, 0.0], 1.0))
+    # ... and 1 mm more is fine
+    scenario_from_dict(_with_circle(centre + [1.0 + 0.201, 0.0], 1.0))
+    # ... but the leader may stop goal_radius early: the slot 0.5 m behind is checked too
+    with pytest.raises(ScenarioError, match="robot 0's formation slot"):
+        scenario_from_dict(_with_circle(centre - [gap + 0.5, 0.0], 0.5 + 0.1))
+
+
+def test_the_common_large_100_reaches_clear_goal_slots_and_its_old_goal_is_rejected():
+    sc = load_scenario("scenarios/bench/large_100.toml")
+    assert tuple(sc.spec.leader.goal) == (42.0, 20.0)
+    for back in (0.0, sc.spec.leader.goal_radius):
+        xy = slot_positions(np.array([42.0 - back, 20.0, 0.0]), sc.offsets)
+        assert sc.world.clearance(xy).min() >= 1.4 - 1e-9
+    with pytest.raises(ScenarioError, match="formation slot at the goal"):
+        load_scenario("scenarios/bench/large_100.toml", overrides={"leader.goal": [37.0, 20.0]})
+
+
+@pytest.mark.parametrize("disc, key", [
+    ({"speed": 0.5, "waypoints": [[5.0, 8.0]]}, "world.dynamic_obstacles[0].speed"),
+    ({"speed": 0.0, "waypoints": [[5.0, 8.0], [6.0, 8.0]]}, "world.dynamic_obstacles[0].waypoints"),
+    ({"speed": 0.0, "waypoints": [[5.0, 8.0]], "end": "loop"}, "world.dynamic_obstacles[0].end"),
+    ({"speed": 0.5, "waypoints": [[5.0, 8.0], [6.0, 8.0]], "start_time": 61.0},
+     "world.dynamic_obstacles[0].start_time"),
+])
+def test_a_disc_told_to_move_that_cannot_is_an_error(disc, key):
+    data = {**BASE, "t_max": 60.0,
+            "world": {**BASE["world"], "dynamic_obstacles": [{"radius": 0.3, **disc}]}}
+    with pytest.raises(ScenarioError) as err:
+        scenario_from_dict(data, "x.toml")
+    assert str(err.value).startswith(f"x.toml: {key}:") and "\n" not in str(err.value)
+
+
+def test_a_parked_disc_and_a_moving_disc_are_fine():
+    for disc in ({"speed": 0.0, "waypoints": [[5.0, 8.0]]},
+                 {"speed": 0.5, "waypoints": [[5.0, 8.0], [6.0, 8.0]], "end": "bounce",
+                  "start_time": 59.0}):
+        scenario_from_dict({**BASE, "t_max": 60.0, "world": {
+            **BASE["world"], "dynamic_obstacles": [{"radius": 0.3, **disc}]}})
