@@ -59,6 +59,8 @@ def _parser() -> argparse.ArgumentParser:
                         "folder; never re-simulates")
     rp.add_argument("results", help="results folder written by dfcoa bench")
     rp.add_argument("--out", help="output folder (default RESULTS/report)")
+    rp.add_argument("--baseline", help="variant to compare the others with (default: the "
+                                       "sweep's baseline; '' for none)")
 
     f = sub.add_parser("figures", help="regenerate every paper table and figure (make figures)")
     f.add_argument("--out", default="paper_figures", help="output folder (default paper_figures)")
@@ -127,7 +129,17 @@ def _cmd_bench(a: argparse.Namespace) -> int:
 def _cmd_report(a: argparse.Namespace) -> int:
     from dfcoa_opt.bench.report import make_report
 
-    paths = make_report(Path(a.results), Path(a.out) if a.out else None)
+    results = Path(a.results)
+    if a.baseline:
+        from dfcoa_opt.bench.plots import variant_name
+        from dfcoa_opt.bench.report import load_rows
+        from dfcoa_opt.errors import did_you_mean
+
+        names = sorted({variant_name(r) for r in load_rows(results)})
+        if a.baseline not in names:
+            raise DfcoaError(f"--baseline: '{a.baseline}' is not a variant of {results}"
+                             f"{did_you_mean(a.baseline, names)}; variants: {', '.join(names)}")
+    paths = make_report(results, Path(a.out) if a.out else None, baseline=a.baseline)
     for p in paths:
         print(p)
     return 0

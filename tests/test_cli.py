@@ -64,3 +64,14 @@ def test_console_script_installed():
     proc = subprocess.run([str(exe), "list", "controllers"], capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 0 and "goto_slot" in proc.stdout
+
+
+def test_report_baseline_option_checks_the_name(tmp_path, capsys):
+    from test_report import synthetic_rows, write_results
+
+    folder = write_results(tmp_path / "res", synthetic_rows())
+    assert main(["report", str(folder), "--baseline", "ctl_c"]) == 2
+    assert "not a variant" in capsys.readouterr().err
+    assert main(["report", str(folder), "--baseline", "ctl_b"]) == 0
+    md = (folder / "report" / "report.md").read_text()
+    assert "Baseline of the paired comparisons: `ctl_b`." in md and "### Ranking" in md

@@ -83,8 +83,9 @@ def explain(groups: Sequence[Mapping[str, Any]], rows: Sequence[Row], results_di
         t = snapshot_time(first)
         name = f"fail_{safe_name(g['scenario'])}_{safe_name(g['variant'])}_s{first['seed']}.png"
         try:
-            path = trajectories.snapshot_figure(first, results_dir, out_dir / name,
-                                         t if math.isfinite(t) else _last_time(first, results_dir))
+            if not first.get("log"):
+                raise DfcoaError("the run has no log")
+            path = trajectories.snapshot_figure(first, results_dir, out_dir / name, t)
         except DfcoaError as exc:
             lines.append(f"{text} (no snapshot: {exc})")
             continue
@@ -92,10 +93,3 @@ def explain(groups: Sequence[Mapping[str, Any]], rows: Sequence[Row], results_di
         when = {"collision": "first contact", "deadlock": "deadlock onset"}.get(why, "end")
         lines.append(f"{text}, [{when}]({name})")
     return lines, written
-
-
-def _last_time(row: Row, results_dir: Path) -> float:
-    """The last logged instant of a row's run, s."""
-    from dfcoa_opt.sim.log import RunLog
-
-    return float(RunLog.load(results_dir / str(row["log"])).t[-1])

@@ -240,9 +240,10 @@ def _check_goal_clear(world: World, path: np.ndarray, offsets: np.ndarray, spec:
     leader's final pose; a slot whose centre is within the robot radius of an
     obstacle (``World.clearance < radius`` is the simulator's contact rule; at
     exactly one radius, within :data:`GOAL_TOLERANCE`, rounding decides) can
-    never be reached without a contact, so every controller would fail there. The leader ends its path heading along the path's last segment and
-    stops anywhere within ``leader.goal_radius`` before the goal, so the slots
-    are checked for :data:`GOAL_SAMPLES` leader positions on that stretch.
+    never be reached without a contact, so every controller would fail there.
+    The leader ends its path heading along the path's last segment and stops
+    anywhere within ``leader.goal_radius`` before the goal, so the slots are
+    checked for :data:`GOAL_SAMPLES` leader positions on that stretch.
     """
     end = path[-1] if len(path) else np.asarray(spec.leader.goal, dtype=float)
     before = [q for q in path[::-1] if np.hypot(*(q - end)) > 1e-9]
