@@ -154,8 +154,9 @@ class _Renderer:
             atomic_write(dest / "artefacts.json", json.dumps(
                 {"recipe": r.name, "title": r.title, "sweep": r.sweep,
                  "artefacts": [asdict(a) for a in arts]}, indent=1) + "\n")
-            print(f"{r.name}: {done}; {len(arts)} artefacts rendered in {seconds:.1f} s",
-                  file=sys.stderr)
+            stale = remove_stale(dest, arts)
+            print(f"{r.name}: {done}; {len(arts)} artefacts rendered in {seconds:.1f} s"
+                  + (f", {stale} stale file(s) removed" if stale else ""), file=sys.stderr)
 
     def __exit__(self, *exc: object) -> None:
         try:
@@ -170,6 +171,22 @@ class _Renderer:
                 self.pool.shutdown(cancel_futures=True)
             else:  # an error or an interrupt: do not wait for the render in progress
                 terminate(self.pool)
+
+
+def remove_stale(dest: Path, arts: Sequence[Artefact]) -> int:
+    """Delete the files of a recipe's folder that its latest render did not write.
+
+    A recipe folder holds generated files only (its ``artefacts.json`` lists
+    them); a file left by an earlier version of the recipe (an older figure
+    name, a dropped table) would otherwise stay in ``paper_figures/`` looking
+    current. Returns how many files were removed.
+    """
+    keep = {"artefacts.json", *(a.path for a in arts)}
+    stale = [p for p in dest.rglob("*")
+             if p.is_file() and p.relative_to(dest).as_posix() not in keep]
+    for p in stale:
+        p.unlink()
+    return len(stale)
 
 
 def _picklable(obj: object) -> bool:

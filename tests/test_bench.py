@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import dfcoa_opt
+from dfcoa_opt.bench import store
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
 from dfcoa_opt.bench.runner import DETERMINISTIC_KEYS, execute
@@ -332,6 +334,8 @@ def test_process_pool_survives_a_parent_that_ran_parallel_numba(tmp_path):
                      'controllers = ["goto_slot+orca"]\nseeds = 2\n')
     script = f"""
 from comparisons.orca.crowd import OrcaCrowd, circle_positions
+import dfcoa_opt
+from dfcoa_opt.bench import store
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
 crowd = OrcaCrowd(circle_positions(50, 40.0))
@@ -343,3 +347,30 @@ assert res.failed == 0 and res.ran == 2, res
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                           timeout=300, cwd=Path(__file__).resolve().parents[1])
     assert proc.returncode == 0, proc.stderr[-2000:]
+
+
+def test_runs_never_import_the_presentation_sources_left_out_of_the_fingerprint(tmp_path):
+    """Every controller's run, in a fresh process: no module of store.PRESENTATION is loaded."""
+    scen = (Path(__file__).resolve().parents[1] / "scenarios" / "example_obstacles.toml")
+    sweep = tmp_path / "all.toml"
+    sweep.write_text(f'scenarios = ["{scen.as_posix()}"]\n'
+                     'controllers = ["*", "goto_slot+cbf", "goto_slot+orca"]\nseeds = 1\n'
+                     '[grid]\nt_max = [0.3]\n')
+    code = ("import sys, json\n"
+            "from dfcoa_opt.bench.runner import execute\n"
+            "from dfcoa_opt.bench.sweep import load_sweep\n"
+            f"runs = load_sweep({str(sweep)!r}).runs\n"
+            "bad = [o.row['error'] for o in map(execute, runs) if o.row['status'] != 'ok']\n"
+            "mods = [m.__file__ for m in list(sys.modules.values())\n"
+            "        if getattr(m, '__file__', None) and m.__name__.split('.')[0] in\n"
+            "        ('dfcoa_opt', 'comparisons')]\n"
+            "print(json.dumps({'bad': bad, 'n': len(runs), 'files': mods}))\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=600, check=True)
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["bad"] == [] and out["n"] >= 11
+    root = Path(dfcoa_opt.__file__).resolve().parents[1]
+    used = [Path(f).resolve().relative_to(root).as_posix() for f in out["files"]]
+    assert "dfcoa_opt/sim/simulator.py" in used  # the check sees the run's modules
+    assert [u for u in used if store.is_presentation(u)] == []
+    assert store.is_presentation("dfcoa_opt/bench/recipes/ladders.py")

@@ -28,7 +28,10 @@ def test_figures_smoke_renders_every_recipe_and_reuses_the_cache(tmp_path):
               if json.loads(p.read_text())["status"] != "ok"]
     assert not failed
     report = (out / "comparison" / "report.md").read_bytes()
+    stale = out / "comparison" / "traj_clutter_c4d9c17a7e_s0.png"  # an older file name
+    stale.write_bytes(b"old")
     make_figures(SCENARIOS, out, cache, cfg, seeds=1, progress=False, overrides=QUICK)
+    assert not stale.exists()  # files the recipe no longer writes are removed
     assert {p: p.stat().st_mtime_ns for p in cache.rglob("rows/*.json")} == rows  # cached
     assert (out / "comparison" / "report.md").read_bytes() == report  # same bytes again
 

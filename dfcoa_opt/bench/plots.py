@@ -179,7 +179,8 @@ def ladder_figure(series: Mapping[str, Sequence[tuple[float, float, float, float
         hi = 100.0 * np.array([p[3] for p in pts])
         runs = sorted({p[4] for p in pts})
         n = f"n={runs[0]}" if len(runs) == 1 else f"n={runs[0]}-{runs[-1]}"
-        ax.errorbar(x, y, yerr=[y - lo, hi - y], color=colors[i], capsize=3,
+        ax.errorbar(x, y, yerr=[np.maximum(y - lo, 0.0), np.maximum(hi - y, 0.0)],
+                    color=colors[i], capsize=3,
                     linestyle=_STYLES[i % len(_STYLES)], marker=_MARKERS[i % len(_MARKERS)],
                     label=f"{name} ({n})")
     if log_x:

@@ -17,7 +17,8 @@ duplicating a row: the rerun skips every run that has a row.
 
 A row counts as done only if it was produced by the same code, the same
 scenario file and the same overrides: each row records ``code`` (a fingerprint
-of the installed ``dfcoa_opt`` and ``comparisons`` sources),
+of the installed ``dfcoa_opt`` and ``comparisons`` sources that a run uses;
+reports and figures are left out),
 ``scenario_sha256`` and ``overrides``; other rows are run again. Controllers
 from other packages (entry points) are not part of the fingerprint; use
 ``--rerun`` after changing one.
@@ -45,9 +46,29 @@ CSV_FIELDS = ("key", "scenario", "variant", "controller", "seed", "ladder", "lad
               "overrides", "status", "error", "digest")
 
 
+#: Sources that only present saved results (CLI, reports, figures); a run never imports
+#: them (``tests/test_bench.py`` checks it), so they are left out of :func:`code_fingerprint`:
+#: editing a table or a figure re-renders without re-simulating.
+PRESENTATION = ("dfcoa_opt/__main__.py", "dfcoa_opt/cli.py", "dfcoa_opt/figures.py",
+                "dfcoa_opt/plotting.py", "dfcoa_opt/environment.py", "dfcoa_opt/sim/docs.py",
+                "dfcoa_opt/bench/report.py", "dfcoa_opt/bench/tables.py",
+                "dfcoa_opt/bench/paired.py", "dfcoa_opt/bench/stats.py",
+                "dfcoa_opt/bench/failures.py", "dfcoa_opt/bench/trajectories.py",
+                "dfcoa_opt/bench/plots.py", "dfcoa_opt/bench/recipes/")
+
+
+def is_presentation(relative: str) -> bool:
+    """Whether a source path (``dfcoa_opt/...``) is in :data:`PRESENTATION`."""
+    return any(relative == p or (p.endswith("/") and relative.startswith(p))
+               for p in PRESENTATION)
+
+
 @functools.lru_cache(maxsize=1)
 def code_fingerprint() -> str:
-    """SHA-256 (16 hex digits) over the source files of ``dfcoa_opt`` and ``comparisons``."""
+    """SHA-256 (16 hex digits) over the sources of ``dfcoa_opt`` and ``comparisons`` a run uses.
+
+    Every source file but the :data:`PRESENTATION` ones.
+    """
     import comparisons
     import dfcoa_opt
 
@@ -55,7 +76,10 @@ def code_fingerprint() -> str:
     for pkg in (dfcoa_opt, comparisons):
         root = Path(pkg.__file__).parent
         for path in sorted(root.rglob("*.py")):
-            h.update(str(path.relative_to(root.parent)).encode())
+            rel = path.relative_to(root.parent).as_posix()
+            if is_presentation(rel):
+                continue
+            h.update(rel.encode())
             h.update(path.read_bytes())
     return h.hexdigest()[:16]
 

@@ -143,11 +143,6 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
     if isinstance(data.get("localization"), str):  # shorthand: localization = "mcl"
         data = {**data, "localization": {"mode": data["localization"]}}
     spec = build(ScenarioSpec, data, source)
-    for i, disc in enumerate(spec.world.dynamic_obstacles):
-        if disc.speed > 0 and disc.start_time >= spec.t_max:
-            raise ScenarioError(source, f"world.dynamic_obstacles[{i}].start_time",
-                                f"{disc.start_time:g} s is not before t_max = {spec.t_max:g} s: "
-                                "the disc told to move never does")
     offsets = formation_offsets(spec.formation, spec.team.n)
     _check_extents(spec, offsets, source)
     world = _build_world(spec, source, Path(base_dir), offsets)
