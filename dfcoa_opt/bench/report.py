@@ -16,8 +16,6 @@ ladders' curves (:mod:`dfcoa_opt.bench.plots`). Use: ``make_report("results/my_s
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
@@ -30,7 +28,7 @@ from scipy.stats import t as student_t
 
 from dfcoa_opt import environment
 from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench import failures, paired, plots, stats, tables, trajectories
+from dfcoa_opt.bench import failures, ladders, paired, plots, stats, tables, trajectories
 from dfcoa_opt.bench.sweep import safe_name
 from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.outcome import OUTCOMES
@@ -315,7 +313,7 @@ def make_report(results_dir: str | Path, out_dir: str | Path | None = None,
     if notes:
         md += ["Notes:", *[f"- {n}" for n in notes], ""]
     lgroups = aggregate(laddered, metrics, LADDER_BY) if laddered else []
-    md += _ladder_sections(lgroups, manifest, out_dir, written)
+    md += ladders.sections(lgroups, manifest, out_dir, written)
     boxes = [plots.metric_boxplots(plain, m, out_dir / f"box_{safe_name(m)}.png")
              for m in metrics] if plain else []
     if boxes:
@@ -331,7 +329,7 @@ def make_report(results_dir: str | Path, out_dir: str | Path | None = None,
     if lgroups:
         extra.append(atomic_write(out_dir / "ladders.csv", tables.csv_table(lgroups, metrics)))
     if comparisons:
-        extra.append(atomic_write(out_dir / "paired.csv", _paired_csv(comparisons)))
+        extra.append(atomic_write(out_dir / "paired.csv", tables.paired_csv(comparisons)))
     return [md_path, csv_path, *extra, *boxes, *[p for s in sorted(trajs) for p in trajs[s]],
             *written]
 
@@ -352,49 +350,3 @@ def _scenario_section(scen: str, groups: Sequence[Mapping[str, Any]],
         md += ["### Why it fails", "", "Every variant below 50 % success: its most frequent "
                "failure and a snapshot of the first seed that failed so.", "", *lines, ""]
     return md
-
-
-def _ladder_sections(groups: Sequence[Mapping[str, Any]], manifest: Mapping[str, Any],
-                     out_dir: Path, written: list[Path]) -> list[str]:
-    """Markdown and figures of every ladder: success rate against the rung's value."""
-    log_x = {str(lad.get("label")): bool(lad.get("log_x"))
-             for lad in manifest.get("ladders") or [] if isinstance(lad, Mapping)}
-    md: list[str] = []
-    for label in dict.fromkeys(str(g["ladder"]) for g in groups):
-        for scen in sorted({str(g["scenario"]) for g in groups if str(g["ladder"]) == label}):
-            mine = [g for g in groups if str(g["ladder"]) == label and str(g["scenario"]) == scen]
-            series: dict[str, list[tuple[float, float, float, float, int]]] = {}
-            for g in sorted(mine, key=lambda g: float(g["ladder_value"])):
-                lo, hi = g["success_ci"]
-                series.setdefault(str(g["variant"]), []).append(
-                    (float(g["ladder_value"]), g["success_rate"], lo, hi, int(g["runs"])))
-            name = f"ladder_{safe_name(label)}_{safe_name(scen)}.png"
-            written.append(plots.ladder_figure(series, label, out_dir / name,
-                                               f"{scen}: success rate against {label}",
-                                               log_x=log_x.get(label, False)))
-            widest = max(((hi - lo) / 2 for g in mine for lo, hi in [g["success_ci"]]),
-                         default=math.nan)
-            md += [f"## Ladder `{label}` on `{scen}`", "", tables.ladder_table(mine, label),
-                   f"Success rate with its Wilson 95 % interval; the widest interval is "
-                   f"±{100 * widest:.0f} points.", "", f"![ladder {label}]({name})", ""]
-            fails = [f"- `{g['variant']}` at {float(g['ladder_value']):g}: "
-                     f"{g['dominant_failure']} ({100 * g['success_rate']:.0f}% success)"
-                     for g in mine if g["success_rate"] < failures.EXPLAIN_BELOW
-                     and g["dominant_failure"]]
-            if fails:
-                md += ["Where each variant breaks (most frequent failure below 50 % success):",
-                       "", *fails, ""]
-    return md
-
-
-def _paired_csv(comparisons: Sequence[Any]) -> str:
-    """CSV of every paired comparison (one row per table, variant and metric)."""
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["scenario", "ladder", "ladder_value", "variant", "metric", "n", "estimate",
-                "ci_low", "ci_high", "p_value", "p_holm", "verdict"])
-    for c in comparisons:
-        w.writerow([*c.table[:2], "" if c.table[2] is None else c.table[2], c.variant, c.metric,
-                    c.n, *(repr(v) if math.isfinite(v) else "" for v in
-                           (c.estimate, c.ci_low, c.ci_high, c.p_value, c.p_holm)), c.verdict])
-    return buf.getvalue()

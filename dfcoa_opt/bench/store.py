@@ -54,7 +54,8 @@ PRESENTATION = ("dfcoa_opt/__main__.py", "dfcoa_opt/cli.py", "dfcoa_opt/figures.
                 "dfcoa_opt/bench/report.py", "dfcoa_opt/bench/tables.py",
                 "dfcoa_opt/bench/paired.py", "dfcoa_opt/bench/stats.py",
                 "dfcoa_opt/bench/failures.py", "dfcoa_opt/bench/trajectories.py",
-                "dfcoa_opt/bench/plots.py", "dfcoa_opt/bench/recipes/")
+                "dfcoa_opt/bench/plots.py", "dfcoa_opt/bench/ladders.py",
+                "dfcoa_opt/bench/recipes/")
 
 
 def is_presentation(relative: str) -> bool:

@@ -253,3 +253,16 @@ def overrides_note(groups: Sequence[Mapping[str, Any]]) -> list[str]:
             lines.append(f"- `{md_escape(name)}`: " + ", ".join(f"`{k} = {v}`"
                                                               for k, v in sorted(own.items())))
     return lines
+
+
+def paired_csv(comparisons: Sequence[Comparison]) -> str:
+    """CSV of every paired comparison (one row per table, variant and metric)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["scenario", "ladder", "ladder_value", "variant", "metric", "n", "estimate",
+                "ci_low", "ci_high", "p_value", "p_holm", "verdict"])
+    for c in comparisons:
+        w.writerow([*c.table[:2], "" if c.table[2] is None else c.table[2], c.variant, c.metric,
+                    c.n, *(repr(v) if math.isfinite(v) else "" for v in
+                           (c.estimate, c.ci_low, c.ci_high, c.p_value, c.p_holm)), c.verdict])
+    return buf.getvalue()
