@@ -349,8 +349,8 @@ assert res.failed == 0 and res.ran == 2, res
     assert proc.returncode == 0, proc.stderr[-2000:]
 
 
-def test_runs_never_import_the_presentation_sources_left_out_of_the_fingerprint(tmp_path):
-    """Every controller's run, in a fresh process: no module of store.PRESENTATION is loaded."""
+def test_runs_never_import_the_sources_left_out_of_the_fingerprint(tmp_path):
+    """Every controller's run, in a fresh process: no module of store.NOT_RUN is loaded."""
     scen = (Path(__file__).resolve().parents[1] / "scenarios" / "example_obstacles.toml")
     sweep = tmp_path / "all.toml"
     sweep.write_text(f'scenarios = ["{scen.as_posix()}"]\n'
@@ -372,5 +372,7 @@ def test_runs_never_import_the_presentation_sources_left_out_of_the_fingerprint(
     root = Path(dfcoa_opt.__file__).resolve().parents[1]
     used = [Path(f).resolve().relative_to(root).as_posix() for f in out["files"]]
     assert "dfcoa_opt/sim/simulator.py" in used  # the check sees the run's modules
-    assert [u for u in used if store.is_presentation(u)] == []
-    assert store.is_presentation("dfcoa_opt/bench/recipes/ladders.py")
+    assert [u for u in used if store.outside_fingerprint(u)] == []
+    assert store.outside_fingerprint("dfcoa_opt/bench/recipes/ladders.py")
+    assert store.outside_fingerprint("dfcoa_opt/bench/store.py")
+    assert not store.outside_fingerprint("dfcoa_opt/bench/runner.py")

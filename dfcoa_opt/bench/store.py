@@ -18,7 +18,7 @@ duplicating a row: the rerun skips every run that has a row.
 A row counts as done only if it was produced by the same code, the same
 scenario file and the same overrides: each row records ``code`` (a fingerprint
 of the installed ``dfcoa_opt`` and ``comparisons`` sources that a run uses;
-reports and figures are left out),
+reports, figures and the harness are left out),
 ``scenario_sha256`` and ``overrides``; other rows are run again. Controllers
 from other packages (entry points) are not part of the fingerprint; use
 ``--rerun`` after changing one.
@@ -46,29 +46,30 @@ CSV_FIELDS = ("key", "scenario", "variant", "controller", "seed", "ladder", "lad
               "overrides", "status", "error", "digest")
 
 
-#: Sources that only present saved results (CLI, reports, figures); a run never imports
-#: them (``tests/test_bench.py`` checks it), so they are left out of :func:`code_fingerprint`:
-#: editing a table or a figure re-renders without re-simulating.
-PRESENTATION = ("dfcoa_opt/__main__.py", "dfcoa_opt/cli.py", "dfcoa_opt/figures.py",
-                "dfcoa_opt/plotting.py", "dfcoa_opt/environment.py", "dfcoa_opt/sim/docs.py",
-                "dfcoa_opt/bench/report.py", "dfcoa_opt/bench/tables.py",
-                "dfcoa_opt/bench/paired.py", "dfcoa_opt/bench/stats.py",
-                "dfcoa_opt/bench/failures.py", "dfcoa_opt/bench/trajectories.py",
-                "dfcoa_opt/bench/plots.py", "dfcoa_opt/bench/ladders.py",
-                "dfcoa_opt/bench/recipes/")
+#: Sources a run never executes: the CLI, reports and figures, and the harness that schedules
+#: and stores runs (all of ``dfcoa_opt/bench/`` but :data:`RUN_SOURCES`). They are left out of
+#: :func:`code_fingerprint`, so editing a table, a figure or the scheduler re-renders or
+#: resumes without re-simulating; ``tests/test_bench.py`` checks that no run imports them.
+NOT_RUN = ("dfcoa_opt/__main__.py", "dfcoa_opt/cli.py", "dfcoa_opt/figures.py",
+           "dfcoa_opt/plotting.py", "dfcoa_opt/environment.py", "dfcoa_opt/sim/docs.py",
+           "dfcoa_opt/bench/")
+#: The harness sources a run does execute (loading the run's scenario, summarising it).
+RUN_SOURCES = ("dfcoa_opt/bench/__init__.py", "dfcoa_opt/bench/runner.py",
+               "dfcoa_opt/bench/sweep.py", "dfcoa_opt/bench/variants.py")
 
 
-def is_presentation(relative: str) -> bool:
-    """Whether a source path (``dfcoa_opt/...``) is in :data:`PRESENTATION`."""
-    return any(relative == p or (p.endswith("/") and relative.startswith(p))
-               for p in PRESENTATION)
+def outside_fingerprint(relative: str) -> bool:
+    """Whether a source (``dfcoa_opt/...``) is left out of the fingerprint (:data:`NOT_RUN`)."""
+    if relative in RUN_SOURCES:
+        return False
+    return any(relative == p or (p.endswith("/") and relative.startswith(p)) for p in NOT_RUN)
 
 
 @functools.lru_cache(maxsize=1)
 def code_fingerprint() -> str:
     """SHA-256 (16 hex digits) over the sources of ``dfcoa_opt`` and ``comparisons`` a run uses.
 
-    Every source file but the :data:`PRESENTATION` ones.
+    Every source file but the :data:`NOT_RUN` ones.
     """
     import comparisons
     import dfcoa_opt
@@ -78,7 +79,7 @@ def code_fingerprint() -> str:
         root = Path(pkg.__file__).parent
         for path in sorted(root.rglob("*.py")):
             rel = path.relative_to(root.parent).as_posix()
-            if is_presentation(rel):
+            if outside_fingerprint(rel):
                 continue
             h.update(rel.encode())
             h.update(path.read_bytes())
