@@ -146,3 +146,11 @@ def test_extra_runs_continue_the_seeds_of_undecided_cells_only(tmp_path):
     del won[sw.runs[-1].key]
     assert precision.extra_runs(sw.runs, won, 0.15, 40) == []
     assert sw.max_seeds == 40 and load_sweep(sw.source, seeds=2).max_seeds == 0
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "scenarios" / "sweeps").glob("*.toml")),
+                         ids=lambda p: p.stem)
+def test_every_recipe_sweep_loads_with_readable_unique_names(path):
+    sw = load_sweep(path)
+    assert sw.runs and len({r.key for r in sw.runs}) == len(sw.runs)
+    assert not any(HEX.search(r.variant_name) for r in sw.runs)
