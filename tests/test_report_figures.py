@@ -1,5 +1,7 @@
 """Report figures: trajectory panels, failure snapshots, ladder curves; ladders end to end."""
 
+import csv
+import io
 from pathlib import Path
 
 import numpy as np
@@ -74,6 +76,10 @@ def test_ladder_sweep_adds_seeds_to_undecided_cells_and_reports_curves(ladder_re
     assert len(res.sweep.runs) == 2 * 2 * 4 and res.ran == 16
     assert sorted({r.seed for r in res.sweep.runs}) == [0, 1, 2, 3]
     assert res.store.manifest()["keys"] == [r.key for r in res.sweep.runs]
+    table = list(csv.DictReader(io.StringIO((res.store.root / "results.csv").read_text())))
+    assert len(table) == 16 and {"variant", "outcome", "reached", "ladder_value"} <= set(table[0])
+    assert {r["outcome"] for r in table} == {"timeout"} and {r["reached"] for r in table} == {
+        "False"}
     again = run_sweep(sweep, res.store.root, ExecutorConfig("serial"), progress=False)
     assert again.ran == 0 and len(again.sweep.runs) == 16  # resumes to the same runs
     paths = report.make_report(res.store.root, tmp_path)
