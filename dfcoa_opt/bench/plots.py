@@ -154,6 +154,9 @@ def ladder_figure(series: Mapping[str, Sequence[tuple[float, float, float, float
                   xlabel: str, path: str | Path, title: str, log_x: bool = False) -> Path:
     """Success rate against a ladder's value, one line per variant, with Wilson intervals.
 
+    The lines are shifted sideways by 1 % of the axis each, so variants with the
+    same rate at a rung do not hide each other.
+
     Args:
         series: Variant -> points ``(value, rate, low, high, n)``: the rung's value,
             the success rate and its interval bounds (fractions), the runs.
@@ -169,11 +172,14 @@ def ladder_figure(series: Mapping[str, Sequence[tuple[float, float, float, float
     ax = fig.add_subplot()
     names = list(series)
     colors = robot_colors(max(1, len(names)))
-    shift = 0.012 if log_x else 0.0
+    values = [p[0] for pts in series.values() for p in pts]
+    span = (max(values) - min(values)) if values else 0.0
     for i, name in enumerate(names):
         pts = sorted(series[name])
         x = np.array([p[0] for p in pts], dtype=float)
-        x = x * (1.0 + shift * (i - (len(names) - 1) / 2)) if log_x else x
+        # dodge the lines sideways (1 % of the axis per line) so equal rates stay apart
+        dodge = 0.01 * (i - (len(names) - 1) / 2)
+        x = x * (1.0 + dodge) if log_x else x + dodge * span
         y = 100.0 * np.array([p[1] for p in pts])
         lo = 100.0 * np.array([p[2] for p in pts])
         hi = 100.0 * np.array([p[3] for p in pts])
