@@ -157,7 +157,7 @@ offsets = [[0.5, 1.5], [0.5, -1.5]]
 
 [leader]
 start = [1.0, 1.0]
-goal = [4.0, 1.0]
+goal = [3.5, 1.5]          # its formation slots at the goal keep clear of the walls
 heading = 0.0
 planner = "astar"
 

@@ -48,7 +48,8 @@ def test_field_follows_the_seed():
 
 
 def test_start_and_formation_kept_clear():
-    sc = scenario_from_dict(_data(keep_clear=0.5))
+    # discs only left of x = 14 m: the goal's formation slots stay clear (a loader check)
+    sc = scenario_from_dict(_data(keep_clear=0.5, region=[0.0, 0.0, 14.0, 10.0]))
     assert sc.world.grid.clearance(sc.initial_pose[:, :2], 5.0).min() >= 0.5 + 0.2 - 0.11
 
 
