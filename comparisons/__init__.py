@@ -1,7 +1,7 @@
 """Controllers from the companion papers (001, 002, 004) and beyond.
 
 One package per method, named by its controller id (``orca``, ``cbf``,
-``lf_vo``, ``nmpc``, ``virtual_spring``); a module where one file is the whole
+``lf_vo``, ``nmpc``, ``virtual_spring``, ``reshape``); a module where one file is the whole
 method (``consensus``). ``constraints`` holds what the constraint-based
 methods share: the distance geometry of ``cbf`` and ``nmpc`` and the
 ``qpsolvers`` plumbing of ``orca`` and ``cbf``. Importing a method's

@@ -414,4 +414,5 @@ def summary(log: RunLog, spec: Settings = None) -> dict[str, Any]:
         "lf_error_mean": _mean(leader_follower_position_error(log)),
         "loc_rmse": _rms(localization_error(log)),
         "steps": int(log.n_steps),
+        **{f"ctl_{k}": int(v) for k, v in (log.meta.get("controller_counters") or {}).items()},
     }

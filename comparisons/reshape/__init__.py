@@ -1,5 +1,13 @@
-"""``reshape``: a formation that reshapes itself to get through (issue 20, work in progress).
+"""``reshape``: a formation that reshapes itself to get through (beyond the papers, issue 20).
 
+- :mod:`~comparisons.reshape.controller`: the controller ``Reshape`` (registered
+  as ``reshape``): central formation planning, distributed CBF tracking;
 - :mod:`~comparisons.reshape.region`: convex obstacle-free regions around the
-  leader's look-ahead segment (IRIS style).
+  leader's look-ahead segment (IRIS style);
+- :mod:`~comparisons.reshape.planner`: the choice of template, rotation, scale
+  and position inside a region.
 """
+
+from comparisons.reshape.controller import Reshape
+
+__all__ = ["Reshape"]

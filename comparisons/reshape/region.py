@@ -11,6 +11,8 @@ grown around a seed segment (the leader's look-ahead): alternately
 2. **the largest inscribed ellipse** of that polygon (``max log det C`` subject
    to ``|C a_k| + a_k . d <= b_k``), which seeds the next round.
 
+The first round starts from the disc whose diameter is the seed segment.
+
 Obstacles are segments (a polygon's edges; a disc as the edges of its
 circumscribed regular polygon, so it is covered, never cut; a moving disc as
 the circumscribed polygon of its sweep over the horizon). A convex region that
@@ -38,7 +40,7 @@ FloatArray = NDArray[np.float64]
 
 #: Edges of the regular polygon that circumscribes a disc obstacle.
 DISC_EDGES = 16
-#: Width of the initial ellipse across the seed segment, m.
+#: Smallest radius of the initial disc (a seed segment of one point), m.
 SEED_WIDTH = 1e-3
 #: Half-plane offsets keep this much off an obstacle (numerical margin), m.
 EPS = 1e-9
@@ -230,11 +232,10 @@ def grow_region(seed: FloatArray, segments: FloatArray, bounds: tuple[float, flo
         The :class:`Region` (its half-planes include the map's bounds).
     """
     seed = np.asarray(seed, dtype=float).reshape(2, 2)
-    axis = seed[1] - seed[0]
-    half = 0.5 * math.hypot(*axis)
-    u = axis / half / 2.0 if half > 0 else np.array([1.0, 0.0])
-    rot = np.column_stack([u, [-u[1], u[0]]])
-    C = rot @ np.diag([max(half, SEED_WIDTH) * (1 + 1e-6), SEED_WIDTH]) @ rot.T
+    # the first round measures distances from the disc through the seed's ends: a thin
+    # ellipse along the seed would see every obstacle as far across and cut the region
+    # down to a band along the seed
+    C = max(0.5 * math.hypot(*(seed[1] - seed[0])), SEED_WIDTH) * np.eye(2)
     d = seed.mean(axis=0)
     xmin, xmax, ymin, ymax = bounds
     box_a = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])

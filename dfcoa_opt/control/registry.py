@@ -33,7 +33,8 @@ ENTRY_POINT_GROUP = "dfcoa_opt.controllers"
 #: Modules of this distribution that register controllers when imported.
 BUILTIN_MODULES = ("dfcoa_opt.control.goto_slot", "dfcoa_opt.control.dfcoa",
                    "comparisons.orca.filter", "comparisons.consensus", "comparisons.lf_vo",
-                   "comparisons.virtual_spring", "comparisons.cbf", "comparisons.nmpc")
+                   "comparisons.virtual_spring", "comparisons.cbf", "comparisons.nmpc",
+                   "comparisons.reshape")
 
 _REGISTRY: dict[str, type] = {}
 _FILTERS: dict[str, type] = {}

@@ -212,6 +212,8 @@ class Simulator:
             "wall_time": wall, "version": __version__,
             "leader_path": sc.leader_path.tolist(), "goal": list(spec.leader.goal),
             "settle_tolerance": spec.leader.settle_tolerance,
+            "controller_counters": {str(k): int(v) for k, v in
+                                    (getattr(self.controller, "counters", None) or {}).items()},
         }
         return buf.truncated(end)
 

@@ -1,0 +1,298 @@
+"""``reshape``: a formation that changes its shape, size and place to get through.
+
+Beyond the papers (after Alonso-Mora, Baker & Rus, IJRR 2017: a formation
+optimised inside a convex obstacle-free region). Every ``replan_period`` s a
+central planner, from the robots' broadcast positions:
+
+1. takes the formation's progress ``s_c`` along the leader's path (the
+   centroid's nearest path point) and a look-ahead goal ``g``: the virtual
+   leader's broadcast position when the formation keeps up with it, else the
+   path point ``lookahead`` m beyond ``s_c``;
+2. grows a convex free region around the seed segment from the centroid
+   towards ``g`` (:mod:`~comparisons.reshape.region`; static shapes, and the
+   sensed moving discs swept over ``horizon`` s);
+3. chooses template, rotation, scale and position in the region
+   (:mod:`~comparisons.reshape.planner`);
+4. assigns robots to slots: its own slot for the scenario's template (success
+   is judged on those), the Hungarian assignment (squared distances) otherwise,
+   kept unless a new one is ``hysteresis`` cheaper;
+5. for robots whose straight line to their slot is blocked, an A* path on the
+   map inflated by the robot radius and margin; they head for a point on it.
+
+When nothing fits, the look-ahead is halved (twice), then the formation waits
+on its previous plan (or where it is): counted as ``shrinks`` and ``waits``
+(``counters``, in the run's metrics as ``ctl_shrinks``, ``ctl_waits``).
+
+Tracking is distributed: each robot drives to its own target with a
+proportional velocity (the leader's feed-forward when the plan is the nominal
+formation on the virtual leader, which is then ``goto_slot``) through the
+``cbf`` safety filter. Broadcast per plan: the template id, ``t`` (2 floats),
+``theta``, ``s`` and the assignment (N integers) -- 4 N + 24 bytes.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+
+from comparisons.cbf.filter import CbfFilter
+from comparisons.reshape import planner
+from comparisons.reshape.region import grow_region, shape_segments, swept_disc_segments
+from dfcoa_opt.control.base import FilterResult, Observation, slot_velocity
+from dfcoa_opt.control.registry import register
+from dfcoa_opt.formation import line_offsets
+from dfcoa_opt.params import param
+from dfcoa_opt.planning.astar import search
+from dfcoa_opt.planning.pure_pursuit import PurePursuit
+
+FloatArray = NDArray[np.float64]
+#: Step of the free-segment test along a seed or a robot's line, m.
+PROBE = 0.1
+
+
+@register("reshape")
+class Reshape:
+    """Reshaping formation: free region, template choice, assignment, CBF tracking."""
+
+    command = "velocity"
+    uses_scan = False
+
+    @dataclass(frozen=True)
+    class Params:
+        """Parameters of ``reshape`` (``[controllers.reshape]``)."""
+
+        replan_period: float = param(0.5, doc="Time between two plans.", unit="s", gt=0.0)
+        lookahead: float = param(3.0, doc="Look-ahead along the leader's path beyond the "
+                                          "formation's progress.", unit="m", gt=0.0)
+        s_min: float = param(0.5, doc="Smallest scale of a template.", gt=0.0, le=1.0)
+        scales: int = param(4, doc="Scales tried in [s_min, 1].", ge=1)
+        rotation_max: float = param(math.pi / 3, doc="Largest rotation tried either side of "
+                                                     "the look-ahead direction.", unit="rad",
+                                    ge=0.0)
+        rotations: int = param(5, doc="Rotations tried (odd: includes 0).", ge=1)
+        templates: tuple[str, ...] = param(("scenario", "line", "column"),
+                                           doc="Templates: 'scenario' (the file's shape), "
+                                               "'line' (abreast), 'column' (single file).")
+        template_cost: float = param(1.0, doc="Cost of a template other than the scenario's.")
+        margin: float = param(0.1, doc="Clearance kept beyond the robot radius in the region.",
+                              unit="m", ge=0.0)
+        horizon: float = param(2.0, doc="Moving discs are swept over this time.", unit="s",
+                               ge=0.0)
+        hysteresis: float = param(0.1, doc="A new assignment must be this fraction cheaper.",
+                                  ge=0.0, lt=1.0)
+        kp: float = param(1.0, doc="Proportional gain towards the target.", unit="1/s", gt=0.0)
+        weight_progress: float = param(1.0, doc="Cost weight of |t - g|^2.", unit="1/m^2",
+                                       ge=0.0)
+        weight_scale: float = param(4.0, doc="Cost weight of (1 - s)^2.", ge=0.0)
+        weight_rotation: float = param(0.5, doc="Cost weight of the rotation squared.",
+                                       unit="1/rad^2", ge=0.0)
+        switch_cost: float = param(0.5, doc="Cost of changing template.", ge=0.0)
+
+    def __init__(self, params: Params) -> None:
+        self.p = params
+        self.safety = CbfFilter(CbfFilter.Params(solver="exact"), owner="reshape")
+        self.last_result: FilterResult | None = None
+        self.counters: dict[str, int] = {}
+        self.plan_times: list[float] = []
+        #: ``(t, template, scale)`` of every plan (None when the formation waited).
+        self.history: list[tuple[float, str | None, float]] = []
+
+    # ---------------------------------------------------------------------- set-up
+    def reset(self, scenario, rng: np.random.Generator) -> None:
+        """Read the team, the map and the leader's path; build the templates."""
+        self.safety.reset(scenario, rng)
+        spec = scenario.spec
+        self._n = scenario.n
+        self._r = spec.robots.radius
+        self._v_max = spec.robots.v_max
+        self._offsets = np.asarray(scenario.offsets, dtype=float)
+        spacing = _spacing(self._offsets, self._r)
+        column = np.column_stack([-spacing * np.arange(self._n), np.zeros(self._n)])
+        every = {"scenario": self._offsets, "line": line_offsets(self._n, spacing),
+                 "column": column}
+        self._templates = {k: every[k] for k in self.p.templates if k in every}
+        self._cost = {k: (0.0 if k == "scenario" else self.p.template_cost)
+                      for k in self._templates}
+        self._path = PurePursuit(scenario.leader_path, 0.0, 0.0, 0.0)
+        self._world = scenario.world
+        self._segments = shape_segments(scenario.world.shapes)
+        self._bounds = scenario.world.grid.extent
+        self._inflated = scenario.world.grid.inflate(self._r + self.p.margin)
+        half = 0.5 * (self.p.rotations - 1)
+        self._rot = (np.linspace(-self.p.rotation_max, self.p.rotation_max, self.p.rotations)
+                     if half else np.zeros(1))
+        self._scales = np.linspace(1.0, self.p.s_min, self.p.scales)
+        self._weights = planner.Weights(self.p.weight_progress, self.p.weight_scale,
+                                        self.p.weight_rotation, self.p.switch_cost)
+        self._next = 0.0
+        self._targets = np.zeros((self._n, 2))
+        self._nominal = True
+        self._template: str | None = None
+        self._assign = np.arange(self._n)
+        self._waypoint: dict[int, FloatArray] = {}
+        self.counters = {"replans": 0, "shrinks": 0, "waits": 0, "switches": 0}
+        self.plan_times = []
+        self.history = []
+        self.last_result = None
+
+    # ------------------------------------------------------------------- planning
+    def _free(self, a: FloatArray, b: FloatArray, clearance: float) -> bool:
+        """Whether the segment ``[a, b]`` keeps ``clearance`` from every static obstacle."""
+        steps = max(2, int(math.ceil(math.hypot(*(b - a)) / PROBE)) + 1)
+        pts = a + np.linspace(0.0, 1.0, steps)[:, None] * (b - a)
+        return bool(np.all(self._world.clearance(pts) >= clearance))
+
+    def _moving_segments(self, obs: Observation) -> FloatArray:
+        m = obs.obstacles
+        if not m.mask.any():
+            return np.zeros((0, 2, 2))
+        pos, vel, rad = m.position[m.mask], m.velocity[m.mask], m.radius[m.mask]
+        keys = np.round(np.column_stack([pos, rad]), 6)  # several robots sense one disc
+        _, first = np.unique(keys, axis=0, return_index=True)
+        return swept_disc_segments(pos[first], vel[first], rad[first], self.p.horizon)
+
+    def _plan(self, obs: Observation) -> None:
+        t0 = time.perf_counter()
+        self.counters["replans"] += 1
+        pos = obs.pose[:, :2]
+        centroid = pos.mean(axis=0)
+        s_c = float(self._path.arc_length(centroid[None])[0])
+        s_l = float(self._path.arc_length(obs.leader[None, :2])[0])
+        segments = np.concatenate([self._segments, self._moving_segments(obs)])
+        start = centroid if self._free(centroid, centroid, self._r) else \
+            self._path.point_at(s_c)
+        cand = None
+        for shrink in (1.0, 0.5, 0.25):
+            following = s_c + shrink * self.p.lookahead >= s_l
+            goal = obs.leader[:2].copy() if following else \
+                self._path.point_at(s_c + shrink * self.p.lookahead)
+            if not self._free(start, goal, self._r + self.p.margin):
+                goal = self._route_point(start, goal, shrink * self.p.lookahead)
+            end = goal.copy()
+            for _ in range(8):  # shorten the seed until it is free
+                if self._free(start, end, 0.5 * self._r):
+                    break
+                end = 0.5 * (start + end)
+            seed = np.array([start, end])
+            psi = (float(obs.leader[2]) if following or math.hypot(*(end - start)) < 0.2
+                   else math.atan2(*(end - start)[::-1]))
+            region = grow_region(seed, segments, self._bounds)
+            cand = planner.choose(region, self._templates, self._cost, goal, psi, self._rot,
+                                  self._scales, self._r + self.p.margin, self._template,
+                                  self._weights)
+            if cand is not None:
+                break
+            self.counters["shrinks"] += 1
+        if cand is None:
+            self.counters["waits"] += 1
+            self.history.append((obs.t, None, math.nan))
+            if self._template is None:
+                self._targets, self._nominal = pos.copy(), False
+            self.plan_times.append(time.perf_counter() - t0)
+            return
+        self.history.append((obs.t, cand.template, cand.scale))
+        slots = cand.slots(self._templates[cand.template])
+        self._nominal = (cand.template == "scenario" and cand.scale == 1.0
+                         and abs(cand.theta - float(obs.leader[2])) < 1e-12
+                         and bool(np.allclose(cand.t, obs.leader[:2])))
+        if cand.template != self._template and self._template is not None:
+            self.counters["switches"] += 1
+        self._assign = self._assignment(pos, slots, cand.template)
+        self._template = cand.template
+        self._targets = slots[self._assign]
+        self._waypoint = self._guidance(pos, self._targets)
+        self.plan_times.append(time.perf_counter() - t0)
+
+    def _route_point(self, start: FloatArray, goal: FloatArray, reach: float) -> FloatArray:
+        """The point ``reach`` m along an A* route to ``goal``; ``goal`` when there is none.
+
+        The route runs on the map inflated by the robot radius and margin. The
+        leader's path may cross obstacles (the ``straight`` planner through a
+        clutter field): the formation then heads around them along the route.
+        """
+        cells = self._route(start, goal)
+        if cells is None:
+            return goal
+        pts = self._cell_centres(cells)
+        steps = np.hypot(*np.diff(pts, axis=0).T)
+        along = np.concatenate([[0.0], np.cumsum(steps)])
+        k = int(np.searchsorted(along, reach))
+        return pts[min(k, len(pts) - 1)]
+
+    def _route(self, a: FloatArray, b: FloatArray) -> NDArray[np.int64] | None:
+        """A* cells from ``a`` to ``b`` on the inflated map, or None."""
+        grid = self._inflated
+        ca = tuple(int(v) for v in grid.world_to_cell(a))
+        cb = tuple(int(v) for v in grid.world_to_cell(b))
+        if not (grid.in_bounds(*ca) and grid.in_bounds(*cb)) or grid.occupied[ca] \
+                or grid.occupied[cb]:
+            return None
+        res = search(grid.occupied, ca, cb)
+        return res.cells if res.found and len(res.cells) >= 2 else None
+
+    def _cell_centres(self, cells: NDArray[np.int64]) -> FloatArray:
+        """World centres (m) of ``(P, 2)`` grid cells ``(row, col)``."""
+        g = self._inflated
+        return np.column_stack([g.origin[0] + (cells[:, 1] + 0.5) * g.cell_size,
+                                g.origin[1] + (cells[:, 0] + 0.5) * g.cell_size])
+
+    def _assignment(self, pos: FloatArray, slots: FloatArray, template: str) -> NDArray[np.intp]:
+        """Robot i -> slot index: its own for the scenario's template, else Hungarian."""
+        if template == "scenario":
+            return np.arange(self._n)
+        cost = np.sum((pos[:, None, :] - slots[None]) ** 2, axis=2)
+        _, best = linear_sum_assignment(cost)
+        keep = self._assign
+        if template == self._template and \
+                cost[np.arange(self._n), keep].sum() <= (1.0 + self.p.hysteresis) * \
+                cost[np.arange(self._n), best].sum():
+            return keep
+        return best
+
+    def _guidance(self, pos: FloatArray, targets: FloatArray) -> dict[int, FloatArray]:
+        """A waypoint on an A* path for each robot whose straight line is blocked."""
+        out: dict[int, FloatArray] = {}
+        for i in range(self._n):
+            if self._free(pos[i], targets[i], self._r):
+                continue
+            cells = self._route(pos[i], targets[i])
+            if cells is not None:
+                k = min(len(cells) - 1, max(1, int(round(0.6 / self._inflated.cell_size))))
+                out[i] = self._cell_centres(cells[k:k + 1])[0]
+        return out
+
+    # ------------------------------------------------------------------- tracking
+    def act(self, obs: Observation) -> FloatArray:
+        """Replan when due (central), then every robot to its target through the CBF filter."""
+        if obs.t >= self._next - 1e-9:
+            self._plan(obs)
+            self._next = obs.t + self.p.replan_period
+        pos = obs.pose[:, :2]
+        ids = obs.robot_ids
+        if self._nominal:
+            target = obs.slot
+            u = self.p.kp * (target - pos) + slot_velocity(obs.leader, target)
+        else:
+            target = self._targets[ids].copy()
+            for row, i in enumerate(ids):
+                if int(i) in self._waypoint:
+                    target[row] = self._waypoint[int(i)]
+            u = self.p.kp * (target - pos)
+        speed = np.hypot(u[:, 0], u[:, 1])
+        u = u * np.minimum(1.0, self._v_max / np.maximum(speed, 1e-12))[:, None]
+        self.last_result = self.safety.filter(obs, u)
+        return self.last_result.command
+
+
+def _spacing(offsets: FloatArray, radius: float) -> float:
+    """Nearest-neighbour distance of the scenario's slots, at least 2 radii + 0.3 m."""
+    if len(offsets) < 2:
+        return 2.0 * radius + 0.3
+    d = np.linalg.norm(offsets[:, None] - offsets[None], axis=2)
+    np.fill_diagonal(d, np.inf)
+    return float(max(d.min(), 2.0 * radius + 0.3))
