@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.sim.loader import load_scenario, scenario_from_dict
 
 CORPUS = Path(__file__).parent / "data" / "bad_scenarios"
 FILES = sorted(CORPUS.glob("*.toml"))
@@ -93,3 +93,29 @@ def test_bench_rejects_a_sweep_naming_an_unknown_controller(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(sweep) in err[0]
     assert "controllers[0]: unknown controller 'goto_slott' (did you mean 'goto_slot'?)" in err[0]
+
+
+NEAR_MISS = {"world": {"size": [10.0, 10.0]}, "team": {"n": 4},
+             "leader": {"start": [2.0, 5.0], "goal": [8.0, 5.0]}}
+
+
+@pytest.mark.parametrize("edit", [
+    {"world": {"size": [10.0, 10.0], "dynamic_obstacles": [
+        {"radius": 0.3, "speed": 0.0, "waypoints": [[5.0, 8.0]], "start_time": 0.0}]}},
+    {"t_max": 10.0, "world": {"size": [10.0, 10.0], "dynamic_obstacles": [
+        {"radius": 0.3, "speed": 0.5, "waypoints": [[5.0, 8.0], [6.0, 8.0]],
+         "start_time": 12.0}]}},  # starts after t_max: allowed (a shortened run)
+    {"sensors": {"lidar": {"range_min": 3.999, "range_max": 4.0}}},
+    {"formation": {"shape": "polar", "offsets": [[1.0, 0.0], [1.0, 1.6], [1.0, 3.1],
+                                                  [1.0, 4.7]]}},
+    {"formation": {"shape": "grid", "columns": 2}},
+    {"leader": {"start": [2.0, 5.0], "goal": [8.0, 5.0], "waypoints": [[5.0, 7.0]]}},
+], ids=["parked_disc", "disc_starting_after_t_max", "lidar_range", "polar_offsets",
+        "grid_columns", "straight_waypoints"])
+def test_the_values_next_to_the_new_rules_still_load(edit: dict):
+    """The legal neighbours of the corpus's newer cases load.
+
+    Next to ``parked_disc_start_time``, ``lidar_range_min_above_max``,
+    ``formation_*_ignored`` and ``leader_waypoints_ignored``.
+    """
+    scenario_from_dict({**NEAR_MISS, **edit})

@@ -10,8 +10,11 @@ known, and the planner must find a path. Whatever the planner, the goal must
 be in the start's free region of the map (a grid search), and no robot may
 start on a formation slot inside an obstacle (an error; a robot body that only
 overlaps an obstacle at the start is allowed and counted as a contact), and no
-formation slot may lie within a robot radius of an obstacle at the goal (it
-could never be reached without a contact).
+formation slot may lie within (or at) a robot radius of an obstacle at the goal
+(:func:`final_leader_poses`: no robot could stand on it without a contact).
+Values that would be silently ignored are errors too: ``leader.waypoints``
+with a planner other than ``straight`` (and, in the schema, a formation key
+its shape ignores, a moving disc that cannot move, ``range_min >= range_max``).
 Sizes are bounded so that no legal-looking number exhausts memory or overflows:
 a map of at most :data:`MAX_CELLS` cells, and every position and length within
 :data:`MAX_EXTENT` m of the origin (``team.n`` <= 100,000 is a schema bound).
@@ -30,6 +33,7 @@ import numpy as np
 from dfcoa_opt.errors import DfcoaError, ScenarioError, did_you_mean
 from dfcoa_opt.formation import formation_offsets, slot_positions
 from dfcoa_opt.params import build
+from dfcoa_opt.planning.pure_pursuit import PurePursuit
 from dfcoa_opt.sim.scenario import Scenario, World
 from dfcoa_opt.sim.schema import ObstacleSpec, ScenarioSpec
 from dfcoa_opt.world.clutter import random_discs
@@ -149,6 +153,7 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
     _check_free(world.grid, spec.leader.start, source, "leader.start")
     _check_free(world.grid, spec.leader.goal, source, "leader.goal")
     _check_names(spec, source)
+    _check_waypoints(spec, source)
 
     from dfcoa_opt.planning.registry import get_planner, planner_options
 
@@ -177,7 +182,8 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
         pose = np.column_stack((xy, np.full(spec.team.n, heading)))
     _check_start_clear(world, pose, spec, source)
     _check_connected(world.grid, spec, source)
-    _check_goal_clear(world, np.asarray(path, dtype=float), offsets, spec, source)
+    _check_goal_clear(world, final_leader_poses(np.asarray(path, dtype=float), spec, heading),
+                      offsets, spec, source)
     return Scenario(spec=spec, source=source, world=world, offsets=offsets, initial_pose=pose,
                     leader_heading=float(heading), leader_path=np.asarray(path, dtype=float))
 
@@ -200,6 +206,18 @@ def _check_names(spec: ScenarioSpec, source: str) -> None:
     check_overrides(spec.controllers, source)
 
 
+def _check_waypoints(spec: ScenarioSpec, source: str) -> None:
+    """``leader.waypoints`` only with the ``straight`` planner, the one that uses them.
+
+    The searching planners plan their own path from ``leader.start`` to
+    ``leader.goal`` and would silently ignore the via points.
+    """
+    if spec.leader.waypoints and spec.leader.planner != "straight":
+        raise ScenarioError(source, "leader.waypoints", f"only the 'straight' planner uses them; "
+                                                        f"planner '{spec.leader.planner}' plans "
+                                                        f"its own path and would ignore them")
+
+
 def _check_start_clear(world: World, pose: Any, spec: ScenarioSpec, source: str) -> None:
     """No robot may start on a formation slot inside a static obstacle: an error, not a warning.
 
@@ -220,39 +238,84 @@ def _check_start_clear(world: World, pose: Any, spec: ScenarioSpec, source: str)
                                                  f"the formation")
 
 
-#: Leader positions checked on the final approach, from ``goal_radius`` before the goal to it.
+#: Leader positions checked on the final approach, from where the leader stops to the goal.
 GOAL_SAMPLES = 5
 #: A goal slot this close to one robot radius from an obstacle counts as touching it, m: at
 #: exactly one radius, rounding decides whether the simulator sees a contact.
 GOAL_TOLERANCE = 1e-6
+#: Arc length over which the leader's arrival heading is measured, m.
+ARRIVAL_STEP = 1e-3
 
 
-def _check_goal_clear(world: World, path: np.ndarray, offsets: np.ndarray, spec: ScenarioSpec,
+def final_leader_poses(path: np.ndarray, spec: ScenarioSpec, heading: float) -> np.ndarray:
+    """Leader poses at which a run can end: the formation settles around one of these.
+
+    The virtual leader (:class:`~dfcoa_opt.sim.leader.VirtualLeader`) stops as
+    soon as it is within ``leader.goal_radius`` of ``leader.goal``. A leader
+    that starts there never moves: its only final pose is the start with its
+    initial heading. Otherwise it stops on the path's final stretch, about
+    ``goal_radius`` of arc length before the goal (exactly so on a straight
+    last segment), heading along the path there: the direction of the path's
+    last :data:`ARRIVAL_STEP` before the stop point (on a straight last
+    segment, its direction; not the direction of a few-cm hop from the last
+    A* cell centre or via point to the exact goal, which the leader never
+    drives). The poses returned run from the goal back to that stop point
+    along the path (:data:`GOAL_SAMPLES` of them), all with that heading.
+    The simulated leader stops near, not exactly at, that pose (pure pursuit
+    cuts corners and stops at a Euclidean, not an arc-length, distance): on
+    the shipped scenarios within 0.11 m and 1.2 degrees (``dfcoa_s1``,
+    ``dfcoa_s2``; ``tests/test_goal_slots.py``).
+
+    Args:
+        path: ``(P, 2)`` planned leader path from ``leader.start`` to ``leader.goal``, m.
+        spec: The scenario.
+        heading: The leader's initial heading, rad.
+
+    Returns:
+        ``(K, 3)`` leader poses ``(x, y, theta)`` in m, m, rad.
+    """
+    lead = spec.leader
+    start = np.asarray(lead.start, dtype=float)
+    if np.hypot(*(start - np.asarray(lead.goal, dtype=float))) <= lead.goal_radius:
+        return np.array([[*start, heading]])
+    track = PurePursuit(path, lead.speed, lead.lookahead, lead.w_max)
+    stop = max(track.length - lead.goal_radius, 0.0)
+    d = track.point_at(stop) - track.point_at(stop - ARRIVAL_STEP)
+    arrive = math.atan2(d[1], d[0]) if np.any(d) else heading
+    return np.array([[*track.point_at(s), arrive]
+                     for s in np.linspace(track.length, stop, GOAL_SAMPLES)])
+
+
+def _check_goal_clear(world: World, leader: np.ndarray, offsets: np.ndarray, spec: ScenarioSpec,
                       source: str) -> None:
-    """No formation slot may lie within a robot radius of a static obstacle at the goal.
+    """No formation slot may lie within (or at) a robot radius of a static obstacle at the goal.
 
     The run succeeds only when every robot settles on its slot around the
     leader's final pose; a slot whose centre is within the robot radius of an
-    obstacle (``World.clearance < radius`` is the simulator's contact rule; at
-    exactly one radius, within :data:`GOAL_TOLERANCE`, rounding decides) can
-    never be reached without a contact, so every controller would fail there.
-    The leader ends its path heading along the path's last segment and stops
-    anywhere within ``leader.goal_radius`` before the goal, so the slots are
-    checked for :data:`GOAL_SAMPLES` leader positions on that stretch.
+    obstacle (``World.clearance < radius``, the simulator's contact rule; at
+    exactly one radius, within :data:`GOAL_TOLERANCE`, rounding decides) cannot
+    be occupied without a contact (a robot could at best settle beside it,
+    within ``settle_tolerance``, which is not the formation the file asks
+    for). The slots are checked for every pose of :func:`final_leader_poses`.
+
+    Args:
+        world: The world (exact shapes, clutter and raster map).
+        leader: ``(K, 3)`` final leader poses, :func:`final_leader_poses`.
+        offsets: ``(N, 2)`` formation slot offsets, m.
+        spec: The scenario.
+        source: Name used in error messages.
+
+    Raises:
+        ScenarioError: Key ``leader.goal``, naming the first robot whose slot is too close.
     """
-    end = path[-1] if len(path) else np.asarray(spec.leader.goal, dtype=float)
-    before = [q for q in path[::-1] if np.hypot(*(q - end)) > 1e-9]
-    d = end - before[0] if before else np.array([1.0, 0.0])
-    heading = math.atan2(d[1], d[0])
-    unit = d / np.hypot(*d)
     radius = spec.robots.radius
-    for back in np.linspace(0.0, spec.leader.goal_radius, GOAL_SAMPLES):
-        xy = slot_positions(np.array([*(end - back * unit), heading]), offsets)
+    for pose in leader:
+        xy = slot_positions(pose, offsets)
         clear = world.clearance(xy)
         for i in np.flatnonzero(clear <= radius + GOAL_TOLERANCE):
             x, y = xy[i]
             raise ScenarioError(source, "leader.goal", f"robot {i}'s formation slot at the goal "
-                                                       f"({x:.3g}, {y:.3g}) is {clear[i]:.3g} m "
+                                                       f"({x:.5g}, {y:.5g}) is {clear[i]:.3g} m "
                                                        f"from an obstacle, within the robot "
                                                        f"radius {radius:g} m: no controller can "
                                                        f"settle there; move the goal")

@@ -60,9 +60,11 @@ class DynamicObstacleSpec:
         """At least one waypoint, and a motion that means something.
 
         A disc told to move (``speed > 0``) needs a path of positive length; a
-        disc that never moves (``speed = 0``) makes further waypoints and a
-        ``loop``/``bounce`` end meaningless. A parked disc (one waypoint, speed
-        0, ``end = "stop"``) is fine.
+        disc that never moves (``speed = 0``) makes further waypoints, a
+        ``loop``/``bounce`` end and a ``start_time`` meaningless. A parked disc
+        (one waypoint, speed 0, ``end = "stop"``, no ``start_time``) is fine.
+        A ``start_time`` after ``t_max`` is allowed: a run shortened by an
+        override just ends before the disc starts.
         """
         _need(src, f"{key}.waypoints", self.waypoints, "(at least one point)")
         moves = any(p != self.waypoints[0] for p in self.waypoints[1:])
@@ -77,6 +79,11 @@ class DynamicObstacleSpec:
         if self.speed == 0 and self.end != "stop":
             raise ScenarioError(src, f"{key}.end", f"'{self.end}' needs a moving disc "
                                                    "(speed > 0); a parked disc ends with 'stop'")
+        if self.speed == 0 and self.start_time > 0:
+            raise ScenarioError(src, f"{key}.start_time", f"{self.start_time:g} s is when the "
+                                                          "disc starts moving, but it never moves "
+                                                          "(speed = 0): set a speed or drop "
+                                                          "start_time")
 
 
 @dataclass(frozen=True)
@@ -220,6 +227,20 @@ class FormationSpec:
                          lt=math.pi)
     columns: int = param(0, doc="Grid columns; 0 = ceil(sqrt(n)).", ge=0)
 
+    def check(self, src: str, key: str) -> None:
+        """No key that the shape ignores: ``offsets`` need offsets/polar, ``columns`` a grid.
+
+        (``width``, ``length``, ``spacing`` and ``angle`` have defaults, so a
+        value given for another shape cannot be told from the default.)
+        """
+        if self.offsets and self.shape not in ("offsets", "polar"):
+            raise ScenarioError(src, f"{key}.offsets", f"does not apply to shape = "
+                                                       f"'{self.shape}', which places the robots "
+                                                       "itself; use shape = 'offsets' or 'polar'")
+        if self.columns and self.shape != "grid":
+            raise ScenarioError(src, f"{key}.columns", f"does not apply to shape = "
+                                                       f"'{self.shape}', only to 'grid'")
+
 
 @dataclass(frozen=True)
 class LeaderSpec:
@@ -261,6 +282,13 @@ class LidarSpec:
                              gt=0.0)
     noise_std: float = param(0.0, doc="Gaussian range noise standard deviation.", unit="m",
                              ge=0.0)
+
+    def check(self, src: str, key: str) -> None:
+        """range_min < range_max: otherwise no return could ever be finite."""
+        if self.range_min >= self.range_max:
+            raise ScenarioError(src, f"{key}.range_min", f"({self.range_min:g} m) must be below "
+                                                         f"range_max ({self.range_max:g} m), or "
+                                                         "no return could ever be finite")
 
 
 @dataclass(frozen=True)
