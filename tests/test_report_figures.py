@@ -2,10 +2,12 @@
 
 import csv
 import io
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
+from matplotlib.patches import Circle as CirclePatch
 from test_metrics import make_log
 
 from dfcoa_opt.bench import plots, report, trajectories
@@ -108,3 +110,152 @@ def test_panels_have_one_titled_panel_per_variant_with_the_same_axes(ladder_resu
 def test_sweep_seeds_override_turns_sequential_seeds_off(ladder_results):
     sweep, _ = ladder_results
     assert load_sweep(sweep).max_seeds == 6 and load_sweep(sweep, seeds=1).max_seeds == 0
+
+
+# ------------------------------------------------- names, outcomes, panels, snapshots, boxes
+HASH = re.compile(r"[0-9a-f]{10}")
+
+
+def test_variant_name_and_outcome_text_fall_back_for_old_rows():
+    assert plots.variant_name({"variant": "goto_slot+cbf", "controller": "goto_slot"}) == (
+        "goto_slot+cbf")
+    assert plots.variant_name({"controller": "lf_vo"}) == "lf_vo"  # row without the field
+    assert plots.variant_name({"variant": "", "controller": "lf_vo"}) == "lf_vo"
+
+    def ok(**metrics):
+        return {"status": "ok", "metrics": metrics}
+
+    text = trajectories.outcome_text
+    assert text(ok(outcome="collision", first_contact_time=12.34)) == "collision at 12.3 s"
+    assert text(ok(outcome="deadlock", deadlock_time=40)) == "deadlock from 40.0 s"
+    assert text(ok(outcome="success", first_contact_time=None)) == "success"
+    assert text(ok(outcome="collision", first_contact_time=None)) == "collision"
+    assert text(ok(fce_rms=1.0)) == "?"  # old row: outcome unknown
+    assert text({"status": "failed", "metrics": None}) == "run failed"
+
+
+def _capture(monkeypatch, module):
+    """Keep the figures ``module.save_png`` renders (and still write them)."""
+    figs = []
+    real = module.save_png
+
+    def keep(fig, path):
+        figs.append(fig)
+        return real(fig, path)
+
+    monkeypatch.setattr(module, "save_png", keep)
+    return figs
+
+
+def _save_edited(res, row, key, edit):
+    """A copy of ``row`` whose log is the row's log changed by ``edit(log)``, saved anew."""
+    log = trajectories.load_log(res.store.root, row)
+    edit(log)
+    log.save(res.store.root / "logs" / f"{key}.npz")
+    return {**row, "key": key, "log": f"logs/{key}.npz"}
+
+
+def test_panels_one_per_variant_span_every_trajectory_and_name_no_hash(ladder_results,
+                                                                       tmp_path, monkeypatch):
+    _, res = ladder_results
+    rows = sorted((r for r in res.store.rows() if r["seed"] == 0 and r["ladder_value"] == 2.0),
+                  key=lambda r: r["controller"])
+    assert all(HASH.search(str(r["overrides_hash"])) for r in rows)  # there is a hash to avoid
+
+    def far(log):
+        log.pose[-1, 0, :2] = (-9.0, 30.0)  # robot 0 ends far off the 24 m x 14 m map
+
+    gone = _save_edited(res, rows[0], "far_away", far)
+    rows = [{**rows[0], "variant": "goto_slot+hit", "metrics": {
+                **rows[0]["metrics"], "outcome": "collision", "first_contact_time": 1.25}},
+            {**rows[1], "variant": "orca_nav+stuck", "metrics": {
+                **rows[1]["metrics"], "outcome": "deadlock", "deadlock_time": 2.0}},
+            {**gone, "variant": "gone"}, *rows,
+            {**rows[0], "variant": "broken", "status": "failed", "log": None, "metrics": None,
+             "error": "controller 'broken' raised ValueError: " + "x" * 200}]
+    figs = _capture(monkeypatch, trajectories)
+    written, notes = trajectories.overlay_figures(rows, res.store.root, tmp_path, seed=0)
+    assert notes == [] and [p.name for p in written["example_obstacles"]] == [
+        "traj_example_obstacles_s0.png"]
+    assert written["example_obstacles"][0].read_bytes()[:8] == PNG_MAGIC
+    fig, = figs
+    titled = [ax for ax in fig.axes if ax.get_title()]
+    assert [ax.get_title() for ax in titled] == [
+        "broken — run failed", "gone — timeout", "goto_slot — timeout",
+        "goto_slot+hit — collision at 1.2 s", "orca_nav — timeout",
+        "orca_nav+stuck — deadlock from 2.0 s"]
+    assert len(fig.axes) == 8 and sum(not ax.axison for ax in fig.axes) == 2  # 2 rows of 4
+    assert fig.get_suptitle() == "example_obstacles — seed 0"
+    assert not any(HASH.search(ax.get_title()) for ax in titled)
+    limits = {(ax.get_xlim(), ax.get_ylim()) for ax in titled}
+    assert len(limits) == 1
+    (x0, x1), (y0, y1) = limits.pop()
+    assert x0 <= -9.0 and y1 >= 30.0 and x1 >= 24.0 and y0 <= 0.0  # map and the far robot
+    failed = " ".join(t.get_text() for t in titled[0].texts)
+    assert "run failed:" in failed and "raised ValueError" in failed and "x" * 100 not in failed
+
+
+def test_panels_reject_mixed_scenarios(ladder_results):
+    _, res = ladder_results
+    rows = [r for r in res.store.rows() if r["seed"] == 0 and r["ladder_value"] == 2.0]
+    with pytest.raises(ValueError, match="mix"):
+        trajectories.panels_figure([rows[0], {**rows[1], "scenario": "other"}], res.store.root)
+
+
+def test_snapshot_draws_the_nearest_step_and_marks_exactly_the_robots_in_contact(
+        ladder_results, tmp_path, monkeypatch):
+    _, res = ladder_results
+    row = next(r for r in res.store.rows() if r["seed"] == 0 and r["ladder_value"] == 3.0
+               and r["controller"] == "orca_nav")
+    k = 10
+
+    def touch(log):  # robots 0 and 1 overlap at step k (0.3 m < 2 x 0.2 m), robot 2 is free
+        log.pose[k, :, :2] = [(4.0, 7.0), (4.3, 7.0), (5.5, 7.0)]
+        log.clearance[k] = 5.0
+        log.pose[k + 1, :, :2] = [(4.0, 7.0), (4.0, 7.0), (4.0, 7.0)]  # all at one point
+
+    row = _save_edited(res, row, "touching", touch)
+    figs = _capture(monkeypatch, trajectories)
+    log = trajectories.load_log(res.store.root, row)
+    t = float(log.t[k]) + 0.4 * float(log.meta["dt"])  # nearer to step k than to k + 1
+    path = trajectories.snapshot_figure(row, res.store.root, tmp_path / "s.png", t)
+    assert path.read_bytes()[:8] == PNG_MAGIC
+    ax = figs[0].axes[0]
+    discs = [p for p in ax.patches if isinstance(p, CirclePatch)
+             and np.isclose(p.get_radius(), 0.2)]
+    assert len(discs) == 3
+    red = sorted(tuple(p.center) for p in discs if tuple(p.get_edgecolor()[:3]) == (1, 0, 0))
+    assert red == [(4.0, 7.0), (4.3, 7.0)]
+    assert ax.get_title() == ("example_obstacles / orca_nav / seed 0 at t = 1.0 s "
+                              "(2 robot(s) in contact)")
+    grey = [p for p in ax.patches if isinstance(p, CirclePatch)
+            and np.isclose(p.get_radius(), 0.3)]  # the moving disc, where the log has it
+    assert len(grey) == 1 and np.allclose(grey[0].center, log.dyn_pos[k, 0])
+    trajectories.snapshot_figure(row, res.store.root, tmp_path / "t.png", t, title="mine")
+    assert figs[1].axes[0].get_title() == "mine"
+
+
+def test_boxplot_has_one_box_per_variant_named_without_hash(tmp_path, monkeypatch):
+    def r(controller, seed, value, variant=None):
+        out = {"scenario": "sc", "controller": controller, "seed": seed, "status": "ok",
+               "overrides_hash": "c4d9c17a7e", "metrics": {"fce_rms": value}}
+        return out if variant is None else {**out, "variant": variant}
+
+    rows = [r("dfcoa", 0, 1.0, "dfcoa"), r("dfcoa", 1, 2.0, "dfcoa"),
+            r("dfcoa", 0, 3.0, "dfcoa_compensated"), r("lf_vo", 0, 4.0)]  # old row: no variant
+    figs = _capture(monkeypatch, plots)
+    plots.metric_boxplots(rows, "fce_rms", tmp_path / "b.png")
+    ax = figs[0].axes[0]
+    labels = [t.get_text() for t in ax.get_xticklabels()]
+    assert labels == ["dfcoa\n(n=2)", "dfcoa_compensated\n(n=1)", "lf_vo\n(n=1)"]
+    dots = sorted(float(y) for ln in ax.lines if ln.get_marker() == "o" for y in ln.get_ydata())
+    assert dots == [1.0, 2.0, 3.0, 4.0]
+
+
+def test_ladder_figure_is_linear_unless_asked(tmp_path, monkeypatch):
+    figs = _capture(monkeypatch, plots)
+    plots.ladder_figure({"a": [(0.1, 1.0, 0.8, 1.0, 5), (0.2, 0.4, 0.1, 0.7, 5)]},
+                        "noise (m)", tmp_path / "l.png", "t")
+    ax = figs[0].axes[0]
+    assert ax.get_xscale() == "linear" and ax.get_ylim() == (-3.0, 103.0)
+    assert ax.get_xlabel() == "noise (m)"

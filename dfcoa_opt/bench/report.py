@@ -10,8 +10,9 @@ Wilson 95 % intervals, and the mean of each metric over seeds with the
 half-width of its Student-t 95 % confidence interval (:mod:`dfcoa_opt.bench.tables`);
 with a ``baseline``, paired comparisons and a ranking
 (:mod:`dfcoa_opt.bench.paired`); for every variant below 50 % success, why it
-fails (:mod:`dfcoa_opt.bench.failures`); trajectory panels, box plots and the
-ladders' curves (:mod:`dfcoa_opt.bench.plots`). Use: ``make_report("results/my_sweep")``.
+fails (:mod:`dfcoa_opt.bench.failures`); trajectory panels and failure snapshots
+(:mod:`dfcoa_opt.bench.trajectories`), box plots (:mod:`dfcoa_opt.bench.plots`) and
+the ladders (:mod:`dfcoa_opt.bench.ladders`). Use: ``make_report("results/my_sweep")``.
 """
 
 from __future__ import annotations

@@ -32,6 +32,8 @@ Row = Mapping[str, Any]
 COLUMNS = 4
 #: Size of one panel, inches.
 PANEL_IN = 3.4
+#: Robot radius assumed for logs that do not record it (``RobotSpec`` default), m.
+DEFAULT_RADIUS = 0.2
 
 
 def load_log(results_dir: Path, row: Row) -> RunLog:
@@ -96,7 +98,7 @@ def panels_figure(rows: Sequence[Row], results_dir: str | Path) -> Figure:
         The figure (panels titled ``"<variant> — <outcome>"``).
 
     Raises:
-        ValueError: The rows mix scenarios or seeds, or there is none.
+        ValueError: The rows mix scenarios or seeds, repeat a variant, or there is none.
         DfcoaError: The scenario file or a log cannot be read.
     """
     rows = sorted(rows, key=lambda r: variant_name(r))
@@ -106,6 +108,9 @@ def panels_figure(rows: Sequence[Row], results_dir: str | Path) -> Figure:
     if len(ids) > 1:
         raise ValueError(f"rows mix scenarios or seeds: {sorted(ids)}")
     scen, seed = ids.pop()
+    names = [variant_name(r) for r in rows]
+    if len(set(names)) < len(names):
+        raise ValueError(f"rows repeat a variant (e.g. ladder rungs): {sorted(names)}")
     sc = scenario_for_row(next((r for r in rows if r.get("log")), rows[0]))
     logs = {variant_name(r): load_log(Path(results_dir), r) for r in rows if r.get("log")}
     view = _view(list(logs.values()), sc.world.grid.extent)
@@ -195,7 +200,7 @@ def contacts_at(log: RunLog, k: int) -> np.ndarray:
     another robot when their centres are closer than two radii, and a moving
     disc when it overlaps it -- the simulator's contact rules.
     """
-    r = float(log.meta.get("robot_radius", 0.0))
+    r = float(log.meta.get("robot_radius", DEFAULT_RADIUS))
     pos = np.asarray(log.pose[k, :, :2], dtype=float)
     hit = np.asarray(log.clearance[k]) < r
     if len(pos) > 1:
@@ -237,7 +242,7 @@ def snapshot_figure(row: Row, results_dir: str | Path, path: str | Path, t: floa
     draw_world(ax, sc.world.grid, sc.spec.leader.goal, sc.spec.leader.start,
                shapes=sc.world.shapes)
     _draw_run(ax, log, upto=k + 1, alpha=0.35)
-    r = float(log.meta.get("robot_radius", 0.2))
+    r = float(log.meta.get("robot_radius", DEFAULT_RADIUS))
     hit = contacts_at(log, k)
     for i, (color, touching) in enumerate(zip(robot_colors(log.pose.shape[1]), hit,
                                               strict=True)):
