@@ -11,6 +11,7 @@ line saying how many runs are saved, and exits with 130 (SIGINT) or 143
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import signal
@@ -18,7 +19,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from dfcoa_opt.bench.lifecycle import Interrupted, SweepInterrupted
+from dfcoa_opt.bench.lifecycle import Interrupted, SweepInterrupted, interruptible
 from dfcoa_opt.errors import DfcoaError
 
 EXIT_BAD_INPUT = 2
@@ -236,8 +237,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     handlers = {"run": _cmd_run, "list": _cmd_list, "schema": _cmd_schema,
                 "bench": _cmd_bench, "report": _cmd_report, "figures": _cmd_figures}
+    # bench and figures: SIGTERM too stops them with one line (and SIGINT raises
+    # Interrupted rather than KeyboardInterrupt) from the start, imports included
+    stoppable = interruptible() if args.cmd in ("bench", "figures") else contextlib.nullcontext()
     try:
-        return handlers[args.cmd](args)
+        with stoppable:
+            return handlers[args.cmd](args)
     except DfcoaError as exc:
         print(f"dfcoa: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

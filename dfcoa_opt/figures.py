@@ -15,7 +15,6 @@ are still importable from here (they live in :mod:`dfcoa_opt.bench.recipes`).
 from __future__ import annotations
 
 import json
-import multiprocessing
 import os
 import pickle
 import sys
@@ -27,12 +26,13 @@ from pathlib import Path
 from typing import Any
 
 from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench.executors import ExecutorConfig
+from dfcoa_opt.bench.executors import WORKER_PRELOAD, ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
 from dfcoa_opt.bench.lifecycle import (
+    deferred,
+    forkserver_context,
     init_worker,
     interruptible,
-    quiet_resource_tracker,
     terminate,
 )
 from dfcoa_opt.bench.recipes import RECIPE_MODULES, Artefact, Recipe, Renderer, recipe, registered
@@ -122,9 +122,8 @@ class _Renderer:
 
     def __init__(self, overlap: bool) -> None:
         self.pool: ProcessPoolExecutor | None = None
-        if overlap:
-            quiet_resource_tracker()
-            ctx = multiprocessing.get_context("forkserver")
+        if overlap:  # the sweeps' fork server: started here, so with their preload
+            ctx = forkserver_context(WORKER_PRELOAD)
             self.pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx,
                                             initializer=init_worker, initargs=(None,))
         self.pending: list[tuple[Recipe, Path, str, Future[tuple[list[Artefact], float]]]] = []
@@ -140,11 +139,13 @@ class _Renderer:
         args = (r.render, source, r.sweep is not None, dest)
         fut: Future[tuple[list[Artefact], float]] = Future()
         if self.pool is not None and _picklable(r.render):
-            fut = self.pool.submit(_render, *args)
+            with deferred():  # the first submit starts the render process
+                fut = self.pool.submit(_render, *args)
         else:
             fut.set_result(_render(*args))
         self.pending.append((r, dest, done, fut))
-        self._collect(block=False)
+        with deferred():  # takes the futures' locks, which the pool's manager thread needs
+            self._collect(block=False)
 
     def _collect(self, block: bool) -> None:
         """Write the artefact lists of finished renders, in submission order."""

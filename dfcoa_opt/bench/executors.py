@@ -16,13 +16,13 @@ processes ever write the same file and a remote cluster needs no shared disk
 from __future__ import annotations
 
 import itertools
-import multiprocessing
 import os
-from collections.abc import Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from collections.abc import Iterable, Iterator, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
+from queue import SimpleQueue
 
-from dfcoa_opt.bench.lifecycle import init_worker, quiet_resource_tracker, terminate
+from dfcoa_opt.bench.lifecycle import deferred, forkserver_context, init_worker, terminate
 from dfcoa_opt.bench.runner import Outcome, execute
 from dfcoa_opt.bench.sweep import RunSpec
 from dfcoa_opt.control.registry import BUILTIN_MODULES
@@ -78,28 +78,48 @@ def _processes(runs: Sequence[RunSpec], jobs: int) -> Iterator[Outcome]:
     Workers start from a fork server, not by forking this process: once this
     process has run a parallel numba kernel, GNU OpenMP's threads are up and a
     forked child dies ("fork() called from a process already using GNU
-    OpenMP"); ``make figures`` runs such kernels between sweeps. Each worker runs
-    :func:`~dfcoa_opt.bench.lifecycle.init_worker` (one numba thread, SIGINT
-    ignored, exit with the main process). An interrupt or an abandoned
-    generator terminates the workers at once instead of waiting for their runs.
+    OpenMP"); ``make figures`` runs such kernels between sweeps. The server
+    starts with SIGINT blocked (:func:`~dfcoa_opt.bench.lifecycle.forkserver_context`)
+    and each worker runs :func:`~dfcoa_opt.bench.lifecycle.init_worker` (one
+    numba thread, SIGINT ignored, exit with the main process). An interrupt or
+    an abandoned generator terminates the workers at once instead of waiting
+    for their runs.
     """
     queue = iter(runs)
-    quiet_resource_tracker()
-    ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(list(WORKER_PRELOAD))
+    ctx = forkserver_context(WORKER_PRELOAD)
     pool = ProcessPoolExecutor(max_workers=min(jobs, len(runs)), mp_context=ctx,
                                initializer=init_worker)
+    finished: SimpleQueue[Future[Outcome]] = SimpleQueue()
     try:
-        active = {pool.submit(execute, r) for r in itertools.islice(queue, 2 * jobs)}
-        while active:
-            done, active = wait(active, return_when=FIRST_COMPLETED)
-            active |= {pool.submit(execute, r) for r in itertools.islice(queue, len(done))}
-            for fut in done:
-                yield fut.result()
+        with deferred():
+            in_flight = _submit(pool, itertools.islice(queue, 2 * jobs), finished)
+        while in_flight:
+            fut = finished.get()  # waits in C and holds no lock when interrupted
+            with deferred():
+                outcome = fut.result()
+                in_flight += _submit(pool, itertools.islice(queue, 1), finished) - 1
+            yield outcome
     except BaseException:  # an interrupt, or the consumer stopped: stop the workers now
         terminate(pool)
         raise
     pool.shutdown(wait=True)
+
+
+def _submit(pool: ProcessPoolExecutor, runs: Iterable[RunSpec],
+            finished: SimpleQueue[Future[Outcome]]) -> int:
+    """Submit ``runs``; each future goes into ``finished`` when done. Returns how many.
+
+    Call it inside :func:`~dfcoa_opt.bench.lifecycle.deferred`, like every step
+    of :func:`_processes` that takes a lock of the pool or of a future (and a
+    submit may start a worker): SIGINT and SIGTERM raise an exception where
+    they land. The only wait outside such a block is ``SimpleQueue.get``,
+    which holds no lock when interrupted.
+    """
+    n = 0
+    for run in runs:
+        pool.submit(execute, run).add_done_callback(finished.put)
+        n += 1
+    return n
 
 
 #: Imported once by the fork server (when it starts), so that every pool worker

@@ -13,24 +13,35 @@ process's sentinel -- a pipe that only the main process holds open -- and ends
 the worker when it closes, i.e. when the main process died, even by SIGKILL.
 
 Why the thread is needed: a pool worker blocks reading its call queue, whose
-write end it holds itself, so it never sees the main process go; and every
-process forked by the multiprocessing fork server holds the server's "alive"
-pipe, so the server, which exits when that pipe closes, lives as long as any
-worker. Measured before: after a SIGKILL of ``dfcoa bench``, the fork server
-and both workers stayed alive indefinitely. With the watchdog, the workers
-exit at once, and with them the fork server and the resource tracker.
+write end it holds itself, so it never sees the main process go. And the fork
+server exits when its "alive" pipe reaches end of file, but the main process
+hands the write end of that pipe to every process the server forks (CPython
+does so on purpose, so that those processes could use the server too), so the
+server lives as long as any worker does. Measured before: after a SIGKILL of
+``dfcoa bench``, the fork server and both workers stayed alive indefinitely.
+With the watchdog, the workers exit at once, and with them the fork server and
+the resource tracker.
+
+The fork server is started by :func:`forkserver_context` with SIGINT
+blocked, a mask it keeps for life and that the workers inherit: without it, a
+Ctrl-C during the server's second of preloading imports printed a
+``KeyboardInterrupt`` traceback from it.
 """
 
 from __future__ import annotations
 
 import contextlib
 import multiprocessing
+import multiprocessing.forkserver
+import multiprocessing.resource_tracker
 import os
 import signal
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from multiprocessing.connection import wait
+from multiprocessing.context import ForkServerContext
 from pathlib import Path
 from types import FrameType
 
@@ -86,6 +97,42 @@ def interruptible() -> Iterator[None]:
             signal.signal(s, handler)
 
 
+@contextlib.contextmanager
+def deferred() -> Iterator[None]:
+    """SIGINT and SIGTERM wait for the end of the block, then act (main thread only).
+
+    For short steps that must not be cut in two, as :class:`Interrupted`
+    raised where the signal lands would:
+
+    - taking and releasing a lock that another thread needs (a pool's or a
+      future's, which the pool's manager thread takes too: left held, the
+      shutdown waits for that thread for ever);
+    - starting a pool worker: the fork server forks it only after the request
+      (a second or more while the server still imports its preload), and a
+      main process that stopped in between left a worker that found its
+      pool's semaphores gone and printed a ``FileNotFoundError`` traceback.
+
+    A signal caught here is raised again when the block ends, with the
+    handlers in place before it.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+
+    def catch(signum: int, _frame: FrameType | None) -> None:
+        caught.append(signum)
+
+    old = {s: signal.signal(s, catch) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+        for s in dict.fromkeys(caught):
+            signal.raise_signal(s)
+
+
 def _exit_with_parent() -> None:
     """Block until the main process's sentinel closes, then end this process."""
     parent = multiprocessing.parent_process()
@@ -112,7 +159,40 @@ def init_worker(numba_threads: int | None = 1) -> None:
         numba.set_num_threads(numba_threads)
 
 
-def quiet_resource_tracker() -> None:
+def forkserver_context(preload: Sequence[str]) -> ForkServerContext:
+    """The ``forkserver`` context, with its server running (started once per process).
+
+    The server is spawned with SIGINT blocked in the calling thread: a blocked
+    signal stays blocked across ``fork`` and ``exec``, so a Ctrl-C can no
+    longer interrupt the server's preloading imports (about a second, during
+    which it printed a ``KeyboardInterrupt`` traceback), nor a worker before
+    :func:`init_worker` runs. (The resource tracker gets the same protection
+    from CPython itself.) A SIGINT or SIGTERM that reaches this process
+    meanwhile acts once both are started (:func:`deferred`).
+
+    Args:
+        preload: Modules the server imports when it starts (ignored when it
+            already runs).
+
+    Returns:
+        The context for ``ProcessPoolExecutor(mp_context=...)``.
+    """
+    _quiet_resource_tracker()
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(list(preload))
+    with deferred():
+        # The tracker first: starting it unblocks SIGINT (it blocks SIGINT and SIGTERM
+        # while it spawns the tracker, which ignores both, then unblocks them).
+        multiprocessing.resource_tracker.ensure_running()
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            multiprocessing.forkserver.ensure_running()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    return ctx
+
+
+def _quiet_resource_tracker() -> None:
     """Keep the resource tracker's leaked-semaphore warning off stderr after an interrupt.
 
     Terminated workers leave the pool's queue semaphores to multiprocessing's
@@ -126,14 +206,25 @@ def quiet_resource_tracker() -> None:
         sys.warnoptions.append(option)
 
 
-def terminate(pool: object) -> None:
+def terminate(pool: ProcessPoolExecutor) -> None:
     """Terminate the worker processes of a ``ProcessPoolExecutor`` and shut it down.
 
     Running tasks are abandoned (a run can take minutes); pending ones are
     cancelled. ``concurrent.futures`` has no public way to stop a running task,
     so the processes are taken from the executor's ``_processes`` table.
+
+    A worker killed while it sends its result (a run's log: often more than a
+    pipe holds) leaves half a message in the result pipe, and the pool's
+    manager thread, which ``shutdown`` joins, waits for the rest for ever: this
+    process holds the pipe's write end too, so no end of file comes. It is
+    closed here (only workers write to it), so the thread gets end of file as
+    soon as the workers are gone, and finds the pool broken. Without it, one
+    interrupted sweep in about 60 hung.
     """
-    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+    for proc in list((pool._processes or {}).values()):
         with contextlib.suppress(OSError, ValueError):
             proc.terminate()
-    pool.shutdown(wait=True, cancel_futures=True)  # type: ignore[attr-defined]
+    results = pool._result_queue
+    if results is not None:
+        results._writer.close()
+    pool.shutdown(wait=True, cancel_futures=True)
