@@ -43,6 +43,7 @@ from scipy.optimize import linear_sum_assignment
 from comparisons.cbf.filter import CbfFilter
 from comparisons.reshape import planner
 from comparisons.reshape.region import grow_region, shape_segments, swept_disc_segments
+from comparisons.reshape.routes import ConfigurationSpace, Route, bin_heading, heading_bin
 from dfcoa_opt.control.base import FilterResult, Observation, slot_velocity
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.formation import line_offsets
@@ -53,6 +54,8 @@ from dfcoa_opt.planning.pure_pursuit import PurePursuit
 FloatArray = NDArray[np.float64]
 #: Step of the free-segment test along a seed or a robot's line, m.
 PROBE = 0.1
+#: Smallest gap between two robots' discs in a template (sets the smallest scale), m.
+GAP = 0.3
 
 
 @register("reshape")
@@ -69,7 +72,8 @@ class Reshape:
         replan_period: float = param(0.5, doc="Time between two plans.", unit="s", gt=0.0)
         lookahead: float = param(3.0, doc="Look-ahead along the leader's path beyond the "
                                           "formation's progress.", unit="m", gt=0.0)
-        s_min: float = param(0.5, doc="Smallest scale of a template.", gt=0.0, le=1.0)
+        s_min: float = param(0.5, doc="Smallest scale of a template (raised so that the "
+                                      "scaled slots keep GAP between robots).", gt=0.0, le=1.0)
         scales: int = param(4, doc="Scales tried in [s_min, 1].", ge=1)
         rotation_max: float = param(math.pi / 3, doc="Largest rotation tried either side of "
                                                      "the look-ahead direction.", unit="rad",
@@ -92,10 +96,14 @@ class Reshape:
         weight_rotation: float = param(0.5, doc="Cost weight of the rotation squared.",
                                        unit="1/rad^2", ge=0.0)
         switch_cost: float = param(0.5, doc="Cost of changing template.", ge=0.0)
+        route_detour: float = param(0.1, doc="A route of a larger scale may be this fraction "
+                                             "longer than the quickest passage.", ge=0.0)
+        route_period: float = param(2.0, doc="Time between two route searches while the "
+                                             "formation stays on its route.", unit="s", gt=0.0)
 
     def __init__(self, params: Params) -> None:
         self.p = params
-        self.safety = CbfFilter(CbfFilter.Params(solver="exact"), owner="reshape")
+        self.safety: CbfFilter | None = None  # built by reset (it needs the robots' v_max)
         self.last_result: FilterResult | None = None
         self.counters: dict[str, int] = {}
         self.plan_times: list[float] = []
@@ -105,8 +113,13 @@ class Reshape:
     # ---------------------------------------------------------------------- set-up
     def reset(self, scenario, rng: np.random.Generator) -> None:
         """Read the team, the map and the leader's path; build the templates."""
-        self.safety.reset(scenario, rng)
         spec = scenario.spec
+        # the box |u_x|, |u_y| <= v_max (the filter's default, v_max / sqrt 2, would hold
+        # a formation moving along an axis to 71 % of its speed), the result clipped to
+        # |u| <= v_max afterwards: a uniform saturation, which keeps every barrier row
+        self.safety = CbfFilter(CbfFilter.Params(solver="exact", v_max=spec.robots.v_max),
+                                owner="reshape")
+        self.safety.reset(scenario, rng)
         self._n = scenario.n
         self._r = spec.robots.radius
         self._v_max = spec.robots.v_max
@@ -126,9 +139,23 @@ class Reshape:
         half = 0.5 * (self.p.rotations - 1)
         self._rot = (np.linspace(-self.p.rotation_max, self.p.rotation_max, self.p.rotations)
                      if half else np.zeros(1))
-        self._scales = np.linspace(1.0, self.p.s_min, self.p.scales)
+        floor = (2.0 * self._r + GAP) / _spacing(self._offsets, 0.0)  # 1 for a lone robot
+        self._scales = np.linspace(1.0, min(1.0, max(self.p.s_min, floor)), self.p.scales)
         self._weights = planner.Weights(self.p.weight_progress, self.p.weight_scale,
                                         self.p.weight_rotation, self.p.switch_cost)
+        self._spacing = spacing
+        self._centre = self._offsets.mean(axis=0)
+        rho = self._r + self.p.margin
+        self._cspace = ConfigurationSpace(scenario.world.grid, self._offsets - self._centre, rho)
+        self._single = (ConfigurationSpace(scenario.world.grid, np.zeros((1, 2)), rho)
+                        if "column" in self._templates else None)
+        self._extent = float(np.max(np.hypot(*(self._offsets - self._centre).T)))
+        end = self._path.length
+        self._goal_heading = self._tangent(end)
+        self._goal_centre = self._path.point_at(end) + _rot(self._goal_heading) @ self._centre
+        self._way: Route | None = None  # the formation's route, when the leader's is blocked
+        self._way_scale: float | None = None  # its scale (None: single file)
+        self._way_bin, self._way_time = -1, -math.inf
         self._next = 0.0
         self._targets = np.zeros((self._n, 2))
         self._nominal = True
@@ -163,6 +190,11 @@ class Reshape:
         centroid = pos.mean(axis=0)
         s_c = float(self._path.arc_length(centroid[None])[0])
         s_l = float(self._path.arc_length(obs.leader[None, :2])[0])
+        k = heading_bin(self._tangent(s_c + self.p.lookahead))
+        if self._path_blocked(s_c, k) and self._follow_route(obs, pos, centroid, k):
+            self.plan_times.append(time.perf_counter() - t0)
+            return
+        self._way = None
         segments = np.concatenate([self._segments, self._moving_segments(obs)])
         start = centroid if self._free(centroid, centroid, self._r) else \
             self._path.point_at(s_c)
@@ -207,6 +239,85 @@ class Reshape:
         self._targets = slots[self._assign]
         self._waypoint = self._guidance(pos, self._targets)
         self.plan_times.append(time.perf_counter() - t0)
+
+    # ------------------------------------------------------------ formation routes
+    def _tangent(self, s: float) -> float:
+        """Heading (rad) of the leader's path around arc length ``s`` (m)."""
+        a = self._path.point_at(max(0.0, min(s, self._path.length) - 0.5))
+        b = self._path.point_at(min(self._path.length, max(s, 0.0) + 0.5))
+        return math.atan2(b[1] - a[1], b[0] - a[0]) if np.any(b != a) else 0.0
+
+    def _path_blocked(self, s_c: float, k: int) -> bool:
+        """Whether the scenario's formation, rigid at scale 1, hits a static obstacle ahead.
+
+        Its centre is placed on the leader's path (heading bin ``k``) from the
+        formation's progress ``s_c`` to ``lookahead`` plus its extent beyond.
+        """
+        end = min(s_c + self.p.lookahead + self._extent, self._path.length)
+        s = np.append(np.arange(max(s_c, 0.0), end, 2.0 * self._inflated.cell_size), end)
+        lead = np.array([self._path.point_at(v) for v in s])
+        centres = lead + _rot(bin_heading(k)) @ self._centre
+        return not bool(self._cspace.free_at(centres, 1.0, k).all())
+
+    def _follow_route(self, obs: Observation, pos: FloatArray, centroid: FloatArray,
+                      k: int) -> bool:
+        """Targets along the formation's route (module docstring); False when there is none."""
+        way = self._way
+        if (way is None or k != self._way_bin or obs.t >= self._way_time + self.p.route_period
+                - 1e-9 or way.distance(centroid) > self._spacing):
+            self._way, self._way_scale = self._best_route(centroid, k)
+            self._way_bin, self._way_time = k, obs.t
+            way = self._way
+        if way is None:
+            return False
+        ahead = way.project(centroid) + self.p.lookahead
+        if ahead >= way.length:  # the goal within reach: the formation of the goal, if free
+            if not self._cspace.free_at(self._goal_centre[None], 1.0,
+                                        heading_bin(self._goal_heading))[0]:
+                return False
+            template, scale = "scenario", 1.0
+            slots = self._goal_centre + (self._offsets - self._centre) @ _rot(
+                self._goal_heading).T
+        elif self._way_scale is not None:  # the scenario's shape, rigid, at the route's scale
+            template, scale = "scenario", self._way_scale
+            slots = (way.point_at(ahead) + scale * (self._offsets - self._centre)
+                     @ _rot(bin_heading(k)).T)
+        else:  # single file along the route
+            template, scale = "column", 1.0
+            slots = _along(way, ahead - self._spacing * np.arange(self._n))
+        if template != self._template and self._template is not None:
+            self.counters["switches"] += 1
+        self.history.append((obs.t, template, scale))
+        self._assign = self._assignment(pos, slots, template)
+        self._template, self._nominal = template, False
+        self._targets = slots[self._assign]
+        self._waypoint = self._guidance(pos, self._targets)
+        return True
+
+    def _best_route(self, centroid: FloatArray, k: int) -> tuple[Route | None, float | None]:
+        """The route of the largest scale within ``route_detour`` of the quickest passage.
+
+        The quickest passage is the shortest route of any scale, or single file,
+        whose length counts the column's too (the last robot must pass). The
+        current scale is kept while its route is within ``route_detour`` of that
+        limit again (hysteresis: a change of scale moves every robot).
+        Returns ``(route, scale)``; the single-file route with scale None when it
+        is quicker than every scale (``(None, None)`` when nothing gets through).
+        """
+        single = (self._single.route(centroid, self._goal_centre, 1.0, k)
+                  if self._single is not None else None)
+        ways = [(float(sc), w) for sc in self._scales
+                if (w := self._cspace.route(centroid, self._goal_centre, float(sc), k))
+                is not None]
+        column = math.inf if single is None else single.length + self._spacing * (self._n - 1)
+        limit = (1.0 + self.p.route_detour) * min([w.length for _, w in ways] + [column])
+        for scale, way in ways:  # the current scale while it qualifies, else the largest
+            if scale == self._way_scale and way.length <= (1.0 + self.p.route_detour) * limit:
+                return way, scale
+        for scale, way in ways:
+            if way.length <= limit + 1e-9:
+                return way, scale
+        return single, None
 
     def _route_point(self, start: FloatArray, goal: FloatArray, reach: float) -> FloatArray:
         """The point ``reach`` m along an A* route to ``goal``; ``goal`` when there is none.
@@ -285,14 +396,38 @@ class Reshape:
             u = self.p.kp * (target - pos)
         speed = np.hypot(u[:, 0], u[:, 1])
         u = u * np.minimum(1.0, self._v_max / np.maximum(speed, 1e-12))[:, None]
-        self.last_result = self.safety.filter(obs, u)
-        return self.last_result.command
+        assert self.safety is not None, "reset() first"
+        res = self.safety.filter(obs, u)
+        speed = np.hypot(res.command[:, 0], res.command[:, 1])
+        over = speed > self._v_max
+        if over.any():
+            res.command[over] *= (self._v_max / speed[over])[:, None]
+        self.last_result = res
+        return res.command
+
+
+def _rot(theta: float) -> FloatArray:
+    """2D rotation matrix."""
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def _along(way: Route, arcs: FloatArray) -> FloatArray:
+    """Points at arc lengths ``arcs`` (m) of a route; before its start, straight back from it."""
+    pts = np.array([way.point_at(float(a)) for a in arcs])
+    behind = arcs < 0.0
+    if behind.any():
+        d = way.points[min(1, len(way.points) - 1)] - way.points[0]
+        n = float(np.hypot(*d))
+        u = d / n if n > 0 else np.array([1.0, 0.0])
+        pts[behind] = way.points[0] + arcs[behind, None] * u
+    return pts
 
 
 def _spacing(offsets: FloatArray, radius: float) -> float:
-    """Nearest-neighbour distance of the scenario's slots, at least 2 radii + 0.3 m."""
+    """Nearest-neighbour distance of the scenario's slots, at least 2 radii + GAP, m."""
     if len(offsets) < 2:
-        return 2.0 * radius + 0.3
+        return 2.0 * radius + GAP
     d = np.linalg.norm(offsets[:, None] - offsets[None], axis=2)
     np.fill_diagonal(d, np.inf)
-    return float(max(d.min(), 2.0 * radius + 0.3))
+    return float(max(d.min(), 2.0 * radius + GAP))
