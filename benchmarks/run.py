@@ -10,7 +10,15 @@ from __future__ import annotations
 import datetime
 from pathlib import Path
 
-from benchmarks import bench_astar, bench_figures, bench_lidar, bench_mcl, bench_orca, bench_sim
+from benchmarks import (
+    bench_astar,
+    bench_figures,
+    bench_lidar,
+    bench_mcl,
+    bench_orca,
+    bench_reshape,
+    bench_sim,
+)
 from dfcoa_opt.environment import machine, versions
 
 #: Targets from the issues (what, us). Matched by row-title prefix.
@@ -22,6 +30,10 @@ TARGETS = {
     "A* search 35x35": 100.0,
     "A* search 1024x1024": 30000.0,
     "make figures from an empty result cache": 300e6,
+    "reshape planning per replanning, corridor": 5000.0,
+    "reshape planning per replanning, clutter": 5000.0,
+    "reshape planning per replanning, large_20": 5000.0,
+    "reshape planning per replanning, large_100": 50000.0,
 }
 #: Targets given as a ratio to the same-run reference (what prefix, minimum ratio).
 RATIO_TARGETS = {"ORCA step, Circle N=1000": 1.0}
@@ -40,7 +52,7 @@ def _target(what: str) -> str:
 def main() -> None:
     """Run every benchmark module, print the table, write results.md."""
     rows = (bench_lidar.run() + bench_sim.run() + bench_mcl.run() + bench_astar.run()
-            + bench_orca.run() + bench_figures.run())
+            + bench_orca.run() + bench_reshape.run() + bench_figures.run())
     head = [f"# Benchmarks ({datetime.date.today().isoformat()})", "",
             f"CPU: {machine()}; {versions()}.", "",
             "Ratio = reference median / our median, both measured in this run.", "",

@@ -89,6 +89,8 @@ class Reshape:
                                ge=0.0)
         hysteresis: float = param(0.1, doc="A new assignment must be this fraction cheaper.",
                                   ge=0.0, lt=1.0)
+        gamma: float = param(5.0, doc="Class-K gain of the CBF tracking filter (the filter "
+                                      "caps it at 1/dt).", unit="1/s", gt=0.0)
         kp: float = param(1.0, doc="Proportional gain towards the target.", unit="1/s", gt=0.0)
         weight_progress: float = param(1.0, doc="Cost weight of |t - g|^2.", unit="1/m^2",
                                        ge=0.0)
@@ -98,6 +100,11 @@ class Reshape:
         switch_cost: float = param(0.5, doc="Cost of changing template.", ge=0.0)
         route_detour: float = param(0.1, doc="A route of a larger scale may be this fraction "
                                              "longer than the quickest passage.", ge=0.0)
+        route_clearance: float = param(0.3, doc="Extra distance a formation route keeps from "
+                                                "obstacles where it can.", unit="m", ge=0.0)
+        route_lead: float = param(1.0, doc="On a route, the slots lead the formation's centre "
+                                           "(single file: its middle) by this much.", unit="m",
+                                  gt=0.0)
         route_period: float = param(2.0, doc="Time between two route searches while the "
                                              "formation stays on its route.", unit="s", gt=0.0)
 
@@ -117,8 +124,8 @@ class Reshape:
         # the box |u_x|, |u_y| <= v_max (the filter's default, v_max / sqrt 2, would hold
         # a formation moving along an axis to 71 % of its speed), the result clipped to
         # |u| <= v_max afterwards: a uniform saturation, which keeps every barrier row
-        self.safety = CbfFilter(CbfFilter.Params(solver="exact", v_max=spec.robots.v_max),
-                                owner="reshape")
+        self.safety = CbfFilter(CbfFilter.Params(solver="exact", v_max=spec.robots.v_max,
+                                                 gamma=self.p.gamma), owner="reshape")
         self.safety.reset(scenario, rng)
         self._n = scenario.n
         self._r = spec.robots.radius
@@ -146,8 +153,9 @@ class Reshape:
         self._spacing = spacing
         self._centre = self._offsets.mean(axis=0)
         rho = self._r + self.p.margin
-        self._cspace = ConfigurationSpace(scenario.world.grid, self._offsets - self._centre, rho)
-        self._single = (ConfigurationSpace(scenario.world.grid, np.zeros((1, 2)), rho)
+        grid, wide = scenario.world.grid, self.p.route_clearance
+        self._cspace = ConfigurationSpace(grid, self._offsets - self._centre, rho, wide)
+        self._single = (ConfigurationSpace(grid, np.zeros((1, 2)), rho, wide)
                         if "column" in self._templates else None)
         self._extent = float(np.max(np.hypot(*(self._offsets - self._centre).T)))
         end = self._path.length
@@ -270,7 +278,8 @@ class Reshape:
             way = self._way
         if way is None:
             return False
-        ahead = way.project(centroid) + self.p.lookahead
+        ahead = way.project(centroid) + self.p.route_lead + (
+            0.0 if self._way_scale is not None else 0.5 * self._spacing * (self._n - 1))
         if ahead >= way.length:  # the goal within reach: the formation of the goal, if free
             if not self._cspace.free_at(self._goal_centre[None], 1.0,
                                         heading_bin(self._goal_heading))[0]:

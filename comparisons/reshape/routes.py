@@ -13,7 +13,10 @@ computed once per (scale, heading bin) and cached, since the map is static.
 A* (:func:`dfcoa_opt.planning.astar.search`) on that set gives a route for the
 centre along which the whole formation, rigid, stays clear of every static
 obstacle (moving ones are left to the tracking layer's safety filter). A
-start or goal inside the set is moved to the nearest free cell. A formation
+shortest route hugs the obstacles, and robots that lag behind their slots cut
+its corners, so the route is searched first with ``clearance`` m more
+(``rho + clearance``), and only when that finds none with ``rho``. A start
+or goal inside the set is moved to the nearest free cell. A formation
 with one slot at the origin is a single robot: the route of a column that
 follows it in single file.
 """
@@ -84,19 +87,25 @@ class ConfigurationSpace:
         grid: The static occupancy grid.
         offsets: ``(N, 2)`` template offsets relative to the formation's centre, m.
         rho: Robot radius plus margin, m.
+        clearance: Extra distance that routes keep where they can, m.
     """
 
-    def __init__(self, grid: OccupancyGrid, offsets: FloatArray, rho: float) -> None:
+    def __init__(self, grid: OccupancyGrid, offsets: FloatArray, rho: float,
+                 clearance: float = 0.0) -> None:
         self.grid = grid
         self.offsets = np.asarray(offsets, float)
-        h = grid.cell_size
-        self._disc = grid.distance_field <= rho + 0.5 * math.sqrt(2.0) * h
-        self._blocked: dict[tuple[float, int], NDArray[np.bool_]] = {}
-        self._nearest: dict[tuple[float, int], NDArray[np.intp]] = {}
+        half = 0.5 * math.sqrt(2.0) * grid.cell_size
+        self._disc = {False: grid.distance_field <= rho + half,
+                      True: grid.distance_field <= rho + clearance + half}
+        self._blocked: dict[tuple[float, int, bool], NDArray[np.bool_]] = {}
+        self._nearest: dict[tuple[float, int, bool], NDArray[np.intp]] = {}
 
-    def blocked(self, scale: float, k: int) -> NDArray[np.bool_]:
-        """``(H, W)`` True where the centre cannot be, at ``scale`` and heading bin ``k``."""
-        key = (round(scale, 9), k)
+    def blocked(self, scale: float, k: int, wide: bool = False) -> NDArray[np.bool_]:
+        """``(H, W)`` True where the centre cannot be, at ``scale`` and heading bin ``k``.
+
+        ``wide``: with the extra ``clearance``.
+        """
+        key = (round(scale, 9), k, wide)
         if key not in self._blocked:
             psi = bin_heading(k)
             c, s = math.cos(psi), math.sin(psi)
@@ -104,7 +113,7 @@ class ConfigurationSpace:
             cells = np.unique(np.rint(off / self.grid.cell_size).astype(np.intp), axis=0)
             out = np.zeros(self.grid.shape, dtype=bool)
             for dc, dr in cells:
-                _shift_or(out, self._disc, int(dr), int(dc))
+                _shift_or(out, self._disc[wide], int(dr), int(dc))
             out.setflags(write=False)
             self._blocked[key] = out
         return self._blocked[key]
@@ -118,11 +127,20 @@ class ConfigurationSpace:
         return out
 
     def route(self, start: FloatArray, goal: FloatArray, scale: float, k: int) -> Route | None:
-        """A* route of the centre from ``start`` to ``goal`` (m), or None when there is none."""
-        blocked = self.blocked(scale, k)
+        """A* route of the centre from ``start`` to ``goal`` (m), or None when there is none.
+
+        With the extra clearance when it finds one, else without.
+        """
+        return (self._search(start, goal, scale, k, True)
+                or self._search(start, goal, scale, k, False))
+
+    def _search(self, start: FloatArray, goal: FloatArray, scale: float, k: int,
+                wide: bool) -> Route | None:
+        blocked = self.blocked(scale, k, wide)
         if blocked.all():
             return None
-        a, b = self._snap(start, scale, k), self._snap(goal, scale, k)
+        a, b = self._snap(start, blocked, (round(scale, 9), k, wide)), \
+            self._snap(goal, blocked, (round(scale, 9), k, wide))
         if a == b:
             pts = self._centres(np.array([a]))
             return Route(pts, np.zeros(1))
@@ -133,15 +151,14 @@ class ConfigurationSpace:
         arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
         return Route(pts, arc)
 
-    def _snap(self, p: FloatArray, scale: float, k: int) -> tuple[int, int]:
-        """The cell of ``p``, or the nearest cell where the centre fits."""
+    def _snap(self, p: FloatArray, blocked: NDArray[np.bool_],
+              key: tuple[float, int, bool]) -> tuple[int, int]:
+        """The cell of ``p``, or the nearest cell not ``blocked`` (cached by ``key``)."""
         row, col = (int(v) for v in self.grid.world_to_cell(p))
         h, w = self.grid.shape
         row, col = min(max(row, 0), h - 1), min(max(col, 0), w - 1)
-        blocked = self.blocked(scale, k)
         if not blocked[row, col]:
             return row, col
-        key = (round(scale, 9), k)
         if key not in self._nearest:
             self._nearest[key] = ndimage.distance_transform_edt(
                 blocked, return_distances=False, return_indices=True)

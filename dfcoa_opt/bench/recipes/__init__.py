@@ -13,7 +13,8 @@ group registers its recipes, in index order (:data:`RECIPE_MODULES`):
 - :mod:`~dfcoa_opt.bench.recipes.astar`: traditional vs improved A* (paper 000 §4.1);
 - :mod:`~dfcoa_opt.bench.recipes.paper001`, :mod:`~dfcoa_opt.bench.recipes.paper002`,
   :mod:`~dfcoa_opt.bench.recipes.paper004`: the companion papers' tables;
-- :mod:`~dfcoa_opt.bench.recipes.beyond`: ``nmpc`` and ``cbf`` beside the papers' methods.
+- :mod:`~dfcoa_opt.bench.recipes.beyond`: ``nmpc`` and ``cbf`` beside the papers' methods;
+- :mod:`~dfcoa_opt.bench.recipes.reshape`: the reshaping formation, with the corridor GIF.
 
 Adding a recipe::
 
@@ -40,7 +41,7 @@ from typing import Any
 #: Modules whose import registers recipes, in index order.
 RECIPE_MODULES = tuple(f"dfcoa_opt.bench.recipes.{m}" for m in (
     "examples", "comparison", "ladders", "dfcoa", "astar", "paper001", "paper002", "paper004",
-    "beyond"))
+    "beyond", "reshape"))
 
 
 @dataclass(frozen=True)
