@@ -375,3 +375,24 @@ def test_loc_rmse_is_the_rms_position_estimate_error():
     est[:, 1, 2] += 1.0                  # heading errors do not count
     log = make_log(pose_est=est)
     assert m.summary(log)["loc_rmse"] == pytest.approx(math.sqrt(0.25 / 4))
+
+
+# ------------------------------------------------------------------ open stretches
+def test_open_steps_need_every_robot_clear_of_walls_and_moving_discs():
+    n_t = 4
+    pose = np.repeat(SQUARE[None], n_t, axis=0)
+    clearance = np.full((n_t, 4), 5.0)
+    clearance[1, 2] = 1.19  # surface gap 0.99 m < 1.0 m: closed
+    clearance[2, 0] = 1.2   # exactly 1.0 m: open
+    dyn_pos = np.full((n_t, 1, 2), 50.0)
+    dyn_pos[3, 0] = [1.0 + 0.2 + 0.3 + 0.9, 1.0]  # 0.9 m from robot 0's edge: closed
+    log = make_log(pose=pose, slots=pose[..., :2] + [0.0, 0.5], clearance=clearance,
+                   dyn_pos=dyn_pos, dyn_radius=np.array([0.3]))
+    assert m.open_steps(log).tolist() == [True, False, True, False]
+    s = m.summary(log)
+    assert s["open_pct"] == pytest.approx(50.0)
+    assert s["fce_open_rms"] == pytest.approx(0.5) and s["fse_open_rms"] == pytest.approx(0.0)
+    wide = m.open_steps(log, MetricSpec(open_clearance=0.5))
+    assert wide.tolist() == [True, True, True, True]
+    nothing_open = make_log(pose=pose, clearance=np.full((n_t, 4), 0.5))
+    assert math.isnan(m.summary(nothing_open)["fce_open_rms"])

@@ -47,6 +47,7 @@ from comparisons.reshape.routes import ConfigurationSpace, Route, bin_heading, h
 from dfcoa_opt.control.base import FilterResult, Observation, slot_velocity
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.formation import line_offsets
+from dfcoa_opt.geometry import point_segment_distance
 from dfcoa_opt.params import param
 from dfcoa_opt.planning.astar import search
 from dfcoa_opt.planning.pure_pursuit import PurePursuit
@@ -54,6 +55,8 @@ from dfcoa_opt.planning.pure_pursuit import PurePursuit
 FloatArray = NDArray[np.float64]
 #: Step of the free-segment test along a seed or a robot's line, m.
 PROBE = 0.1
+#: The nominal formation must also fit this far along the leader's path, m.
+NOMINAL_AHEAD = 1.0
 #: Smallest gap between two robots' discs in a template (sets the smallest scale), m.
 GAP = 0.3
 
@@ -170,6 +173,7 @@ class Reshape:
         self._template: str | None = None
         self._assign = np.arange(self._n)
         self._waypoint: dict[int, FloatArray] = {}
+        self._carried: FloatArray | None = None  # the targets in the leader's frame
         self.counters = {"replans": 0, "shrinks": 0, "waits": 0, "switches": 0}
         self.plan_times = []
         self.history = []
@@ -182,14 +186,37 @@ class Reshape:
         pts = a + np.linspace(0.0, 1.0, steps)[:, None] * (b - a)
         return bool(np.all(self._world.clearance(pts) >= clearance))
 
-    def _moving_segments(self, obs: Observation) -> FloatArray:
+    @staticmethod
+    def _moving(obs: Observation) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Position, velocity and radius of each sensed moving disc, once (m, m/s, m)."""
         m = obs.obstacles
-        if not m.mask.any():
-            return np.zeros((0, 2, 2))
         pos, vel, rad = m.position[m.mask], m.velocity[m.mask], m.radius[m.mask]
         keys = np.round(np.column_stack([pos, rad]), 6)  # several robots sense one disc
         _, first = np.unique(keys, axis=0, return_index=True)
-        return swept_disc_segments(pos[first], vel[first], rad[first], self.p.horizon)
+        return pos[first], vel[first], rad[first]
+
+    def _moving_segments(self, obs: Observation) -> FloatArray:
+        if not obs.obstacles.mask.any():
+            return np.zeros((0, 2, 2))
+        return swept_disc_segments(*self._moving(obs), self.p.horizon)
+
+    def _nominal_fits(self, obs: Observation, s_l: float) -> bool:
+        """Whether the scenario's formation fits on the leader, now and ``NOMINAL_AHEAD`` on.
+
+        Every slot keeps ``r + margin`` from the static obstacles and from each
+        sensed moving disc's sweep over ``horizon``.
+        """
+        ahead = min(s_l + NOMINAL_AHEAD, self._path.length)
+        later = self._path.point_at(ahead) + self._offsets @ _rot(self._tangent(ahead)).T
+        slots = np.concatenate([obs.slot, later])
+        need = self._r + self.p.margin
+        if not bool(np.all(self._world.clearance(slots) >= need)):
+            return False
+        if not obs.obstacles.mask.any():
+            return True
+        pos, vel, rad = self._moving(obs)
+        gap = point_segment_distance(slots[:, None], pos[None], (pos + self.p.horizon * vel)[None])
+        return bool(np.all(gap >= need + rad[None]))
 
     def _plan(self, obs: Observation) -> None:
         t0 = time.perf_counter()
@@ -203,6 +230,10 @@ class Reshape:
             self.plan_times.append(time.perf_counter() - t0)
             return
         self._way = None
+        if s_c + self.p.lookahead >= s_l and self._nominal_fits(obs, s_l):
+            self._nominal_plan(obs)  # nothing in the way: the scenario's formation
+            self.plan_times.append(time.perf_counter() - t0)
+            return
         segments = np.concatenate([self._segments, self._moving_segments(obs)])
         start = centroid if self._free(centroid, centroid, self._r) else \
             self._path.point_at(s_c)
@@ -228,6 +259,7 @@ class Reshape:
             if cand is not None:
                 break
             self.counters["shrinks"] += 1
+        self._carried = None
         if cand is None:
             self.counters["waits"] += 1
             self.history.append((obs.t, None, math.nan))
@@ -245,8 +277,21 @@ class Reshape:
         self._assign = self._assignment(pos, slots, cand.template)
         self._template = cand.template
         self._targets = slots[self._assign]
+        # keeping up with the leader: the plan moves with it until the next one
+        self._carried = ((self._targets - obs.leader[:2]) @ _rot(float(obs.leader[2]))
+                         if following and not self._nominal else None)
         self._waypoint = self._guidance(pos, self._targets)
         self.plan_times.append(time.perf_counter() - t0)
+
+    def _nominal_plan(self, obs: Observation) -> None:
+        """The scenario's formation on the virtual leader (``goto_slot`` with the CBF filter)."""
+        if self._template not in (None, "scenario"):
+            self.counters["switches"] += 1
+        self.history.append((obs.t, "scenario", 1.0))
+        self._template, self._nominal, self._carried = "scenario", True, None
+        self._assign = np.arange(self._n)
+        self._targets = obs.slot.copy()
+        self._waypoint = self._guidance(obs.pose[:, :2], self._targets)
 
     # ------------------------------------------------------------ formation routes
     def _tangent(self, s: float) -> float:
@@ -265,7 +310,7 @@ class Reshape:
         s = np.append(np.arange(max(s_c, 0.0), end, 2.0 * self._inflated.cell_size), end)
         lead = np.array([self._path.point_at(v) for v in s])
         centres = lead + _rot(bin_heading(k)) @ self._centre
-        return not bool(self._cspace.free_at(centres, 1.0, k).all())
+        return not bool(self._cspace.free_at(centres, float(self._scales[-1]), k).all())
 
     def _follow_route(self, obs: Observation, pos: FloatArray, centroid: FloatArray,
                       k: int) -> bool:
@@ -298,7 +343,7 @@ class Reshape:
             self.counters["switches"] += 1
         self.history.append((obs.t, template, scale))
         self._assign = self._assignment(pos, slots, template)
-        self._template, self._nominal = template, False
+        self._template, self._nominal, self._carried = template, False, None
         self._targets = slots[self._assign]
         self._waypoint = self._guidance(pos, self._targets)
         return True
@@ -398,11 +443,16 @@ class Reshape:
             target = obs.slot
             u = self.p.kp * (target - pos) + slot_velocity(obs.leader, target)
         else:
-            target = self._targets[ids].copy()
+            if self._carried is None:
+                target = self._targets[ids].copy()
+                ff = np.zeros_like(target)
+            else:  # a plan made while keeping up: carried along in the leader's frame
+                target = obs.leader[:2] + self._carried[ids] @ _rot(float(obs.leader[2])).T
+                ff = slot_velocity(obs.leader, target)
             for row, i in enumerate(ids):
                 if int(i) in self._waypoint:
-                    target[row] = self._waypoint[int(i)]
-            u = self.p.kp * (target - pos)
+                    target[row], ff[row] = self._waypoint[int(i)], 0.0
+            u = self.p.kp * (target - pos) + ff
         speed = np.hypot(u[:, 0], u[:, 1])
         u = u * np.minimum(1.0, self._v_max / np.maximum(speed, 1e-12))[:, None]
         assert self.safety is not None, "reset() first"

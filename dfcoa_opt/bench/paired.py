@@ -28,8 +28,8 @@ Row = Mapping[str, Any]
 
 #: Metrics compared pairwise by default, after success (keys of ``metrics.summary``).
 PAIRED_METRICS: tuple[str, ...] = (
-    "time_to_goal", "fce_rms", "fse_rms", "risk_raw_mean", "min_inter_robot_distance",
-    "min_obstacle_clearance", "path_length_mean",
+    "time_to_goal", "fce_rms", "fse_rms", "fce_open_rms", "fse_open_rms", "risk_raw_mean",
+    "min_inter_robot_distance", "min_obstacle_clearance", "path_length_mean",
 )
 #: Metrics where a larger value is better; for every other metric smaller is better.
 HIGHER_IS_BETTER = frozenset({"success", "stability_pct", "min_inter_robot_distance",

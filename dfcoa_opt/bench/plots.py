@@ -31,6 +31,8 @@ Row = Mapping[str, Any]
 
 #: Summary key -> (label, unit) for table headers and axes; units as in docs/metrics.md.
 METRIC_INFO: dict[str, tuple[str, str]] = {
+    "fce_open_rms": ("FCE RMS on open stretches", "m"),
+    "fse_open_rms": ("FSE RMS on open stretches", "m"), "open_pct": ("open steps", "%"),
     "fce_rms": ("FCE RMS", "m"), "fce_mean": ("FCE mean", "m"), "fce_max": ("FCE max", "m"),
     "fce_x_rms": ("FCE x RMS", "m"), "fce_y_rms": ("FCE y RMS", "m"), "fse_rms": ("FSE RMS", "m"),
     "fse_mean": ("FSE mean", "m"), "fste_max": ("FStE max", "m"), "fste_final": ("FStE final", "m"),

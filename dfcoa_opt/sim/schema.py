@@ -357,6 +357,9 @@ class MetricSpec:
     deadlock_advance: float = param(0.2, doc="No progress: the formation centroid advanced less "
                                              "than this along the leader's path in the window.",
                                     unit="m", gt=0.0)
+    open_clearance: float = param(1.0, doc="A step is open when every robot keeps at least this "
+                                           "surface gap to every static obstacle and moving "
+                                           "disc (the *_open_rms metrics).", unit="m", gt=0.0)
     deadlock_displacement: float = param(0.2, doc="No progress: every robot away from its slot "
                                                   "moved less than this in the window.",
                                          unit="m", gt=0.0)
