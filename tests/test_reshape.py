@@ -136,3 +136,21 @@ def test_same_seed_same_run():
     b, _, _ = _run(CORRIDOR, seed=5, overrides={"t_max": 20.0})
     assert a.digest() == b.digest()
     assert np.isfinite(a.pose).all()
+
+
+def test_a_robot_held_still_away_from_its_target_is_turned_and_counted():
+    ctrl = Reshape(Reshape.Params(unstick_time=3.0, unstick_angle=np.pi / 2))
+    ctrl._anchor = np.zeros((2, 2))
+    ctrl._still_since = np.zeros(2)
+    ctrl.counters = {"unsticks": 0}
+    ids = np.arange(2)
+    target = np.array([[5.0, 0.0], [0.05, 0.0]])  # robot 1 is at its target
+    u = np.array([[0.5, 0.0], [0.5, 0.0]])
+    pos = np.array([[0.05, 0.0], [0.0, 0.05]])  # both within 0.1 m of their anchors
+    np.testing.assert_array_equal(ctrl._unstick(2.9, ids, pos, target, u), u)
+    out = ctrl._unstick(3.0, ids, pos, target, u)
+    np.testing.assert_allclose(out, [[0.0, 0.5], [0.5, 0.0]], atol=1e-12)  # turned CCW
+    assert ctrl.counters["unsticks"] == 1
+    moved = np.array([[0.5, 0.0], [0.0, 0.05]])  # robot 0 moved: a new anchor, not stuck
+    np.testing.assert_array_equal(ctrl._unstick(3.1, ids, moved, target, u), u)
+    assert ctrl._still_since[0] == 3.1 and ctrl._anchor[0].tolist() == [0.5, 0.0]

@@ -55,6 +55,10 @@ from dfcoa_opt.planning.pure_pursuit import PurePursuit
 FloatArray = NDArray[np.float64]
 #: Step of the free-segment test along a seed or a robot's line, m.
 PROBE = 0.1
+#: A robot that stays within this of one point is still; one this near its target is not stuck, m.
+STILL_RADIUS = 0.1
+#: Farthest a robot's guidance waypoint lies along its A* path, m.
+GUIDANCE_REACH = 1.5
 #: The nominal formation must also fit this far along the leader's path, m.
 NOMINAL_AHEAD = 1.0
 #: Smallest gap between two robots' discs in a template (sets the smallest scale), m.
@@ -108,6 +112,11 @@ class Reshape:
         route_lead: float = param(1.0, doc="On a route, the slots lead the formation's centre "
                                            "(single file: its middle) by this much.", unit="m",
                                   gt=0.0)
+        unstick_time: float = param(3.0, doc="A robot that stayed within 0.1 m of one point "
+                                            "this long, away from its target, is stuck.",
+                                    unit="s", gt=0.0)
+        unstick_angle: float = param(math.pi / 3, doc="A stuck robot's command is turned by "
+                                                      "this (counter-clockwise).", unit="rad")
         route_period: float = param(2.0, doc="Time between two route searches while the "
                                              "formation stays on its route.", unit="s", gt=0.0)
 
@@ -174,7 +183,9 @@ class Reshape:
         self._assign = np.arange(self._n)
         self._waypoint: dict[int, FloatArray] = {}
         self._carried: FloatArray | None = None  # the targets in the leader's frame
-        self.counters = {"replans": 0, "shrinks": 0, "waits": 0, "switches": 0}
+        self.counters = {"replans": 0, "shrinks": 0, "waits": 0, "switches": 0, "unsticks": 0}
+        self._anchor = np.asarray(scenario.initial_pose, float)[:, :2].copy()
+        self._still_since = np.zeros(self._n)
         self.plan_times = []
         self.history = []
         self.last_result = None
@@ -420,18 +431,54 @@ class Reshape:
         return best
 
     def _guidance(self, pos: FloatArray, targets: FloatArray) -> dict[int, FloatArray]:
-        """A waypoint on an A* path for each robot whose straight line is blocked."""
+        """A waypoint on an A* path for each robot whose straight line is blocked.
+
+        The farthest path point within ``GUIDANCE_REACH`` that the robot sees
+        with ``r + margin`` clearance (pure pursuit on the path): a point at
+        a fixed distance could sit behind a corner, where the safety filter
+        stops a robot heading straight at it.
+        """
         out: dict[int, FloatArray] = {}
+        cell = self._inflated.cell_size
+        need = self._r + self.p.margin
         for i in range(self._n):
-            if self._free(pos[i], targets[i], self._r):
+            if self._free(pos[i], targets[i], need):
                 continue
             cells = self._route(pos[i], targets[i])
-            if cells is not None:
-                k = min(len(cells) - 1, max(1, int(round(0.6 / self._inflated.cell_size))))
-                out[i] = self._cell_centres(cells[k:k + 1])[0]
+            if cells is None:
+                continue
+            pts = self._cell_centres(cells[1:1 + int(round(GUIDANCE_REACH / cell))])
+            out[i] = pts[0]
+            for p in pts[::-1]:
+                if self._free(pos[i], p, need):
+                    out[i] = p
+                    break
         return out
 
     # ------------------------------------------------------------------- tracking
+    def _unstick(self, t: float, ids: NDArray[np.intp], pos: FloatArray, target: FloatArray,
+                 u: FloatArray) -> FloatArray:
+        """Turn the command of a robot stuck away from its target by ``unstick_angle``.
+
+        A robot is stuck when it has stayed within ``STILL_RADIUS`` of one point
+        for ``unstick_time`` s while more than ``STILL_RADIUS`` from its target:
+        two robots that block each other in a gap, or a robot held by the safety
+        filter against an obstacle (a local minimum of the filtered field).
+        Turning every stuck robot the same way (counter-clockwise) sends them
+        around each other. Counted as ``unsticks`` (robot-steps turned).
+        """
+        moved = np.hypot(*(pos - self._anchor[ids]).T) > STILL_RADIUS
+        self._anchor[ids[moved]] = pos[moved]
+        self._still_since[ids[moved]] = t
+        stuck = ((t - self._still_since[ids] >= self.p.unstick_time)
+                 & (np.hypot(*(target - pos).T) > STILL_RADIUS))
+        if not stuck.any():
+            return u
+        self.counters["unsticks"] += int(stuck.sum())
+        out = u.copy()
+        out[stuck] = u[stuck] @ _rot(self.p.unstick_angle).T
+        return out
+
     def act(self, obs: Observation) -> FloatArray:
         """Replan when due (central), then every robot to its target through the CBF filter."""
         if obs.t >= self._next - 1e-9:
@@ -453,6 +500,7 @@ class Reshape:
                 if int(i) in self._waypoint:
                     target[row], ff[row] = self._waypoint[int(i)], 0.0
             u = self.p.kp * (target - pos) + ff
+        u = self._unstick(obs.t, ids, pos, target, u)
         speed = np.hypot(u[:, 0], u[:, 1])
         u = u * np.minimum(1.0, self._v_max / np.maximum(speed, 1e-12))[:, None]
         assert self.safety is not None, "reset() first"
