@@ -9,6 +9,7 @@ import pytest
 from comparisons.reshape import planner
 from comparisons.reshape.controller import Reshape
 from comparisons.reshape.region import Region, grow_region, shape_segments
+from comparisons.reshape.tracking import Guidance, StuckMonitor
 from dfcoa_opt.control.registry import make_controller
 from dfcoa_opt.formation import line_offsets, v_offsets
 from dfcoa_opt.sim.loader import load_scenario
@@ -138,19 +139,33 @@ def test_same_seed_same_run():
     assert np.isfinite(a.pose).all()
 
 
-def test_a_robot_held_still_away_from_its_target_is_turned_and_counted():
-    ctrl = Reshape(Reshape.Params(unstick_time=3.0, unstick_angle=np.pi / 2))
-    ctrl._anchor = np.zeros((2, 2))
-    ctrl._still_since = np.zeros(2)
-    ctrl.counters = {"unsticks": 0}
+def test_a_robot_held_still_away_from_its_target_is_turned():
+    monitor = StuckMonitor(np.zeros((2, 2)), after=3.0, angle=np.pi / 2)
     ids = np.arange(2)
     target = np.array([[5.0, 0.0], [0.05, 0.0]])  # robot 1 is at its target
     u = np.array([[0.5, 0.0], [0.5, 0.0]])
     pos = np.array([[0.05, 0.0], [0.0, 0.05]])  # both within 0.1 m of their anchors
-    np.testing.assert_array_equal(ctrl._unstick(2.9, ids, pos, target, u), u)
-    out = ctrl._unstick(3.0, ids, pos, target, u)
+    out, n = monitor.turn(2.9, ids, pos, target, u)
+    np.testing.assert_array_equal(out, u)
+    assert n == 0
+    out, n = monitor.turn(3.0, ids, pos, target, u)
     np.testing.assert_allclose(out, [[0.0, 0.5], [0.5, 0.0]], atol=1e-12)  # turned CCW
-    assert ctrl.counters["unsticks"] == 1
+    assert n == 1
     moved = np.array([[0.5, 0.0], [0.0, 0.05]])  # robot 0 moved: a new anchor, not stuck
-    np.testing.assert_array_equal(ctrl._unstick(3.1, ids, moved, target, u), u)
-    assert ctrl._still_since[0] == 3.1 and ctrl._anchor[0].tolist() == [0.5, 0.0]
+    out, n = monitor.turn(3.1, ids, moved, target, u)
+    np.testing.assert_array_equal(out, u)
+    assert n == 0 and monitor.since[0] == 3.1 and monitor.anchor[0].tolist() == [0.5, 0.0]
+
+
+def test_guidance_heads_for_the_farthest_visible_point_of_the_path_around_a_wall():
+    from dfcoa_opt.world.grid import OccupancyGrid
+    grid = OccupancyGrid.from_shapes((10.0, 10.0), 10.0, [Rectangle((4.0, 0.0), (5.0, 7.0))])
+    guide = Guidance(grid, 0.3)
+    pos, target = np.array([[3.0, 3.0], [3.0, 8.5]]), np.array([[7.0, 3.0], [7.0, 8.5]])
+    wp = guide.waypoints(pos, target)
+    assert set(wp) == {0}  # robot 1's line passes above the wall
+    assert guide.free(pos[0], wp[0], 0.3)  # visible from the robot
+    assert np.hypot(*(wp[0] - pos[0])) > 1.0  # not the next cell: as far as it sees
+    path = guide.path(pos[0], target[0])
+    assert path is not None and path[:, 1].max() > 7.0  # the path goes over the wall
+    assert guide.path(pos[0], np.array([4.5, 3.0])) is None  # a goal in the wall

@@ -43,22 +43,16 @@ from scipy.optimize import linear_sum_assignment
 from comparisons.cbf.filter import CbfFilter
 from comparisons.reshape import planner
 from comparisons.reshape.region import grow_region, shape_segments, swept_disc_segments
-from comparisons.reshape.routes import ConfigurationSpace, Route, bin_heading, heading_bin
+from comparisons.reshape.routes import ConfigurationSpace, RoutePlanner, bin_heading, heading_bin
+from comparisons.reshape.tracking import Guidance, StuckMonitor
 from dfcoa_opt.control.base import FilterResult, Observation, slot_velocity
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.formation import line_offsets
-from dfcoa_opt.geometry import point_segment_distance
+from dfcoa_opt.geometry import point_segment_distance, rotate
 from dfcoa_opt.params import param
-from dfcoa_opt.planning.astar import search
 from dfcoa_opt.planning.pure_pursuit import PurePursuit
 
 FloatArray = NDArray[np.float64]
-#: Step of the free-segment test along a seed or a robot's line, m.
-PROBE = 0.1
-#: A robot that stays within this of one point is still; one this near its target is not stuck, m.
-STILL_RADIUS = 0.1
-#: Farthest a robot's guidance waypoint lies along its A* path, m.
-GUIDANCE_REACH = 1.5
 #: The nominal formation must also fit this far along the leader's path, m.
 NOMINAL_AHEAD = 1.0
 #: Smallest gap between two robots' discs in a template (sets the smallest scale), m.
@@ -154,10 +148,10 @@ class Reshape:
         self._world = scenario.world
         self._segments = shape_segments(scenario.world.shapes)
         self._bounds = scenario.world.grid.extent
-        self._inflated = scenario.world.grid.inflate(self._r + self.p.margin)
+        self._guide = Guidance(scenario.world.grid, self._r + self.p.margin)
         half = 0.5 * (self.p.rotations - 1)
-        self._rot = (np.linspace(-self.p.rotation_max, self.p.rotation_max, self.p.rotations)
-                     if half else np.zeros(1))
+        self._rotations = (np.linspace(-self.p.rotation_max, self.p.rotation_max,
+                                       self.p.rotations) if half else np.zeros(1))
         floor = (2.0 * self._r + GAP) / _spacing(self._offsets, 0.0)  # 1 for a lone robot
         self._scales = np.linspace(1.0, min(1.0, max(self.p.s_min, floor)), self.p.scales)
         self._weights = planner.Weights(self.p.weight_progress, self.p.weight_scale,
@@ -167,15 +161,15 @@ class Reshape:
         rho = self._r + self.p.margin
         grid, wide = scenario.world.grid, self.p.route_clearance
         self._cspace = ConfigurationSpace(grid, self._offsets - self._centre, rho, wide)
-        self._single = (ConfigurationSpace(grid, np.zeros((1, 2)), rho, wide)
-                        if "column" in self._templates else None)
         self._extent = float(np.max(np.hypot(*(self._offsets - self._centre).T)))
         end = self._path.length
         self._goal_heading = self._tangent(end)
-        self._goal_centre = self._path.point_at(end) + _rot(self._goal_heading) @ self._centre
-        self._way: Route | None = None  # the formation's route, when the leader's is blocked
-        self._way_scale: float | None = None  # its scale (None: single file)
-        self._way_bin, self._way_time = -1, -math.inf
+        self._goal_centre = self._path.point_at(end) + rotate(self._centre, self._goal_heading)
+        single = (ConfigurationSpace(grid, np.zeros((1, 2)), rho, wide)
+                  if "column" in self._templates else None)
+        self._routes = RoutePlanner(self._cspace, single, self._scales,
+                                    self._spacing * (self._n - 1), self._goal_centre,
+                                    self.p.route_detour, self.p.route_period, self._spacing)
         self._next = 0.0
         self._targets = np.zeros((self._n, 2))
         self._nominal = True
@@ -184,19 +178,13 @@ class Reshape:
         self._waypoint: dict[int, FloatArray] = {}
         self._carried: FloatArray | None = None  # the targets in the leader's frame
         self.counters = {"replans": 0, "shrinks": 0, "waits": 0, "switches": 0, "unsticks": 0}
-        self._anchor = np.asarray(scenario.initial_pose, float)[:, :2].copy()
-        self._still_since = np.zeros(self._n)
+        self._stuck = StuckMonitor(np.asarray(scenario.initial_pose, float)[:, :2],
+                                   self.p.unstick_time, self.p.unstick_angle)
         self.plan_times = []
         self.history = []
         self.last_result = None
 
     # ------------------------------------------------------------------- planning
-    def _free(self, a: FloatArray, b: FloatArray, clearance: float) -> bool:
-        """Whether the segment ``[a, b]`` keeps ``clearance`` from every static obstacle."""
-        steps = max(2, int(math.ceil(math.hypot(*(b - a)) / PROBE)) + 1)
-        pts = a + np.linspace(0.0, 1.0, steps)[:, None] * (b - a)
-        return bool(np.all(self._world.clearance(pts) >= clearance))
-
     @staticmethod
     def _moving(obs: Observation) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Position, velocity and radius of each sensed moving disc, once (m, m/s, m)."""
@@ -218,7 +206,7 @@ class Reshape:
         sensed moving disc's sweep over ``horizon``.
         """
         ahead = min(s_l + NOMINAL_AHEAD, self._path.length)
-        later = self._path.point_at(ahead) + self._offsets @ _rot(self._tangent(ahead)).T
+        later = self._path.point_at(ahead) + rotate(self._offsets, self._tangent(ahead))
         slots = np.concatenate([obs.slot, later])
         need = self._r + self.p.margin
         if not bool(np.all(self._world.clearance(slots) >= need)):
@@ -240,31 +228,31 @@ class Reshape:
         if self._path_blocked(s_c, k) and self._follow_route(obs, pos, centroid, k):
             self.plan_times.append(time.perf_counter() - t0)
             return
-        self._way = None
+        self._routes.clear()
         if s_c + self.p.lookahead >= s_l and self._nominal_fits(obs, s_l):
             self._nominal_plan(obs)  # nothing in the way: the scenario's formation
             self.plan_times.append(time.perf_counter() - t0)
             return
         segments = np.concatenate([self._segments, self._moving_segments(obs)])
-        start = centroid if self._free(centroid, centroid, self._r) else \
+        start = centroid if self._guide.free(centroid, centroid, self._r) else \
             self._path.point_at(s_c)
         cand = None
         for shrink in (1.0, 0.5, 0.25):
             following = s_c + shrink * self.p.lookahead >= s_l
             goal = obs.leader[:2].copy() if following else \
                 self._path.point_at(s_c + shrink * self.p.lookahead)
-            if not self._free(start, goal, self._r + self.p.margin):
-                goal = self._route_point(start, goal, shrink * self.p.lookahead)
+            if not self._guide.free(start, goal, self._r + self.p.margin):
+                goal = self._guide.point_along(start, goal, shrink * self.p.lookahead)
             end = goal.copy()
             for _ in range(8):  # shorten the seed until it is free
-                if self._free(start, end, 0.5 * self._r):
+                if self._guide.free(start, end, 0.5 * self._r):
                     break
                 end = 0.5 * (start + end)
             seed = np.array([start, end])
             psi = (float(obs.leader[2]) if following or math.hypot(*(end - start)) < 0.2
                    else math.atan2(*(end - start)[::-1]))
             region = grow_region(seed, segments, self._bounds)
-            cand = planner.choose(region, self._templates, self._cost, goal, psi, self._rot,
+            cand = planner.choose(region, self._templates, self._cost, goal, psi, self._rotations,
                                   self._scales, self._r + self.p.margin, self._template,
                                   self._weights)
             if cand is not None:
@@ -289,9 +277,9 @@ class Reshape:
         self._template = cand.template
         self._targets = slots[self._assign]
         # keeping up with the leader: the plan moves with it until the next one
-        self._carried = ((self._targets - obs.leader[:2]) @ _rot(float(obs.leader[2]))
+        self._carried = (rotate(self._targets - obs.leader[:2], -float(obs.leader[2]))
                          if following and not self._nominal else None)
-        self._waypoint = self._guidance(pos, self._targets)
+        self._waypoint = self._guide.waypoints(pos, self._targets)
         self.plan_times.append(time.perf_counter() - t0)
 
     def _nominal_plan(self, obs: Observation) -> None:
@@ -302,7 +290,7 @@ class Reshape:
         self._template, self._nominal, self._carried = "scenario", True, None
         self._assign = np.arange(self._n)
         self._targets = obs.slot.copy()
-        self._waypoint = self._guidance(obs.pose[:, :2], self._targets)
+        self._waypoint = self._guide.waypoints(obs.pose[:, :2], self._targets)
 
     # ------------------------------------------------------------ formation routes
     def _tangent(self, s: float) -> float:
@@ -318,104 +306,41 @@ class Reshape:
         formation's progress ``s_c`` to ``lookahead`` plus its extent beyond.
         """
         end = min(s_c + self.p.lookahead + self._extent, self._path.length)
-        s = np.append(np.arange(max(s_c, 0.0), end, 2.0 * self._inflated.cell_size), end)
+        s = np.append(np.arange(max(s_c, 0.0), end, 2.0 * self._guide.inflated.cell_size), end)
         lead = np.array([self._path.point_at(v) for v in s])
-        centres = lead + _rot(bin_heading(k)) @ self._centre
+        centres = lead + rotate(self._centre, bin_heading(k))
         return not bool(self._cspace.free_at(centres, float(self._scales[-1]), k).all())
 
     def _follow_route(self, obs: Observation, pos: FloatArray, centroid: FloatArray,
                       k: int) -> bool:
         """Targets along the formation's route (module docstring); False when there is none."""
-        way = self._way
-        if (way is None or k != self._way_bin or obs.t >= self._way_time + self.p.route_period
-                - 1e-9 or way.distance(centroid) > self._spacing):
-            self._way, self._way_scale = self._best_route(centroid, k)
-            self._way_bin, self._way_time = k, obs.t
-            way = self._way
+        way, way_scale = self._routes.update(obs.t, centroid, k)
         if way is None:
             return False
         ahead = way.project(centroid) + self.p.route_lead + (
-            0.0 if self._way_scale is not None else 0.5 * self._spacing * (self._n - 1))
+            0.0 if way_scale is not None else 0.5 * self._spacing * (self._n - 1))
         if ahead >= way.length:  # the goal within reach: the formation of the goal, if free
             if not self._cspace.free_at(self._goal_centre[None], 1.0,
                                         heading_bin(self._goal_heading))[0]:
                 return False
             template, scale = "scenario", 1.0
-            slots = self._goal_centre + (self._offsets - self._centre) @ _rot(
-                self._goal_heading).T
-        elif self._way_scale is not None:  # the scenario's shape, rigid, at the route's scale
-            template, scale = "scenario", self._way_scale
-            slots = (way.point_at(ahead) + scale * (self._offsets - self._centre)
-                     @ _rot(bin_heading(k)).T)
+            slots = self._goal_centre + rotate(self._offsets - self._centre,
+                                               self._goal_heading)
+        elif way_scale is not None:  # the scenario's shape, rigid, at the route's scale
+            template, scale = "scenario", way_scale
+            slots = way.point_at(ahead) + scale * rotate(self._offsets - self._centre,
+                                                         bin_heading(k))
         else:  # single file along the route
             template, scale = "column", 1.0
-            slots = _along(way, ahead - self._spacing * np.arange(self._n))
+            slots = way.along(ahead - self._spacing * np.arange(self._n))
         if template != self._template and self._template is not None:
             self.counters["switches"] += 1
         self.history.append((obs.t, template, scale))
         self._assign = self._assignment(pos, slots, template)
         self._template, self._nominal, self._carried = template, False, None
         self._targets = slots[self._assign]
-        self._waypoint = self._guidance(pos, self._targets)
+        self._waypoint = self._guide.waypoints(pos, self._targets)
         return True
-
-    def _best_route(self, centroid: FloatArray, k: int) -> tuple[Route | None, float | None]:
-        """The route of the largest scale within ``route_detour`` of the quickest passage.
-
-        The quickest passage is the shortest route of any scale, or single file,
-        whose length counts the column's too (the last robot must pass). The
-        current scale is kept while its route is within ``route_detour`` of that
-        limit again (hysteresis: a change of scale moves every robot).
-        Returns ``(route, scale)``; the single-file route with scale None when it
-        is quicker than every scale (``(None, None)`` when nothing gets through).
-        """
-        single = (self._single.route(centroid, self._goal_centre, 1.0, k)
-                  if self._single is not None else None)
-        ways = [(float(sc), w) for sc in self._scales
-                if (w := self._cspace.route(centroid, self._goal_centre, float(sc), k))
-                is not None]
-        column = math.inf if single is None else single.length + self._spacing * (self._n - 1)
-        limit = (1.0 + self.p.route_detour) * min([w.length for _, w in ways] + [column])
-        for scale, way in ways:  # the current scale while it qualifies, else the largest
-            if scale == self._way_scale and way.length <= (1.0 + self.p.route_detour) * limit:
-                return way, scale
-        for scale, way in ways:
-            if way.length <= limit + 1e-9:
-                return way, scale
-        return single, None
-
-    def _route_point(self, start: FloatArray, goal: FloatArray, reach: float) -> FloatArray:
-        """The point ``reach`` m along an A* route to ``goal``; ``goal`` when there is none.
-
-        The route runs on the map inflated by the robot radius and margin. The
-        leader's path may cross obstacles (the ``straight`` planner through a
-        clutter field): the formation then heads around them along the route.
-        """
-        cells = self._route(start, goal)
-        if cells is None:
-            return goal
-        pts = self._cell_centres(cells)
-        steps = np.hypot(*np.diff(pts, axis=0).T)
-        along = np.concatenate([[0.0], np.cumsum(steps)])
-        k = int(np.searchsorted(along, reach))
-        return pts[min(k, len(pts) - 1)]
-
-    def _route(self, a: FloatArray, b: FloatArray) -> NDArray[np.int64] | None:
-        """A* cells from ``a`` to ``b`` on the inflated map, or None."""
-        grid = self._inflated
-        ca = tuple(int(v) for v in grid.world_to_cell(a))
-        cb = tuple(int(v) for v in grid.world_to_cell(b))
-        if not (grid.in_bounds(*ca) and grid.in_bounds(*cb)) or grid.occupied[ca] \
-                or grid.occupied[cb]:
-            return None
-        res = search(grid.occupied, ca, cb)
-        return res.cells if res.found and len(res.cells) >= 2 else None
-
-    def _cell_centres(self, cells: NDArray[np.int64]) -> FloatArray:
-        """World centres (m) of ``(P, 2)`` grid cells ``(row, col)``."""
-        g = self._inflated
-        return np.column_stack([g.origin[0] + (cells[:, 1] + 0.5) * g.cell_size,
-                                g.origin[1] + (cells[:, 0] + 0.5) * g.cell_size])
 
     def _assignment(self, pos: FloatArray, slots: FloatArray, template: str) -> NDArray[np.intp]:
         """Robot i -> slot index: its own for the scenario's template, else Hungarian."""
@@ -429,55 +354,6 @@ class Reshape:
                 cost[np.arange(self._n), best].sum():
             return keep
         return best
-
-    def _guidance(self, pos: FloatArray, targets: FloatArray) -> dict[int, FloatArray]:
-        """A waypoint on an A* path for each robot whose straight line is blocked.
-
-        The farthest path point within ``GUIDANCE_REACH`` that the robot sees
-        with ``r + margin`` clearance (pure pursuit on the path): a point at
-        a fixed distance could sit behind a corner, where the safety filter
-        stops a robot heading straight at it.
-        """
-        out: dict[int, FloatArray] = {}
-        cell = self._inflated.cell_size
-        need = self._r + self.p.margin
-        for i in range(self._n):
-            if self._free(pos[i], targets[i], need):
-                continue
-            cells = self._route(pos[i], targets[i])
-            if cells is None:
-                continue
-            pts = self._cell_centres(cells[1:1 + int(round(GUIDANCE_REACH / cell))])
-            out[i] = pts[0]
-            for p in pts[::-1]:
-                if self._free(pos[i], p, need):
-                    out[i] = p
-                    break
-        return out
-
-    # ------------------------------------------------------------------- tracking
-    def _unstick(self, t: float, ids: NDArray[np.intp], pos: FloatArray, target: FloatArray,
-                 u: FloatArray) -> FloatArray:
-        """Turn the command of a robot stuck away from its target by ``unstick_angle``.
-
-        A robot is stuck when it has stayed within ``STILL_RADIUS`` of one point
-        for ``unstick_time`` s while more than ``STILL_RADIUS`` from its target:
-        two robots that block each other in a gap, or a robot held by the safety
-        filter against an obstacle (a local minimum of the filtered field).
-        Turning every stuck robot the same way (counter-clockwise) sends them
-        around each other. Counted as ``unsticks`` (robot-steps turned).
-        """
-        moved = np.hypot(*(pos - self._anchor[ids]).T) > STILL_RADIUS
-        self._anchor[ids[moved]] = pos[moved]
-        self._still_since[ids[moved]] = t
-        stuck = ((t - self._still_since[ids] >= self.p.unstick_time)
-                 & (np.hypot(*(target - pos).T) > STILL_RADIUS))
-        if not stuck.any():
-            return u
-        self.counters["unsticks"] += int(stuck.sum())
-        out = u.copy()
-        out[stuck] = u[stuck] @ _rot(self.p.unstick_angle).T
-        return out
 
     def act(self, obs: Observation) -> FloatArray:
         """Replan when due (central), then every robot to its target through the CBF filter."""
@@ -494,13 +370,14 @@ class Reshape:
                 target = self._targets[ids].copy()
                 ff = np.zeros_like(target)
             else:  # a plan made while keeping up: carried along in the leader's frame
-                target = obs.leader[:2] + self._carried[ids] @ _rot(float(obs.leader[2])).T
+                target = obs.leader[:2] + rotate(self._carried[ids], float(obs.leader[2]))
                 ff = slot_velocity(obs.leader, target)
             for row, i in enumerate(ids):
                 if int(i) in self._waypoint:
                     target[row], ff[row] = self._waypoint[int(i)], 0.0
             u = self.p.kp * (target - pos) + ff
-        u = self._unstick(obs.t, ids, pos, target, u)
+        u, turned = self._stuck.turn(obs.t, ids, pos, target, u)
+        self.counters["unsticks"] += turned
         speed = np.hypot(u[:, 0], u[:, 1])
         u = u * np.minimum(1.0, self._v_max / np.maximum(speed, 1e-12))[:, None]
         assert self.safety is not None, "reset() first"
@@ -511,24 +388,6 @@ class Reshape:
             res.command[over] *= (self._v_max / speed[over])[:, None]
         self.last_result = res
         return res.command
-
-
-def _rot(theta: float) -> FloatArray:
-    """2D rotation matrix."""
-    c, s = math.cos(theta), math.sin(theta)
-    return np.array([[c, -s], [s, c]])
-
-
-def _along(way: Route, arcs: FloatArray) -> FloatArray:
-    """Points at arc lengths ``arcs`` (m) of a route; before its start, straight back from it."""
-    pts = np.array([way.point_at(float(a)) for a in arcs])
-    behind = arcs < 0.0
-    if behind.any():
-        d = way.points[min(1, len(way.points) - 1)] - way.points[0]
-        n = float(np.hypot(*d))
-        u = d / n if n > 0 else np.array([1.0, 0.0])
-        pts[behind] = way.points[0] + arcs[behind, None] * u
-    return pts
 
 
 def _spacing(offsets: FloatArray, radius: float) -> float:

@@ -63,6 +63,17 @@ class Route:
         """Distance (m) from ``p`` to the nearest route point."""
         return float(np.sqrt(np.min(np.sum((self.points - p) ** 2, axis=1))))
 
+    def along(self, arcs: FloatArray) -> FloatArray:
+        """``(K, 2)`` points at arc lengths ``arcs`` (m); before the start, straight back."""
+        pts = np.array([self.point_at(float(a)) for a in arcs])
+        behind = arcs < 0.0
+        if behind.any():
+            d = self.points[min(1, len(self.points) - 1)] - self.points[0]
+            n = float(np.hypot(*d))
+            u = d / n if n > 0 else np.array([1.0, 0.0])
+            pts[behind] = self.points[0] + arcs[behind, None] * u
+        return pts
+
     def point_at(self, s: float) -> FloatArray:
         """The point at arc length ``s`` (m), linearly interpolated, clamped to the ends."""
         s = min(max(s, 0.0), self.length)
@@ -184,3 +195,70 @@ def _shift_or(out: NDArray[np.bool_], disc: NDArray[np.bool_], dr: int, dc: int)
     out[r1:] = True
     out[:, :c0] = True
     out[:, c1:] = True
+
+
+class RoutePlanner:
+    """The formation's route when the leader's path is blocked at every scale.
+
+    Args:
+        cspace: Configuration space of the scenario's formation.
+        single: That of one robot (single file), or None when single file is
+            not a template.
+        scales: Scales tried, largest first.
+        column_length: Length of the single-file column, m.
+        goal: ``(2,)`` the formation's centre at the goal, m.
+        detour: A larger scale's route may be this fraction longer than the
+            quickest passage.
+        period: Time between two searches while the formation stays on its
+            route, s.
+        leave: Distance from the route beyond which it is searched again, m.
+    """
+
+    def __init__(self, cspace: ConfigurationSpace, single: ConfigurationSpace | None,
+                 scales: FloatArray, column_length: float, goal: FloatArray, detour: float,
+                 period: float, leave: float) -> None:
+        self.cspace, self.single = cspace, single
+        self.scales = [float(s) for s in scales]
+        self.column_length, self.goal = column_length, goal
+        self.detour, self.period, self.leave = detour, period, leave
+        self.way: Route | None = None
+        self.scale: float | None = None  # None: single file
+        self._bin, self._time = -1, -math.inf
+
+    def clear(self) -> None:
+        """Forget the route (the leader's path is open again)."""
+        self.way = None
+
+    def update(self, t: float, centroid: FloatArray, k: int) -> tuple[Route | None, float | None]:
+        """The route and its scale, searched again when due, left or turned (bin ``k``)."""
+        if (self.way is None or k != self._bin or t >= self._time + self.period - 1e-9
+                or self.way.distance(centroid) > self.leave):
+            self.way, self.scale = self.best(centroid, k)
+            self._bin, self._time = k, t
+        return self.way, self.scale
+
+    def best(self, centroid: FloatArray, k: int) -> tuple[Route | None, float | None]:
+        """The route of the largest scale within ``detour`` of the quickest passage.
+
+        The quickest passage is the shortest route of any scale, or single file,
+        whose length counts the column's too (the last robot must pass). The
+        current scale is kept while its route is within ``detour`` of that limit
+        again (hysteresis: a change of scale moves every robot).
+
+        Returns:
+            ``(route, scale)``; the single-file route with scale None when it is
+            quicker than every scale; ``(None, None)`` when nothing gets through.
+        """
+        single = (self.single.route(centroid, self.goal, 1.0, k)
+                  if self.single is not None else None)
+        ways = [(sc, w) for sc in self.scales
+                if (w := self.cspace.route(centroid, self.goal, sc, k)) is not None]
+        column = math.inf if single is None else single.length + self.column_length
+        limit = (1.0 + self.detour) * min([w.length for _, w in ways] + [column])
+        for scale, way in ways:  # the current scale while it qualifies, else the largest
+            if scale == self.scale and way.length <= (1.0 + self.detour) * limit:
+                return way, scale
+        for scale, way in ways:
+            if way.length <= limit + 1e-9:
+                return way, scale
+        return single, None
