@@ -2,32 +2,36 @@
 
 Beyond the papers (after Alonso-Mora, Baker & Rus, IJRR 2017: a formation
 optimised inside a convex obstacle-free region). Every ``replan_period`` s a
-central planner, from the robots' broadcast positions:
+central planner, from the robots' broadcast positions, takes the formation's
+progress ``s_c`` along the leader's path (the centroid's nearest path point)
+and picks one of three modes (docs/methods/reshape.md):
 
-1. takes the formation's progress ``s_c`` along the leader's path (the
-   centroid's nearest path point) and a look-ahead goal ``g``: the virtual
-   leader's broadcast position when the formation keeps up with it, else the
-   path point ``lookahead`` m beyond ``s_c``;
-2. grows a convex free region around the seed segment from the centroid
-   towards ``g`` (:mod:`~comparisons.reshape.region`; static shapes, and the
-   sensed moving discs swept over ``horizon`` s);
-3. chooses template, rotation, scale and position in the region
-   (:mod:`~comparisons.reshape.planner`);
-4. assigns robots to slots: its own slot for the scenario's template (success
-   is judged on those), the Hungarian assignment (squared distances) otherwise,
-   kept unless a new one is ``hysteresis`` cheaper;
-5. for robots whose straight line to their slot is blocked, an A* path on the
-   map inflated by the robot radius and margin; they head for a point on it.
+1. **route** -- the leader's path ahead is blocked for the scenario's
+   formation even at the smallest scale (a wall, a circle on the line, a
+   clutter field): the rigid formation follows an A* route in its own
+   configuration space at the largest scale whose route is within
+   ``route_detour`` of the quickest passage, or goes in single file along a
+   one-robot route (:mod:`~comparisons.reshape.routes`);
+2. **nominal** -- the formation keeps up with the leader and fits on it now
+   and 1 m on: every robot to its own slot with the leader's feed-forward
+   (``goto_slot`` through the filter);
+3. **region** -- otherwise: a convex free region grown around the segment
+   from the centroid to the look-ahead goal ``g``
+   (:mod:`~comparisons.reshape.region`; static shapes and the sensed moving
+   discs swept over ``horizon`` s), and the template, rotation, scale and
+   position chosen in it (:mod:`~comparisons.reshape.planner`). When nothing
+   fits, the look-ahead is halved (twice), then the formation waits on its
+   previous plan: counted as ``shrinks`` and ``waits``.
 
-When nothing fits, the look-ahead is halved (twice), then the formation waits
-on its previous plan (or where it is): counted as ``shrinks`` and ``waits``
-(``counters``, in the run's metrics as ``ctl_shrinks``, ``ctl_waits``).
-
-Tracking is distributed: each robot drives to its own target with a
-proportional velocity (the leader's feed-forward when the plan is the nominal
-formation on the virtual leader, which is then ``goto_slot``) through the
-``cbf`` safety filter. Broadcast per plan: the template id, ``t`` (2 floats),
-``theta``, ``s`` and the assignment (N integers) -- 4 N + 24 bytes.
+Robots take their own slots in the scenario's shape (success is judged on
+those) and the Hungarian assignment otherwise, kept unless a new one is
+``hysteresis`` cheaper. Tracking is distributed
+(:mod:`~comparisons.reshape.tracking`): each robot drives to its target (to a
+waypoint of its A* path when its line is blocked) with a proportional velocity
+through the ``cbf`` filter; a robot held still away from its target has its
+command turned (``unsticks``). Broadcast per plan: the mode and template id,
+``t`` (2 floats), ``theta``, ``s`` and the assignment (N integers) -- 4 N + 24
+bytes. The counters are in the run's metrics as ``ctl_*``.
 """
 
 from __future__ import annotations
@@ -74,7 +78,7 @@ class Reshape:
         lookahead: float = param(3.0, doc="Look-ahead along the leader's path beyond the "
                                           "formation's progress.", unit="m", gt=0.0)
         s_min: float = param(0.5, doc="Smallest scale of a template (raised so that the "
-                                      "scaled slots keep GAP between robots).", gt=0.0, le=1.0)
+                                      "scaled slots keep 0.3 m between robots).", gt=0.0, le=1.0)
         scales: int = param(4, doc="Scales tried in [s_min, 1].", ge=1)
         rotation_max: float = param(math.pi / 3, doc="Largest rotation tried either side of "
                                                      "the look-ahead direction.", unit="rad",
