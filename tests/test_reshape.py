@@ -151,10 +151,27 @@ def test_a_robot_held_still_away_from_its_target_is_turned():
     out, n = monitor.turn(3.0, ids, pos, target, u)
     np.testing.assert_allclose(out, [[0.0, 0.5], [0.5, 0.0]], atol=1e-12)  # turned CCW
     assert n == 1
+    out, n = monitor.turn(6.0, ids, pos, target, u)  # still after two periods: turned twice
+    np.testing.assert_allclose(out, [[-0.5, 0.0], [0.5, 0.0]], atol=1e-12)
+    assert monitor.stuck(6.0).tolist() == [0, 1]  # both still; robot 1 is not turned (at target)
     moved = np.array([[0.5, 0.0], [0.0, 0.05]])  # robot 0 moved: a new anchor, not stuck
-    out, n = monitor.turn(3.1, ids, moved, target, u)
+    out, n = monitor.turn(6.1, ids, moved, target, u)
     np.testing.assert_array_equal(out, u)
-    assert n == 0 and monitor.since[0] == 3.1 and monitor.anchor[0].tolist() == [0.5, 0.0]
+    assert n == 0 and monitor.since[0] == 6.1 and monitor.anchor[0].tolist() == [0.5, 0.0]
+    assert monitor.stuck(6.1).tolist() == [1]
+
+
+def test_a_stuck_robot_plans_around_the_robots_settled_in_its_way():
+    from dfcoa_opt.world.grid import OccupancyGrid
+    guide = Guidance(OccupancyGrid.empty((10.0, 10.0), 10.0), 0.3)
+    # robot 0 must pass robot 1, which sits on the straight line to its target
+    pos = np.array([[2.0, 5.0], [3.0, 5.0]])
+    targets = np.array([[4.0, 5.0], [3.0, 5.0]])
+    assert guide.waypoints(pos, targets) == {}  # no static obstacle: no waypoint
+    wp = guide.waypoints(pos, targets, np.array([0]), robot_radius=0.2)
+    assert set(wp) == {0}
+    assert abs(wp[0][1] - 5.0) > 0.2  # off the line, around robot 1
+    assert np.hypot(*(wp[0] - pos[1])) > 0.4  # outside robot 1's contact disc
 
 
 def test_guidance_heads_for_the_farthest_visible_point_of_the_path_around_a_wall():

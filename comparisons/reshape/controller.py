@@ -283,7 +283,7 @@ class Reshape:
         # keeping up with the leader: the plan moves with it until the next one
         self._carried = (rotate(self._targets - obs.leader[:2], -float(obs.leader[2]))
                          if following and not self._nominal else None)
-        self._waypoint = self._guide.waypoints(pos, self._targets)
+        self._waypoint = self._waypoints(obs.t, pos)
         self.plan_times.append(time.perf_counter() - t0)
 
     def _nominal_plan(self, obs: Observation) -> None:
@@ -294,7 +294,7 @@ class Reshape:
         self._template, self._nominal, self._carried = "scenario", True, None
         self._assign = np.arange(self._n)
         self._targets = obs.slot.copy()
-        self._waypoint = self._guide.waypoints(obs.pose[:, :2], self._targets)
+        self._waypoint = self._waypoints(obs.t, obs.pose[:, :2])
 
     # ------------------------------------------------------------ formation routes
     def _tangent(self, s: float) -> float:
@@ -343,8 +343,12 @@ class Reshape:
         self._assign = self._assignment(pos, slots, template)
         self._template, self._nominal, self._carried = template, False, None
         self._targets = slots[self._assign]
-        self._waypoint = self._guide.waypoints(pos, self._targets)
+        self._waypoint = self._waypoints(obs.t, pos)
         return True
+
+    def _waypoints(self, t: float, pos: FloatArray) -> dict[int, FloatArray]:
+        """Guidance waypoints towards the targets (stuck robots: around the others too)."""
+        return self._guide.waypoints(pos, self._targets, self._stuck.stuck(t), self._r)
 
     def _assignment(self, pos: FloatArray, slots: FloatArray, template: str) -> NDArray[np.intp]:
         """Robot i -> slot index: its own for the scenario's template, else Hungarian."""

@@ -27,6 +27,8 @@ FloatArray = NDArray[np.float64]
 PROBE = 0.1
 #: Farthest a robot's guidance waypoint lies along its A* path, m.
 GUIDANCE_REACH = 1.5
+#: How far along its path around the other robots a stuck robot heads, m.
+DETOUR_STEP = 0.6
 #: A robot that stays within this of one point is still; one this near its target is not stuck, m.
 STILL_RADIUS = 0.1
 
@@ -51,15 +53,19 @@ class Guidance:
         pts = a + np.linspace(0.0, 1.0, steps)[:, None] * (b - a)
         return bool(np.all(self.grid.clearance(pts) >= clearance))
 
-    def path(self, a: FloatArray, b: FloatArray) -> FloatArray | None:
-        """Cell centres (m) of an A* path from ``a`` to ``b`` on the inflated map, or None."""
+    def path(self, a: FloatArray, b: FloatArray,
+             blocked: NDArray[np.bool_] | None = None) -> FloatArray | None:
+        """Cell centres (m) of an A* path from ``a`` to ``b`` on the inflated map, or None.
+
+        ``blocked``: the cells to avoid, when not the inflated map's.
+        """
         grid = self.inflated
+        occ = grid.occupied if blocked is None else blocked
         ca = tuple(int(v) for v in grid.world_to_cell(a))
         cb = tuple(int(v) for v in grid.world_to_cell(b))
-        if not (grid.in_bounds(*ca) and grid.in_bounds(*cb)) or grid.occupied[ca] \
-                or grid.occupied[cb]:
+        if not (grid.in_bounds(*ca) and grid.in_bounds(*cb)) or occ[ca] or occ[cb]:
             return None
-        res = search(grid.occupied, ca, cb)
+        res = search(occ, ca, cb)
         if not res.found or len(res.cells) < 2:
             return None
         cells = np.asarray(res.cells)
@@ -78,17 +84,24 @@ class Guidance:
         along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
         return pts[min(int(np.searchsorted(along, reach)), len(pts) - 1)]
 
-    def waypoints(self, pos: FloatArray, targets: FloatArray) -> dict[int, FloatArray]:
+    def waypoints(self, pos: FloatArray, targets: FloatArray,
+                  stuck: NDArray[np.intp] | None = None,
+                  robot_radius: float = 0.0) -> dict[int, FloatArray]:
         """A waypoint for each robot whose straight line to its target is blocked.
 
         The farthest point of its A* path within ``GUIDANCE_REACH`` that the
         robot sees with the clearance (pure pursuit on the path): a point at a
         fixed distance could sit behind a corner, where the safety filter stops
-        a robot heading straight at it.
+        a robot heading straight at it. A ``stuck`` robot plans around the
+        other robots too (their discs, grown by ``robot_radius``, as obstacles)
+        and heads ``DETOUR_STEP`` along that path: a robot settled on its slot
+        does not make way.
 
         Args:
             pos: ``(N, 2)`` robot positions, m.
             targets: ``(N, 2)`` their targets, m.
+            stuck: Indices of stuck robots.
+            robot_radius: Robot radius, m.
 
         Returns:
             Robot index -> ``(2,)`` waypoint, m (robots with a free line, or no
@@ -96,8 +109,14 @@ class Guidance:
         """
         out: dict[int, FloatArray] = {}
         reach = int(round(GUIDANCE_REACH / self.inflated.cell_size))
+        step = int(round(DETOUR_STEP / self.inflated.cell_size))
+        for i in (() if stuck is None else stuck):
+            others = np.delete(pos, i, axis=0)
+            pts = self.path(pos[i], targets[i], self._with_robots(others, 2.0 * robot_radius))
+            if pts is not None:
+                out[int(i)] = pts[min(len(pts) - 1, step)]
         for i in range(len(pos)):
-            if self.free(pos[i], targets[i], self.clearance):
+            if i in out or self.free(pos[i], targets[i], self.clearance):
                 continue
             pts = self.path(pos[i], targets[i])
             if pts is None:
@@ -110,13 +129,35 @@ class Guidance:
         return out
 
 
+    def _with_robots(self, centres: FloatArray, radius: float) -> NDArray[np.bool_]:
+        """The inflated map with every cell within ``radius`` of a centre blocked too."""
+        g = self.inflated
+        occ = g.occupied.copy()
+        h = g.cell_size
+        span = int(math.ceil(radius / h)) + 1
+        for c in centres:
+            row, col = (int(v) for v in g.world_to_cell(c))
+            r0, r1 = max(row - span, 0), min(row + span + 1, occ.shape[0])
+            c0, c1 = max(col - span, 0), min(col + span + 1, occ.shape[1])
+            if r0 >= r1 or c0 >= c1:
+                continue
+            ys = g.origin[1] + (np.arange(r0, r1) + 0.5) * h
+            xs = g.origin[0] + (np.arange(c0, c1) + 0.5) * h
+            occ[r0:r1, c0:c1] |= np.hypot(xs[None] - c[0], ys[:, None] - c[1]) <= radius
+        return occ
+
+
 class StuckMonitor:
     """Turns the command of robots stuck away from their targets.
 
     A robot is stuck when it has stayed within ``STILL_RADIUS`` of one point
-    for ``after`` s while more than ``STILL_RADIUS`` from its target. Turning
-    every stuck robot the same way (counter-clockwise) sends two that block
-    each other around each other.
+    for ``after`` s while more than ``STILL_RADIUS`` from its target. Its
+    command is turned by ``angle`` counter-clockwise, and by one ``angle`` more
+    every further ``after`` s it stays still: the safety filter returns zero
+    when the command points into the corner its rows make (a disc on one side,
+    a robot on the other), and only a command far enough round leaves it.
+    Turning every stuck robot the same way sends two that block each other
+    around each other.
 
     Args:
         start: ``(N, 2)`` initial positions, m.
@@ -129,6 +170,10 @@ class StuckMonitor:
         self.since = np.zeros(len(self.anchor))
         self.after = after
         self.angle = angle
+
+    def stuck(self, t: float) -> NDArray[np.intp]:
+        """Indices of the robots still for ``after`` s or more (their targets unchecked)."""
+        return np.flatnonzero(t - self.since >= self.after)
 
     def turn(self, t: float, ids: NDArray[np.intp], pos: FloatArray, target: FloatArray,
              u: FloatArray) -> tuple[FloatArray, int]:
@@ -144,10 +189,10 @@ class StuckMonitor:
         moved = np.hypot(*(pos - self.anchor[ids]).T) > STILL_RADIUS
         self.anchor[ids[moved]] = pos[moved]
         self.since[ids[moved]] = t
-        stuck = ((t - self.since[ids] >= self.after)
-                 & (np.hypot(*(target - pos).T) > STILL_RADIUS))
+        periods = np.floor((t - self.since[ids]) / self.after)
+        stuck = (periods >= 1) & (np.hypot(*(target - pos).T) > STILL_RADIUS)
         if not stuck.any():
             return u, 0
         out = u.copy()
-        out[stuck] = rotate(u[stuck], self.angle)
+        out[stuck] = rotate(u[stuck], self.angle * periods[stuck])
         return out, int(stuck.sum())
