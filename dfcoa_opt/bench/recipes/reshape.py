@@ -20,7 +20,7 @@ from dfcoa_opt.sim.log import RunLog
 #: The scenario whose run is animated.
 ANIMATED = "corridor"
 #: Controller counters shown in the summary (``ctl_*`` metrics).
-COUNTERS = ("replans", "switches", "shrinks", "waits")
+COUNTERS = ("replans", "switches", "shrinks", "waits", "unsticks")
 
 
 @recipe("reshape", sweep="sweeps/reshape.toml",
