@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.timing import row
+
 WHAT = "make figures from an empty result cache (dfcoa figures, 2 workers), one run"
 
 
@@ -36,10 +38,7 @@ def run() -> list[dict]:
         t0 = time.perf_counter()
         subprocess.run(cmd, check=True, cwd=root, env={**os.environ, "MPLBACKEND": "Agg"})
         seconds = time.perf_counter() - t0
-    us = np.array([seconds * 1e6])
-    return [{"what": f"{WHAT} ({seconds:.0f} s)", "median_us": float(us[0]),
-             "min_us": float(us[0]), "max_us": float(us[0]), "samples": 1,
-             "reference": None, "ref_median_us": float("nan"), "ratio": float("nan")}]
+    return [row(f"{WHAT} ({seconds:.0f} s)", np.array([seconds * 1e6]))]
 
 
 if __name__ == "__main__":
