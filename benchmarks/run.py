@@ -32,7 +32,7 @@ TARGETS = {
     "whole S1 run with mcl": 10_000_000.0,
     "A* search 35x35": 100.0,
     "A* search 1024x1024": 30000.0,
-    "make figures from an empty result cache": 300e6,
+    "make figures from a fresh clone": 300e6,
     "reshape planning per replanning, corridor": 5000.0,
     "reshape planning per replanning, clutter": 5000.0,
     "reshape planning per replanning, large_20": 5000.0,
