@@ -62,6 +62,8 @@ def _python(clone: Path, *args: str) -> subprocess.CompletedProcess:
 def run() -> list[dict]:
     """Rows (f) and the numba compilation; an empty list when ``BENCH_FIGURES=0``."""
     if os.environ.get("BENCH_FIGURES", "1") == "0":
+        print("BENCH_FIGURES=0: row (f), make figures in a fresh clone, and the numba row "
+              "left out")
         return []
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
