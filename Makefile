@@ -28,7 +28,8 @@ $(VENV)/.bench-installed: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[dev,dask,bench]'
 	touch $(VENV)/.bench-installed
 
-# BENCH_FIGURES=0 leaves out row (f), a whole `dfcoa figures` (about 5 min).
+# BENCH_FIGURES=0 leaves out row (f), a whole `dfcoa figures` in a fresh clone (35 min on
+# 2026-11-24; the target is 5), and the numba compilation row.
 BENCH_FIGURES ?= 1
 
 bench: $(VENV)/.bench-installed

@@ -1,7 +1,8 @@
 """Benchmark: grid A* (dfcoa_opt.planning.astar) against a plain-Python heapq A*.
 
 Run ``python -m benchmarks.bench_astar``. Each row times one call with
-``time.perf_counter`` after a warm-up call (numba compilation excluded). The
+``time.perf_counter`` after a warm-up call (numba compilation excluded), ours
+and the reference in interleaved repetitions (:mod:`benchmarks.timing`). The
 reference is the textbook A* below (heapq, dict g-values, same moves, same
 octile heuristic, no corner cutting), measured in the same run on the same
 problem; both must return the same (optimal) cost, which is checked. The
@@ -13,7 +14,9 @@ Problems:
 - the paper-000 Scenario 1 map (``scenarios/**/dfcoa_s1.toml``) rasterised at
   1 cell/m (35 x 35 cells), start (7, 7) m -> goal (12, 29) m;
 - a 1024 x 1024 grid, each cell blocked with probability 0.2 (seed 0), from the
-  bottom-left to the top-right corner (the 2 x 2 corner blocks are cleared).
+  bottom-left to the top-right corner (the 2 x 2 corner blocks are cleared);
+- improved vs traditional A* per expanded node on the DFCOA S1 and S2 maps at
+  10 cells/m (:func:`per_node_rows`).
 """
 
 from __future__ import annotations
@@ -25,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.bench_lidar import print_rows, row
-from benchmarks.bench_lidar import time_calls as lidar_time_calls
-from dfcoa_opt.planning.astar import AStarParams, plan, search
-from dfcoa_opt.planning.astar_improved import ImprovedAStarParams
+from benchmarks.timing import interleave, print_rows, row
+from dfcoa_opt.planning import postprocess
+from dfcoa_opt.planning.astar import AStarParams, obstacle_term, plan, search
+from dfcoa_opt.planning.astar_improved import ImprovedAStarParams, Task
 from dfcoa_opt.world.grid import OccupancyGrid
 
 SQRT2 = math.sqrt(2.0)
@@ -95,19 +98,14 @@ def random_grid(n: int = 1024, density: float = 0.2, seed: int = 0) -> np.ndarra
     return occ
 
 
-def time_calls(fn: Callable[[], object], samples: int) -> np.ndarray:
-    """Per-call times in us of ``fn()`` (after one warm-up)."""
-    return lidar_time_calls(lambda _k: fn(), samples)
-
-
 def _check(ours: float, ref: float, what: str) -> None:
     if abs(ours - ref) > 1e-6:
         raise AssertionError(f"{what}: cost {ours} differs from the reference {ref}")
 
 
-def pyastar2d_calls(occ: np.ndarray, start: tuple[int, int], goal: tuple[int, int],
-                    samples: int) -> np.ndarray | None:
-    """Times (us) of pyastar2d's C++ A* on the same grid; None if it is not installed.
+def pyastar2d_call(occ: np.ndarray, start: tuple[int, int],
+                   goal: tuple[int, int]) -> Callable[[int], object] | None:
+    """pyastar2d's C++ A* on the same grid as ``fn(k)``; None if it is not installed.
 
     pyastar2d (``bench`` extra) is a speed peer only: a move costs the weight
     of the cell entered, so diagonal steps cost 1, not sqrt(2), and it cuts
@@ -121,8 +119,42 @@ def pyastar2d_calls(occ: np.ndarray, start: tuple[int, int], goal: tuple[int, in
     weights = np.where(occ, np.inf, 1.0).astype(np.float32)
     if pyastar2d.astar_path(weights, start, goal, allow_diagonal=True) is None:
         raise RuntimeError("pyastar2d found no path where ours did")
-    return time_calls(lambda: pyastar2d.astar_path(weights, start, goal, allow_diagonal=True),
-                      samples)
+    return lambda k: pyastar2d.astar_path(weights, start, goal, allow_diagonal=True)
+
+
+def per_node_rows() -> list[dict]:
+    """Improved A* (eq 13 defaults) vs traditional A*: search time per expanded node.
+
+    On the DFCOA S1 and S2 maps at their own 10 cells/m with their 1.2 m
+    inflation, start and goal: the searched grid, the scenario's eq 13 options
+    and the map's obstacle term (:func:`obstacle_term`, once per map, as
+    :func:`plan` keeps it) are prepared outside the timing. The times are
+    divided by each search's nodes expanded, so the ratio compares the cost of
+    one expansion (issue 21: >= 1/1.2).
+    """
+    from dfcoa_opt.bench.recipes.astar import dfcoa_tasks
+
+    tasks, inflate = dfcoa_tasks(ROOT / "scenarios")
+    return [_per_node_row(task, inflate) for task in tasks]
+
+
+def _per_node_row(task: Task, inflate: float) -> dict:
+    """One row of :func:`per_node_rows`."""
+    start, goal = np.asarray(task.start), np.asarray(task.goal)
+    occ = postprocess.planning_grid(task.grid, inflate, (start, goal))
+    s_rc = tuple(int(v) for v in task.grid.world_to_cell(start))
+    g_rc = tuple(int(v) for v in task.grid.world_to_cell(goal))
+    opts = ImprovedAStarParams(inflate=inflate).search_options(task.grid.resolution)
+    opts["obstacle_field"] = obstacle_term(occ, opts["window"])
+    nodes = {"trad": search(occ, s_rc, g_rc).expanded,
+             "improved": search(occ, s_rc, g_rc, **opts).expanded}
+    t = interleave({"improved": (lambda k: search(occ, s_rc, g_rc, **opts), 40),
+                    "trad": (lambda k: search(occ, s_rc, g_rc), 40)})
+    per_node = {k: [a / nodes[k] for a in v] for k, v in t.items()}
+    return row(f"improved A* search per node, {task.name} map at 10 cells/m "
+               f"({nodes['improved']} nodes; traditional {nodes['trad']})",
+               per_node["improved"], "traditional A* search per node, same task",
+               per_node["trad"])
 
 
 def run() -> list[dict]:
@@ -136,19 +168,23 @@ def run() -> list[dict]:
     g_rc = tuple(int(v) for v in grid.world_to_cell(np.array([12.0, 29.0])))
     occ_list = occ.tolist()
     _check(search(occ, s_rc, g_rc).cost, heapq_astar(occ_list, s_rc, g_rc)[0], "35x35")
-    ref = time_calls(lambda: heapq_astar(occ_list, s_rc, g_rc), 200)
-    fast = time_calls(lambda: search(occ, s_rc, g_rc), 1000)
-    rows.append(row("A* search 35x35 (dfcoa_s1 at 1 cell/m)", fast, ref_name, ref))
-    peer = pyastar2d_calls(occ, s_rc, g_rc, 1000)
+    peer = pyastar2d_call(occ, s_rc, g_rc)
+    calls = {"search": (lambda k: search(occ, s_rc, g_rc), 200),
+             "heapq": (lambda k: heapq_astar(occ_list, s_rc, g_rc), 40),
+             "plan": (lambda k: plan(grid, (7.0, 7.0), (12.0, 29.0), AStarParams()), 200),
+             "improved": (lambda k: plan(grid, (7.0, 7.0), (12.0, 29.0),
+                                         ImprovedAStarParams()), 200)}
     if peer is not None:
-        rows.append(row("A* search 35x35 (dfcoa_s1 at 1 cell/m)", fast, PEER, peer))
-    full = time_calls(lambda: plan(grid, (7.0, 7.0), (12.0, 29.0), AStarParams()), 1000)
-    rows.append(row("A* plan 35x35 (inflate 0.5 m, search, shortening, metres)", full,
-                    ref_name, ref))
-    improved = time_calls(lambda: plan(grid, (7.0, 7.0), (12.0, 29.0), ImprovedAStarParams()),
-                          1000)
-    rows.append(row("improved A* plan 35x35 (eq 13 defaults)", improved,
-                    "traditional A* plan, same map", full))
+        calls["peer"] = (peer, 200)
+    t = interleave(calls)
+    rows.append(row("A* search 35x35 (dfcoa_s1 at 1 cell/m)", t["search"], ref_name, t["heapq"]))
+    if peer is not None:
+        rows.append(row("A* search 35x35 (dfcoa_s1 at 1 cell/m)", t["search"], PEER, t["peer"]))
+    rows.append(row("A* plan 35x35 (inflate 0.5 m, search, shortening, metres)", t["plan"],
+                    ref_name, t["heapq"]))
+    rows.append(row("improved A* plan 35x35 (eq 13 defaults)", t["improved"],
+                    "traditional A* plan, same map", t["plan"]))
+    rows += per_node_rows()
 
     big = random_grid()
     corner = (big.shape[0] - 1, big.shape[1] - 1)
@@ -156,14 +192,18 @@ def run() -> list[dict]:
     ref_cost, ref_nodes = heapq_astar(big.tolist(), (0, 0), corner)
     _check(ours.cost, ref_cost, "1024x1024")
     big_list = big.tolist()
-    ref = time_calls(lambda: heapq_astar(big_list, (0, 0), corner), 3)
-    fast = time_calls(lambda: search(big, (0, 0), corner), 15)
     what = (f"A* search 1024x1024, 20% random cells, corner to corner "
             f"({ours.expanded} nodes; reference {ref_nodes})")
-    rows.append(row(what, fast, ref_name, ref))
-    peer = pyastar2d_calls(big, (0, 0), corner, 15)
+    peer = pyastar2d_call(big, (0, 0), corner)
+    calls = {"search": (lambda k: search(big, (0, 0), corner), 3)}
     if peer is not None:
-        rows.append(row(what, fast, PEER, peer))
+        calls["peer"] = (peer, 3)
+    t = interleave(calls)
+    ref = interleave({"heapq": (lambda k: heapq_astar(big_list, (0, 0), corner), 1),
+                      "search": (lambda k: search(big, (0, 0), corner), 1)})
+    rows.append(row(what, ref["search"], ref_name, ref["heapq"]))
+    if peer is not None:
+        rows.append(row(what, t["search"], PEER, t["peer"]))
     return rows
 
 

@@ -1,12 +1,15 @@
-"""Benchmark row (f): ``make figures`` from an empty result cache (issue 7).
+"""Benchmark row (f): ``make figures`` from a fresh clone (issues 7 and 21).
 
-Run ``python -m benchmarks.bench_figures``. It runs ``dfcoa figures`` once, in
-a subprocess, into a fresh temporary output folder and result cache, and
-reports its wall time (one sample: the run takes minutes). The numba kernel
-cache is whatever this checkout has: warm after any earlier run, cold on a
-fresh clone, where compiling the kernels adds about 30 s of CPU per worker.
-``make bench`` includes the row; set ``BENCH_FIGURES=0`` to leave it out.
-There is no peer: the row is checked against the 5 min target alone.
+Run ``python -m benchmarks.bench_figures``. It clones this checkout's HEAD
+into a temporary folder (no numba kernel cache, no result cache, no outputs)
+and runs ``dfcoa figures`` there once, in a subprocess with this
+virtualenv's Python, reporting its wall time (one sample: the run takes
+minutes). A second row times what numba compilation costs in such a clone:
+one second of every registered controller on three scenarios, first with the
+clone's empty kernel cache, then again with the cache the first pass wrote.
+Creating the virtualenv is not included (``make`` does it once per machine).
+``make bench`` includes both rows; set ``BENCH_FIGURES=0`` to leave them out.
+There is no peer: row (f) is checked against the 5 min target alone.
 """
 
 from __future__ import annotations
@@ -20,26 +23,63 @@ from pathlib import Path
 
 import numpy as np
 
-WHAT = "make figures from an empty result cache (dfcoa figures, 2 workers), one run"
+from benchmarks.timing import row
+
+WHAT = "make figures from a fresh clone (dfcoa figures, 2 workers, venv present), one run"
+ROOT = Path(__file__).resolve().parents[1]
+
+#: One second of every controller on S1, crossing and corridor: every kernel compiles.
+WARM_UP = """
+import time
+from dfcoa_opt.control.registry import available, build_controller
+from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.sim.simulator import Simulator
+t0 = time.perf_counter()
+for name in available() + ["goto_slot+cbf", "goto_slot+orca"]:
+    for path in ("scenarios/dfcoa_s1.toml", "scenarios/bench/crossing.toml",
+                 "scenarios/bench/corridor.toml"):
+        sc = load_scenario(path, overrides={"t_max": 1.0})
+        Simulator(sc, build_controller(name, sc.spec.controllers, sc.source), 0).run()
+print(time.perf_counter() - t0)
+"""
+
+
+def _clone(tmp: str) -> Path:
+    """A fresh clone of HEAD in ``tmp`` (committed files only)."""
+    dest = Path(tmp) / "clone"
+    subprocess.run(["git", "clone", "--quiet", "--no-hardlinks", str(ROOT), str(dest)],
+                   check=True)
+    return dest
+
+
+def _python(clone: Path, *args: str) -> subprocess.CompletedProcess:
+    """Run this virtualenv's Python in ``clone`` on the clone's sources."""
+    env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONPATH": str(clone)}
+    return subprocess.run([sys.executable, *args], check=True, cwd=clone, env=env,
+                          capture_output=True, text=True)
 
 
 def run() -> list[dict]:
-    """Time one ``dfcoa figures``; an empty list when ``BENCH_FIGURES=0``."""
+    """Rows (f) and the numba compilation; an empty list when ``BENCH_FIGURES=0``."""
     if os.environ.get("BENCH_FIGURES", "1") == "0":
-        print("BENCH_FIGURES=0: row (f), make figures, left out")
+        print("BENCH_FIGURES=0: row (f), make figures in a fresh clone, and the numba row "
+              "left out")
         return []
-    root = Path(__file__).resolve().parents[1]
+    rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, "-m", "dfcoa_opt", "figures", "--out", f"{tmp}/out",
-               "--cache", f"{tmp}/cache", "--scenarios", str(root / "scenarios"),
-               "--no-progress"]
+        clone = _clone(tmp)
+        cold = float(_python(clone, "-c", WARM_UP).stdout.split()[-1])
+        warm = float(_python(clone, "-c", WARM_UP).stdout.split()[-1])
+        rows.append(row(f"numba compilation in a fresh clone: every controller's kernels "
+                        f"({cold - warm:.0f} s)", np.array([cold * 1e6]),
+                        "same warm-up with the kernel cache it wrote", np.array([warm * 1e6])))
+    with tempfile.TemporaryDirectory() as tmp:
+        clone = _clone(tmp)
         t0 = time.perf_counter()
-        subprocess.run(cmd, check=True, cwd=root, env={**os.environ, "MPLBACKEND": "Agg"})
+        _python(clone, "-m", "dfcoa_opt", "figures", "--out", f"{tmp}/out", "--no-progress")
         seconds = time.perf_counter() - t0
-    us = np.array([seconds * 1e6])
-    return [{"what": f"{WHAT} ({seconds:.0f} s)", "median_us": float(us[0]),
-             "min_us": float(us[0]), "max_us": float(us[0]), "samples": 1,
-             "reference": None, "ref_median_us": float("nan"), "ratio": float("nan")}]
+    rows.append(row(f"{WHAT} ({seconds:.0f} s)", np.array([seconds * 1e6])))
+    return rows
 
 
 if __name__ == "__main__":

@@ -2,16 +2,15 @@
 
 Run ``python -m benchmarks.bench_lidar``. Each row times one call with
 ``time.perf_counter`` after a warm-up call (numba compilation excluded), cycling
-over the same random free poses for the simulator and its reference.
+over the same random free poses for the simulator and its reference, in
+interleaved repetitions (:mod:`benchmarks.timing`).
 """
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
-
 import numpy as np
 
+from benchmarks.timing import REPS, interleave, print_rows, row
 from dfcoa_opt.sim.schema import LidarSpec
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.lidar import Lidar
@@ -22,6 +21,8 @@ RESOLUTION = 10.0  # cells per metre -> 350 x 350 cells
 N_RECTS = 15
 BEAMS = 120
 SAMPLES = 400
+#: Calls per interleaved repetition (REPS of them make SAMPLES).
+PER_REP = SAMPLES // REPS
 
 
 def make_grid(seed: int = 0) -> OccupancyGrid:
@@ -63,33 +64,6 @@ def numpy_sampling_scan(grid: OccupancyGrid, pose: np.ndarray, angles: np.ndarra
     return np.where(hit.any(axis=1), t[first], np.inf)
 
 
-def time_calls(fn: Callable[[int], object], samples: int) -> np.ndarray:
-    """Per-call times in us of ``fn(k)`` for ``k = 0 .. samples-1`` (after one warm-up)."""
-    fn(0)
-    out = np.empty(samples)
-    for k in range(samples):
-        t0 = time.perf_counter()
-        fn(k)
-        out[k] = time.perf_counter() - t0
-    return out * 1e6
-
-
-def print_rows(rows: list[dict]) -> None:
-    """Print rows made by :func:`row`, one line each (``python -m benchmarks.bench_*``)."""
-    for r in rows:
-        print(f"{r['what']}: median {r['median_us']:.1f} us (min {r['min_us']:.1f}, "
-              f"max {r['max_us']:.1f}, n={r['samples']}); {r['reference']}: "
-              f"{r['ref_median_us']:.1f} us; ratio {r['ratio']:.2f}x")
-
-
-def row(what: str, ours: np.ndarray, reference: str, ref: np.ndarray) -> dict:
-    """One result row (medians, extremes and the speed-up ``ref / ours``)."""
-    med, ref_med = float(np.median(ours)), float(np.median(ref))
-    return {"what": what, "median_us": med, "min_us": float(ours.min()),
-            "max_us": float(ours.max()), "samples": len(ours), "reference": reference,
-            "ref_median_us": ref_med, "ratio": ref_med / med}
-
-
 def run() -> list[dict]:
     """Time the scans; returns one dict per configuration."""
     grid = make_grid()
@@ -99,14 +73,16 @@ def run() -> list[dict]:
     for rmax in (10.0, 50.0):
         lidar = Lidar(LidarSpec(beams=BEAMS, range_max=rmax), grid)
         angles = lidar.scan(poses[:1]).angles
-        fast = time_calls(lambda k, lid=lidar: lid.scan(singles[k % len(singles)]), SAMPLES)
-        plain = time_calls(lambda k, lid=lidar: lid.scan(singles[k % len(singles)], skip=False),
-                           SAMPLES)
-        ref = time_calls(lambda k, a=angles, r=rmax: numpy_sampling_scan(
-            grid, poses[k % len(poses)], a, r), SAMPLES)
+        t = interleave({
+            "fast": (lambda k, lid=lidar: lid.scan(singles[k % len(singles)]), PER_REP),
+            "plain": (lambda k, lid=lidar: lid.scan(singles[k % len(singles)], skip=False),
+                      PER_REP),
+            "ref": (lambda k, a=angles, r=rmax: numpy_sampling_scan(
+                grid, poses[k % len(poses)], a, r), PER_REP)})
         what = f"lidar scan {BEAMS} beams, 350x350 grid, range_max {rmax:g} m"
-        rows.append(row(what, fast, "numpy ray sampling (half-cell steps)", ref))
-        rows.append(row(what, fast, "numba DDA without distance-field skipping", plain))
+        rows.append(row(what, t["fast"], "numpy ray sampling (half-cell steps)", t["ref"]))
+        rows.append(row(what, t["fast"], "numba DDA without distance-field skipping",
+                        t["plain"]))
 
     # the simulator's use: 4 robots, their bodies (own one excluded) and 2 moving discs
     lidar = Lidar(LidarSpec(beams=BEAMS, range_max=10.0), grid)
@@ -115,11 +91,12 @@ def run() -> list[dict]:
     discs = [np.vstack([p[:, :2], extra]) for p in four]
     radii = np.r_[np.full(4, 0.3), 0.5, 0.5]
     owner = np.r_[np.arange(4), -1, -1]
-    fast = time_calls(lambda k: lidar.scan(four[k % 15], discs[k % 15], radii, owner), SAMPLES)
-    plain = time_calls(lambda k: lidar.scan(four[k % 15], discs[k % 15], radii, owner,
-                                            skip=False), SAMPLES)
+    t = interleave({
+        "fast": (lambda k: lidar.scan(four[k % 15], discs[k % 15], radii, owner), PER_REP),
+        "plain": (lambda k: lidar.scan(four[k % 15], discs[k % 15], radii, owner, skip=False),
+                  PER_REP)})
     rows.append(row("lidar scan 4 robots + 6 discs, 120 beams, 350x350 grid, range_max 10 m",
-                    fast, "numba DDA without distance-field skipping", plain))
+                    t["fast"], "numba DDA without distance-field skipping", t["plain"]))
 
     # a large swarm: 1000 robots and 1000 discs (every robot's body), 35 m and 300 m worlds
     body_r = np.full(1000, 0.3)
@@ -127,11 +104,12 @@ def run() -> list[dict]:
     for side in (SIZE_M, 300.0):
         many = free_poses(grid, 1000) * [side / SIZE_M, side / SIZE_M, 1.0]
         xy = np.ascontiguousarray(many[:, :2])
-        fast = time_calls(lambda k, p=many, c=xy: lidar.scan(p, c, body_r, body_owner), 15)
-        plain = time_calls(lambda k, p=many, c=xy: lidar.scan(p, c, body_r, body_owner,
-                                                              skip=False), 15)
+        t = interleave({
+            "fast": (lambda k, p=many, c=xy: lidar.scan(p, c, body_r, body_owner), 3),
+            "plain": (lambda k, p=many, c=xy: lidar.scan(p, c, body_r, body_owner, skip=False),
+                      3)})
         rows.append(row(f"lidar scan 1000 robots + 1000 discs, {side:g} m world, 350x350 grid",
-                        fast, "numba DDA without distance-field skipping", plain))
+                        t["fast"], "numba DDA without distance-field skipping", t["plain"]))
     return rows
 
 

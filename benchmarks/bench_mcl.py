@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.bench_lidar import print_rows, row
 from benchmarks.bench_sim import scanning
+from benchmarks.timing import REPS, print_rows, row
 from dfcoa_opt.control.registry import make_controller
 from dfcoa_opt.localization import mcl_models
 from dfcoa_opt.localization.mcl import MonteCarloLocalization
@@ -29,7 +29,8 @@ from dfcoa_opt.sim.simulator import Simulator
 from dfcoa_opt.world.lidar import Lidar
 
 ROOT = Path(__file__).resolve().parents[1] / "scenarios"
-RUNS = 3
+#: The estimator's own numba sensor update (the reference swaps it out).
+NUMBA_SENSOR_UPDATE = mcl_models.sensor_update
 
 
 def s1_path() -> Path:
@@ -89,51 +90,57 @@ def recorded_run() -> tuple:
     return sc, log.pose, scans
 
 
-def time_estimates(sc, poses: np.ndarray, scans: list) -> np.ndarray:
-    """Per-step times (us) of ``estimate()`` over the recorded run (after a warm-up pass)."""
-    est = MonteCarloLocalization(sc)
+def time_estimates(est: MonteCarloLocalization, sc, poses: np.ndarray,
+                   scans: list) -> np.ndarray:
+    """Per-step times (us) of ``estimate()`` over the recorded run (one pass)."""
     twist = np.zeros((poses.shape[1], 2))
     out = np.empty(len(poses))
-    for warm in (True, False):
-        est.reset(np.random.default_rng(0))
-        for k, (p, scan) in enumerate(zip(poses, scans, strict=True)):
-            t0 = time.perf_counter()
-            est.estimate(p, twist, scan, sc.spec.dt)
-            if not warm:
-                out[k] = time.perf_counter() - t0
+    est.reset(np.random.default_rng(0))
+    for k, (p, scan) in enumerate(zip(poses, scans, strict=True)):
+        t0 = time.perf_counter()
+        est.estimate(p, twist, scan, sc.spec.dt)
+        out[k] = time.perf_counter() - t0
     return out * 1e6
 
 
-def _per_step_and_run(sc) -> tuple[np.ndarray, np.ndarray]:
-    sim = Simulator(sc, scanning("goto_slot"))  # the LiDAR runs with truth too
-    sim.run()  # warm-up
-    step, whole = np.empty(RUNS), np.empty(RUNS)
-    for k in range(RUNS):
-        t0 = time.perf_counter()
-        log = sim.run()
-        whole[k] = time.perf_counter() - t0
-        step[k] = log.meta["wall_time"] / log.meta["steps"]
-    return step * 1e6, whole * 1e6
+def _numpy_sensor(on: bool) -> None:
+    """Swap the numba sensor update for :func:`numpy_sensor_update` (or back)."""
+    mcl_models.sensor_update = numpy_sensor_update if on else NUMBA_SENSOR_UPDATE
 
 
 def run() -> list[dict]:
-    """Time MCL on S1; one dict per row."""
+    """Time MCL on S1; one dict per row, ours and the reference in alternate repetitions."""
     sc, poses, scans = recorded_run()
-    ours = time_estimates(sc, poses, scans)
-    saved = mcl_models.sensor_update
+    est = MonteCarloLocalization(sc)
+    ours, ref = [], []
     try:
-        mcl_models.sensor_update = numpy_sensor_update
-        ref = time_estimates(sc, poses, scans)
+        for use_numpy in (False, True):  # warm-up passes (numba compilation)
+            _numpy_sensor(use_numpy)
+            time_estimates(est, sc, poses, scans)
+        for rep in range(REPS):
+            for use_numpy in ((False, True) if rep % 2 == 0 else (True, False)):
+                _numpy_sensor(use_numpy)
+                (ref if use_numpy else ours).append(time_estimates(est, sc, poses, scans))
     finally:
-        mcl_models.sensor_update = saved
+        _numpy_sensor(False)
     rows = [row(f"mcl estimate, 4 robots, 120 beams, S1 map ({len(poses)} steps)", ours,
                 "same with vectorised-numpy sensor update", ref)]
-    mcl_step, mcl_run = _per_step_and_run(sc)
-    truth_step, truth_run = _per_step_and_run(load_scenario(s1_path()))
-    rows.append(row("simulator step with mcl, 4 unicycles, 120-beam LiDAR, S1 map", mcl_step,
-                    "same step with truth localization", truth_step))
-    rows.append(row("whole S1 run with mcl (goto_slot)", mcl_run,
-                    "same run with truth localization", truth_run))
+    sims = {"mcl": Simulator(sc, scanning("goto_slot")),  # the LiDAR runs with truth too
+            "truth": Simulator(load_scenario(s1_path()), scanning("goto_slot"))}
+    step: dict[str, list[np.ndarray]] = {k: [] for k in sims}
+    whole: dict[str, list[np.ndarray]] = {k: [] for k in sims}
+    for sim in sims.values():
+        sim.run()  # warm-up
+    for rep in range(REPS):
+        for name in (list(sims) if rep % 2 == 0 else list(sims)[::-1]):
+            t0 = time.perf_counter()
+            log = sims[name].run()
+            whole[name].append(np.array([time.perf_counter() - t0]) * 1e6)
+            step[name].append(np.array([log.meta["wall_time"] / log.meta["steps"]]) * 1e6)
+    rows.append(row("simulator step with mcl, 4 unicycles, 120-beam LiDAR, S1 map", step["mcl"],
+                    "same step with truth localization", step["truth"]))
+    rows.append(row("whole S1 run with mcl (goto_slot)", whole["mcl"],
+                    "same run with truth localization", whole["truth"]))
     return rows
 
 

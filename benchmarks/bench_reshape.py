@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.timing import row
 from dfcoa_opt.control.registry import build_controller
 from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.simulator import Simulator
@@ -38,10 +39,7 @@ def run() -> list[dict]:
     rows = []
     for rel, n in CASES:
         t = plan_times_us(ROOT / rel)
-        rows.append({"what": f"reshape planning per replanning, {Path(rel).stem} (N={n})",
-                     "median_us": float(np.median(t)), "min_us": float(t.min()),
-                     "max_us": float(t.max()), "samples": len(t), "reference": None,
-                     "ref_median_us": float("nan"), "ratio": float("nan")})
+        rows.append(row(f"reshape planning per replanning, {Path(rel).stem} (N={n})", t))
     return rows
 
 

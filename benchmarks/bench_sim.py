@@ -14,14 +14,16 @@ import time
 
 import numpy as np
 
-from benchmarks.bench_lidar import make_grid, numpy_sampling_scan, print_rows, row, time_calls
+from benchmarks.bench_lidar import make_grid, numpy_sampling_scan
+from benchmarks.timing import blocks, interleave, print_rows, row, time_calls
 from dfcoa_opt.control.registry import make_controller
 from dfcoa_opt.sim import neighbours
 from dfcoa_opt.sim.loader import scenario_from_dict
 from dfcoa_opt.sim.simulator import Simulator
 from dfcoa_opt.world.lidar import LaserScan
 
-RUNS = 9
+#: Whole runs per simulator, taken in turns (split into REPS blocks for the ratios).
+RUNS = 10
 
 
 def scanning(controller_id: str) -> object:
@@ -81,8 +83,12 @@ IRSIM_WORLD = {
 }
 
 
-def irsim_step_us(steps: int = 200) -> np.ndarray | None:
+def irsim_step_us(steps: int = 200) -> list[np.ndarray] | None:
     """Per-step times (us) of ir-sim's headless ``env.step()``; None if ir-sim is missing.
+
+    ``steps`` steps in :data:`~benchmarks.timing.REPS` blocks, one block per
+    repetition (the peer runs in its own process state, so it is timed in
+    blocks after ours rather than call for call).
 
     ir-sim is the peer of issue 7 row (d) (``pip install ir-sim``, or the
     ``bench`` extra that ``make bench`` installs). Its world is not ours (discs
@@ -106,7 +112,7 @@ def irsim_step_us(steps: int = 200) -> np.ndarray | None:
         env = irsim.make(str(world), headless=True, log_level="ERROR")
         for _ in range(20):
             env.step()
-        out = time_calls(lambda k: env.step(), steps)
+        out = blocks(time_calls(lambda k: env.step(), steps))
     logging.disable(logging.NOTSET)
     return out
 
@@ -126,6 +132,7 @@ def run() -> list[dict]:
 
     ref_sim.lidar = type("NumpyLidar", (), {"scan": staticmethod(numpy_lidar)})()
     (ref,) = _per_step_us(ref_sim)
+    ours, skipped, ref = blocks(ours), blocks(skipped), blocks(ref)
     rows = [row("simulator step, 4 unicycles with 120-beam LiDAR, 350x350 grid", ours,
                 "same step with numpy-sampling LiDAR", ref)]
     rows.append(row("simulator step, 4 unicycles, LiDAR skipped (goto_slot reads no scan)",
@@ -138,14 +145,18 @@ def run() -> list[dict]:
     for n in (16, 32, 48, 64, 128):
         pts = rng.uniform(0, np.sqrt(n) * 2.0, (n, 2))
         saved = neighbours.DENSE_MAX
+
+        def query(dense_max: int, p: np.ndarray = pts) -> object:
+            neighbours.DENSE_MAX = dense_max
+            return neighbours.proximity(p, 10.0, 10, 0.4)
+
         try:
-            neighbours.DENSE_MAX = 10**9
-            dense = time_calls(lambda k, p=pts: neighbours.proximity(p, 10.0, 10, 0.4), 300)
-            neighbours.DENSE_MAX = 0
-            tree = time_calls(lambda k, p=pts: neighbours.proximity(p, 10.0, 10, 0.4), 300)
+            t = interleave({"dense": (lambda k: query(10**9), 60),
+                            "tree": (lambda k: query(0), 60)})
         finally:
             neighbours.DENSE_MAX = saved
-        rows.append(row(f"neighbour query N={n}, dense matrix", dense, "cKDTree", tree))
+        rows.append(row(f"neighbour query N={n}, dense matrix", t["dense"], "cKDTree",
+                        t["tree"]))
     return rows
 
 

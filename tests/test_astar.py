@@ -12,7 +12,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.planning import postprocess
-from dfcoa_opt.planning.astar import AStarParams, plan, search
+from dfcoa_opt.planning.astar import AStarParams, obstacle_term, plan, search
 from dfcoa_opt.planning.astar_improved import (
     PAPER_CLAIMS,
     ImprovedAStarParams,
@@ -276,6 +276,33 @@ def test_obstacle_term_keeps_raw_path_farther_from_obstacles():
     mean_clr = [postprocess.path_clearance(grid, r.raw_path)[1].mean() for r in (plain, improved)]
     assert mean_clr[1] > mean_clr[0]
     assert improved.search.cost >= plain.search.cost
+
+
+@pytest.mark.parametrize(("shape", "window"), [((23, 31), 1.5), ((40, 40), 4.7), ((6, 9), 15.0),
+                                             ((12, 12), 0.5)])
+def test_obstacle_term_is_the_brute_force_sum(shape, window):
+    """Eq 13's sum from one FFT per map equals the sum over the window's cells, every cell."""
+    occ = np.random.default_rng(len(shape) + int(10 * window)).random(shape) < 0.25
+    rows, cols = np.nonzero(occ)
+    want = np.zeros(shape)
+    for r in range(shape[0]):
+        for c in range(shape[1]):
+            d = np.hypot(rows - r, cols - c)
+            want[r, c] = np.sum(1.0 / d[(d > 0) & (d <= window)])
+    np.testing.assert_allclose(obstacle_term(occ, window), want, rtol=1e-9, atol=1e-12)
+    assert np.all((obstacle_term(occ, window) == 0) == (want == 0))
+
+
+def test_improved_search_with_the_kept_field_is_the_same_search():
+    occ = random_map(np.random.default_rng(7), (50, 60), 0.2, "blocks")
+    occ[:2, :2] = occ[-2:, -2:] = False
+    opts = {"h_gain": 0.5, "o_gain": 1.0, "window": 2.5}
+    fresh = search(occ, (0, 0), (49, 59), **opts)
+    kept = search(occ, (0, 0), (49, 59), obstacle_field=obstacle_term(occ, 2.5), **opts)
+    assert fresh.found and fresh.expanded == kept.expanded and fresh.cost == kept.cost
+    np.testing.assert_array_equal(fresh.cells, kept.cells)
+    with pytest.raises(ValueError, match="obstacle_field has shape"):
+        search(occ, (0, 0), (49, 59), obstacle_field=np.zeros((3, 3)), **opts)
 
 
 # ------------------------------------------------------------------ registration, options

@@ -1,12 +1,16 @@
-"""k nearest neighbours within a radius, by a uniform cell grid (numba).
+"""k nearest neighbours within a radius, by a hashed cell grid (numba).
 
 RVO2's agent query: the ``k`` nearest *other* agents with squared distance
 strictly below ``max_dist**2``, nearest first; once ``k`` are found the search
 radius shrinks to the farthest kept one. Points are binned into square cells of
-side ``max_dist`` (grown when the bounding box would need more than ``4 N + 64``
-cells), so the 3 x 3 block around a point's cell holds every candidate.
-Scipy's ``cKDTree`` gives the same sets (tested) but costs about 0.7 ms for
-1000 points here, more than a whole RVO2 step (``benchmarks/bench_orca.py``).
+side ``max_dist``, so the 3 x 3 block around a point's cell holds every
+candidate. The cells are hashed into a table of about 2 N buckets (spatial
+hashing), so the grid costs O(N) however far apart the points are (a dense
+grid over the bounding box of a 10,000-agent circle of radius 8 km would need
+a million cells); a bucket may hold points of other cells, which the query
+skips by comparing cell coordinates. Scipy's ``cKDTree`` gives the same sets
+(tested) but costs about 0.7 ms for 1000 points here, more than a whole RVO2
+step (``benchmarks/bench_orca.py``).
 """
 
 from __future__ import annotations
@@ -18,38 +22,49 @@ import numpy as np
 from numpy.typing import NDArray
 
 
+@numba.njit(cache=True, inline="always")
+def _bucket(cx, cy, mask):  # pragma: no cover - numba
+    """Hash of cell ``(cx, cy)`` into ``mask + 1`` buckets (large-prime XOR hashing)."""
+    return ((cx * 73856093) ^ (cy * 19349663)) & mask
+
+
 @numba.njit(cache=True)
-def _bin(pos, cell, x0, y0, nx, ny):  # pragma: no cover - numba
+def _bin(pos, cell, x0, y0, mask):  # pragma: no cover - numba
+    """Cells of the points and a counting sort of the points by bucket (stable)."""
     n = pos.shape[0]
+    cxs = np.empty(n, np.int64)
+    cys = np.empty(n, np.int64)
     key = np.empty(n, np.int64)
+    start = np.zeros(mask + 2, np.int64)
     for i in range(n):
-        cx = min(int((pos[i, 0] - x0) / cell), nx - 1)
-        cy = min(int((pos[i, 1] - y0) / cell), ny - 1)
-        key[i] = cy * nx + cx
-    order = np.argsort(key, kind="mergesort")
-    start = np.zeros(nx * ny + 1, np.int64)
-    for i in range(n):
+        cxs[i] = int((pos[i, 0] - x0) / cell)
+        cys[i] = int((pos[i, 1] - y0) / cell)
+        key[i] = _bucket(cxs[i], cys[i], mask)
         start[key[i] + 1] += 1
-    for c in range(nx * ny):
+    for c in range(mask + 1):
         start[c + 1] += start[c]
-    return order, start
+    fill = start[:-1].copy()
+    order = np.empty(n, np.int64)
+    for i in range(n):
+        order[fill[key[i]]] = i
+        fill[key[i]] += 1
+    return order, start, cxs, cys
 
 
 @numba.njit(cache=True, parallel=True)
-def _query(pos, k, max_dist, cell, x0, y0, nx, ny, order, start, idx, dist_sq, count
+def _query(pos, k, max_dist, mask, order, start, cxs, cys, idx, dist_sq, count
            ):  # pragma: no cover - numba
     for i in numba.prange(pos.shape[0]):
         px, py = pos[i, 0], pos[i, 1]
-        cx = min(int((px - x0) / cell), nx - 1)
-        cy = min(int((py - y0) / cell), ny - 1)
+        cx, cy = cxs[i], cys[i]
         range_sq = max_dist * max_dist
         m = 0
-        for gy in range(max(cy - 1, 0), min(cy + 2, ny)):
-            for gx in range(max(cx - 1, 0), min(cx + 2, nx)):
-                c = gy * nx + gx
-                for s in range(start[c], start[c + 1]):
+        for gy in range(cy - 1, cy + 2):
+            for gx in range(cx - 1, cx + 2):
+                b = _bucket(gx, gy, mask)
+                for s in range(start[b], start[b + 1]):
                     j = order[s]
-                    if j == i:
+                    if j == i or cxs[j] != gx or cys[j] != gy:
                         continue
                     dx = px - pos[j, 0]
                     dy = py - pos[j, 1]
@@ -89,12 +104,8 @@ def knn_within(pos: NDArray[np.float64], k: int, max_dist: float
     if n < 2:
         return idx, count
     lo = pos.min(axis=0)
-    span = np.maximum(pos.max(axis=0) - lo, 1e-9)
-    cell = float(max_dist)
-    while math.ceil(span[0] / cell) * math.ceil(span[1] / cell) > 4 * n + 64:
-        cell *= 2.0
-    nx, ny = (max(1, math.ceil(s / cell)) for s in span)
-    order, start = _bin(pos, cell, lo[0], lo[1], nx, ny)
-    _query(pos, k, float(max_dist), cell, lo[0], lo[1], nx, ny, order, start, idx,
-           np.empty((n, k)), count)
+    mask = (1 << max(4, math.ceil(math.log2(2 * n)))) - 1  # >= 2 N buckets, a power of 2
+    order, start, cxs, cys = _bin(pos, float(max_dist), lo[0], lo[1], mask)
+    _query(pos, k, float(max_dist), mask, order, start, cxs, cys, idx, np.empty((n, k)),
+           count)
     return idx, count

@@ -196,12 +196,19 @@ def inscribed_ellipse(A: FloatArray, b: FloatArray, C0: FloatArray, d0: FloatArr
                               n[:, 1] * A[:, 1]])
         return -np.column_stack([dc, A])
 
+    def det(z: FloatArray) -> float:
+        # SLSQP's line search may try huge steps: an overflowing or non-positive
+        # determinant counts as the smallest one (the largest cost), not as nan
+        with np.errstate(over="ignore", invalid="ignore"):
+            v = float(z[0] * z[2] - z[1] * z[1])
+        return v if math.isfinite(v) and v > 1e-300 else 1e-300
+
     def cost(z: FloatArray) -> float:
-        return -math.log(max(z[0] * z[2] - z[1] ** 2, 1e-300))
+        return -math.log(det(z))
 
     def cost_grad(z: FloatArray) -> FloatArray:
-        det = max(z[0] * z[2] - z[1] ** 2, 1e-300)
-        return np.array([-z[2], 2.0 * z[1], -z[0], 0.0, 0.0]) / det
+        with np.errstate(over="ignore", invalid="ignore"):
+            return np.array([-z[2], 2.0 * z[1], -z[0], 0.0, 0.0]) / det(z)
 
     start = np.array([C0[0, 0], C0[0, 1], C0[1, 1], *d0])
     for _ in range(60):

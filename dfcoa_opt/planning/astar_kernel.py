@@ -38,27 +38,26 @@ def _heuristic(r, c, gr, gc, kind):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def astar_kernel(st, wp, occ, s, t, kind, corner_cutting, h_gain, big_r, o_gain, offsets, inv_dist,
-            shortcut):  # pragma: no cover - numba
+def astar_kernel(st, wp, s, t, kind, corner_cutting, h_gain, big_r, o_gain, obst,
+                 shortcut):  # pragma: no cover - numba
     """A* on the padded flat state array ``st`` (row stride ``wp``), s -> t.
 
     Returns ``(path cells (P, 2) (row, col) unpadded, g(goal), expanded)``.
-    Priority (eq 12-13, cells): f = g + h - h_gain h (R - r) / R + o_gain o_sum,
-    ``o_sum`` = sum of ``inv_dist`` over the occupied ``offsets`` around the node
-    in ``occ``; the traditional search has h_gain = o_gain = 0 and then pushes
+    Priority (eq 12-13, cells): f = g + h - h_gain h (R - r) / R + o_gain obst[row, col],
+    ``obst`` = the ``(H, W)`` eq 13 obstacle sums of the unpadded grid
+    (:func:`dfcoa_opt.planning.astar.obstacle_term`; one read per node). The
+    traditional search has h_gain = o_gain = 0 and then pushes
     successors whose f equals the current minimum on a LIFO stack instead of the
     heap (valid for a consistent h: nothing open has a smaller f). The heap is
     an indexed 4-ary min-heap (decrease-key), so each node is in it at most once.
     """
     n = st.size
-    n_rows, n_cols = occ.shape
     g = np.empty(n)
     parent = np.empty(n, np.int32)
     pos = np.empty(n, np.int32)
     hk = np.empty(n)
     hn = np.empty(n, np.int32)
     stack = np.empty(n, np.int32)
-    obst = np.empty(n if o_gain > 0.0 else 1)
     use_stack = h_gain == 0.0 and o_gain == 0.0 and not shortcut
     offs = (wp, -wp, 1, -1, wp + 1, wp - 1, -wp + 1, -wp - 1)
     drs = (1, -1, 0, 0, 1, 1, -1, -1)
@@ -148,14 +147,6 @@ def astar_kernel(st, wp, occ, s, t, kind, corner_cutting, h_gain, big_r, o_gain,
                 continue
             vr = ur + drs[k]
             vc = uc + dcs[k]
-            if o_gain > 0.0 and sv == _FREE:  # first visit: eq 13 obstacle sum
-                acc = 0.0
-                for m in range(offsets.shape[0]):
-                    wr = vr - 1 + offsets[m, 0]
-                    wc = vc - 1 + offsets[m, 1]
-                    if 0 <= wr < n_rows and 0 <= wc < n_cols and occ[wr, wc]:
-                        acc += inv_dist[m]
-                obst[v] = acc
             g[v] = ng
             parent[v] = u
             h = _heuristic(vr, vc, gr, gc, kind)
@@ -163,7 +154,7 @@ def astar_kernel(st, wp, occ, s, t, kind, corner_cutting, h_gain, big_r, o_gain,
             if h_gain != 0.0 and big_r > 0.0:
                 fv -= h_gain * h * (big_r - math.sqrt((vr - gr) ** 2 + (vc - gc) ** 2)) / big_r
             if o_gain > 0.0:
-                fv += o_gain * obst[v]
+                fv += o_gain * obst[vr - 1, vc - 1]
             if use_stack and sv == _FREE and fv <= f_cur + _TIE * (1.0 + f_cur):
                 st[v] = _STACKED
                 stack[sp] = v
