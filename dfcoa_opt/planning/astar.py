@@ -18,6 +18,11 @@ expanded from a LIFO stack without touching the heap, and heap keys are
 ``f - 1e-9 g``. This changes neither optimality nor the cost, only the number
 of nodes expanded (fewer on open maps) and the speed.
 
+``method="jps"`` runs jump point search instead
+(:mod:`dfcoa_opt.planning.jps_kernel`): the same optimal cost on the same moves
+without corner cutting, fewer nodes expanded (jump points), not valid with
+corner cutting or eq 13's terms (``search`` refuses them).
+
 :func:`plan` wraps the search for world coordinates: obstacle inflation, the
 search, line-of-sight shortening, optional smoothing, conversion to metres.
 """
@@ -35,9 +40,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.signal import fftconvolve
 
+from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.params import param
 from dfcoa_opt.planning import postprocess
 from dfcoa_opt.planning.astar_kernel import astar_kernel
+from dfcoa_opt.planning.jps_kernel import jps_kernel
 from dfcoa_opt.planning.registry import register_planner
 from dfcoa_opt.world.grid import OccupancyGrid
 
@@ -64,10 +71,24 @@ class AStarParams:
     shorten: bool = param(True, doc="Remove redundant nodes by exact line-of-sight checks.")
     smooth: bool = param(False, doc="Round the shortened path's corners where free (Chaikin).")
     smooth_iterations: int = param(3, doc="Chaikin rounds when smooth is true.", ge=1, le=8)
+    method: Literal["astar", "jps"] = param(
+        "astar", doc="Search: plain A* or jump point search (same optimal cost, fewer nodes "
+                     "expanded; only without corner cutting and eq 13 terms).")
 
     def search_options(self, resolution: float) -> dict[str, Any]:
         """Keyword arguments of :func:`search` for this planner (no eq 13 terms)."""
-        return {"heuristic": self.heuristic, "corner_cutting": self.corner_cutting}
+        return {"heuristic": self.heuristic, "corner_cutting": self.corner_cutting,
+                "method": self.method}
+
+    def check(self, src: str, key: str) -> None:
+        """``method = "jps"`` only with the options it is optimal for (see :func:`search`)."""
+        if self.method == "jps":
+            o = self.search_options(1.0)
+            bad = jps_conflicts(o["corner_cutting"], o.get("h_gain", 0.0), o.get("o_gain", 0.0),
+                                o.get("goal_shortcut", False))
+            if bad:
+                raise ScenarioError(src, f"{key}.method" if key else "method",
+                                    f"'jps' cannot be combined with {', '.join(bad)}")
 
 
 @dataclass(frozen=True)
@@ -79,7 +100,7 @@ class SearchResult:
             not found. Consecutive cells are 8-neighbours unless the improved
             search's goal shortcut joined the last one by line of sight.
         cost: g(goal) in cells (straight 1, diagonal sqrt 2); ``inf`` when not found.
-        expanded: Nodes expanded (closed).
+        expanded: Nodes expanded (closed); jump points for ``method="jps"``.
         time: Wall time of the search in s.
     """
 
@@ -178,7 +199,20 @@ def _cached_obstacle_term(occ: NDArray[np.bool_], window: float) -> NDArray[np.f
     return field
 
 
-def search(occupied: ArrayLike, start: ArrayLike, goal: ArrayLike, *,
+def jps_conflicts(corner_cutting: bool, h_gain: float, o_gain: float,
+                  goal_shortcut: bool) -> list[str]:
+    """The :func:`search` options that rule out ``method="jps"`` (empty when none).
+
+    JPS prunes by the symmetry of uniform-cost 8-connected moves without corner
+    cutting; corner cutting changes the moves, and eq 13's terms change the
+    priority per cell, so its pruning would no longer be optimal for them.
+    """
+    return [name for name, on in (("corner_cutting", corner_cutting), ("h_gain", h_gain != 0.0),
+                                  ("o_gain", o_gain != 0.0), ("goal_shortcut", goal_shortcut))
+            if on]
+
+
+def search(occupied: ArrayLike, start: ArrayLike, goal: ArrayLike, *, method: str = "astar",
            heuristic: str = "octile", corner_cutting: bool = False, h_gain: float = 0.0,
            o_gain: float = 0.0, window: float = 0.0, goal_shortcut: bool = False,
            obstacle_field: NDArray[np.float64] | None = None) -> SearchResult:
@@ -188,6 +222,10 @@ def search(occupied: ArrayLike, start: ArrayLike, goal: ArrayLike, *,
         occupied: ``(H, W)`` bool, True = blocked; ``occupied[row, col]``.
         start: Start cell ``(row, col)``.
         goal: Goal cell ``(row, col)``.
+        method: ``"astar"`` (every cell a node) or ``"jps"`` (jump point search,
+            :mod:`~dfcoa_opt.planning.jps_kernel`: the same optimal cost, and a
+            path of 8-neighbour cells, but ``expanded`` counts jump points).
+            JPS needs the uniform-cost rules: no corner cutting and no eq 13 terms.
         heuristic: ``"octile"`` or ``"euclidean"`` (cells).
         corner_cutting: See the module docstring.
         h_gain: alpha / const_2 of eq 13 (dimensionless); 0 = traditional.
@@ -207,11 +245,19 @@ def search(occupied: ArrayLike, start: ArrayLike, goal: ArrayLike, *,
         grid, gives an empty path and ``cost = inf``.
 
     Raises:
-        ValueError: Unknown heuristic.
+        ValueError: Unknown heuristic or method, or ``method="jps"`` with corner
+            cutting or an eq 13 term.
     """
     t0 = time.perf_counter()
     if heuristic not in ("octile", "euclidean"):
         raise ValueError(f"heuristic must be 'octile' or 'euclidean', got {heuristic!r}")
+    if method not in ("astar", "jps"):
+        raise ValueError(f"method must be 'astar' or 'jps', got {method!r}")
+    if method == "jps":
+        bad = jps_conflicts(corner_cutting, h_gain, o_gain, goal_shortcut)
+        if bad:
+            raise ValueError("method 'jps' is optimal only for uniform move costs without "
+                             f"corner cutting; it cannot be combined with {', '.join(bad)}")
     occ = np.ascontiguousarray(occupied, dtype=bool)
     sr, sc = (int(v) for v in np.asarray(start).reshape(2))
     gr, gc = (int(v) for v in np.asarray(goal).reshape(2))
@@ -229,6 +275,11 @@ def search(occupied: ArrayLike, start: ArrayLike, goal: ArrayLike, *,
     wp = n_cols + 2
     st = np.ones((n_rows + 2, wp), np.uint8)
     st[1:-1, 1:-1] = occ
+    if method == "jps":
+        cells, cost, expanded = jps_kernel(
+            st.reshape(-1), wp, (sr + 1) * wp + sc + 1, (gr + 1) * wp + gc + 1,
+            0 if heuristic == "octile" else 1)
+        return SearchResult(cells, float(cost), int(expanded), time.perf_counter() - t0)
     cells, cost, expanded = astar_kernel(
         st.reshape(-1), wp, (sr + 1) * wp + sc + 1, (gr + 1) * wp + gc + 1,
         0 if heuristic == "octile" else 1, bool(corner_cutting), float(h_gain),

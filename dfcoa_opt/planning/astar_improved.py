@@ -72,7 +72,8 @@ class ImprovedAStarParams(AStarParams):
         """
         return {"heuristic": self.heuristic, "corner_cutting": self.corner_cutting,
                 "h_gain": self.alpha / self.const2, "o_gain": self.beta / self.const1,
-                "window": self.window * resolution, "goal_shortcut": self.goal_shortcut}
+                "window": self.window * resolution, "goal_shortcut": self.goal_shortcut,
+                "method": self.method}
 
 
 @register_planner("improved_astar", params=ImprovedAStarParams)
