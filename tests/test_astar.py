@@ -120,7 +120,8 @@ def scenario_dict(**leader: object) -> dict:
 
 
 # ------------------------------------------------------------------ oracle
-def test_movingai_arena_all_optimal_lengths():
+@pytest.mark.parametrize("method", ["astar", "jps"])
+def test_movingai_arena_all_optimal_lengths(method):
     grid = load_movingai_map(MOVINGAI / "arena.map")
     n_rows = grid.shape[0]
     problems = movingai_problems()
@@ -128,26 +129,28 @@ def test_movingai_arena_all_optimal_lengths():
     for sx, sy, gx, gy, length in problems:
         s, g = (n_rows - 1 - sy, sx), (n_rows - 1 - gy, gx)  # MovingAI y counts from the top
         for heuristic in ("octile", "euclidean"):
-            res = search(grid.occupied, s, g, heuristic=heuristic)
+            res = search(grid.occupied, s, g, heuristic=heuristic, method=method)
             assert res.cost == pytest.approx(length, abs=1e-6), (sx, sy, gx, gy, heuristic)
             assert len(res.cells) and tuple(res.cells[0]) == s and tuple(res.cells[-1]) == g
             assert_valid_moves(grid.occupied, res.cells)
+            assert postprocess.path_length(res.cells) == pytest.approx(res.cost, abs=1e-9)
         # the same through the world-coordinate wrapper (1 cell/m: cost in cells = m)
         out = plan(grid, (sx + 0.5, n_rows - sy - 0.5), (gx + 0.5, n_rows - gy - 0.5),
-                   AStarParams(inflate=0.0, shorten=False))
+                   AStarParams(inflate=0.0, shorten=False, method=method))
         assert out.search.cost == pytest.approx(length, abs=1e-6)
         assert postprocess.path_length(out.path) == pytest.approx(length, abs=1e-6)
 
 
-def test_random_maps_match_dijkstra_both_heuristics_and_corner_rules():
+@pytest.mark.parametrize("method", ["astar", "jps"])
+def test_random_maps_match_dijkstra_both_heuristics_and_corner_rules(method):
     rng = np.random.default_rng(7)
     for k in range(12):
         occ = random_map(rng, (24, 30), 0.25, "cells" if k % 2 else "blocks")
         s, g = random_free_pair(rng, occ)
-        for cut in (False, True):
+        for cut in (False, True) if method == "astar" else (False,):  # JPS: no corner cutting
             ref = dijkstra_cost(occ, s, g, cut)
             for heuristic in ("octile", "euclidean"):
-                res = search(occ, s, g, heuristic=heuristic, corner_cutting=cut)
+                res = search(occ, s, g, heuristic=heuristic, corner_cutting=cut, method=method)
                 if math.isinf(ref):
                     assert not res.found and math.isinf(res.cost)
                     continue
@@ -350,3 +353,107 @@ def test_compare_planners_rows_and_markdown():
     text = comparison_markdown(rows)
     assert f"{PAPER_CLAIMS['time']:+.0%}" in text and f"{PAPER_CLAIMS['nodes']:+.0%}" in text
     assert "improved_astar" in text and "nodes expanded" in text
+
+
+# ------------------------------------------------------------------ jump point search
+def maze(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
+    """Corridors one cell wide (every other row free, random gaps in the walls between)."""
+    occ = np.ones(shape, dtype=bool)
+    occ[::2] = False
+    occ[1::2] = rng.random((shape[0] // 2, shape[1])) > 0.3
+    return occ
+
+
+def test_jps_matches_astar_on_many_maps():
+    """Same optimal cost as A* (checked against Dijkstra above) on open, cell, block and
+    maze maps; the path is free, 8-connected, cuts no corner and sums to the cost."""
+    rng = np.random.default_rng(21)
+    for k in range(60):
+        shape = tuple(int(v) for v in rng.integers(2, 40, 2))
+        kind = k % 4
+        if kind == 0:
+            occ = np.zeros(shape, dtype=bool)
+        elif kind == 3:
+            occ = maze(rng, shape)
+        else:
+            occ = random_map(rng, shape, rng.uniform(0.05, 0.45), ("cells", "blocks")[kind - 1])
+        if (~occ).sum() < 2:
+            continue
+        for _ in range(4):
+            s, g = random_free_pair(rng, occ)
+            ref = search(occ, s, g)
+            res = search(occ, s, g, method="jps")
+            assert res.found == ref.found
+            if not ref.found:
+                assert res.cells.shape == (0, 2) and math.isinf(res.cost)
+                continue
+            assert res.cost == pytest.approx(ref.cost, abs=1e-9)
+            assert tuple(res.cells[0]) == s and tuple(res.cells[-1]) == g
+            assert_valid_moves(occ, res.cells)
+            assert len({tuple(c) for c in res.cells.tolist()}) == len(res.cells)
+            assert postprocess.path_length(res.cells) == pytest.approx(res.cost, abs=1e-9)
+
+
+def test_jps_expands_few_jump_points_on_open_maps():
+    occ = np.zeros((48, 48), dtype=bool)
+    res = search(occ, (2, 3), (45, 40), method="jps")
+    assert res.cost == pytest.approx(search(occ, (2, 3), (45, 40)).cost)
+    assert res.expanded <= 3  # the start, and the goal reached by one diagonal-first jump
+    assert len(res.cells) == 44  # written out cell by cell
+    occ[10:40, 20] = True  # a wall: a few more jump points, still optimal
+    res = search(occ, (25, 2), (25, 45), method="jps")
+    assert res.cost == pytest.approx(dijkstra_cost(occ, (25, 2), (25, 45)), abs=1e-9)
+    assert res.expanded < search(occ, (25, 2), (25, 45)).expanded / 5
+
+
+def test_jps_unreachable_blocked_outside_and_start_goal():
+    occ = np.zeros((10, 10), dtype=bool)
+    occ[:, 5] = True
+    for s, g in (((2, 2), (2, 8)), ((0, 5), (2, 8)), ((2, 2), (2, 12)), ((-1, 0), (2, 2))):
+        res = search(occ, s, g, method="jps")
+        assert not res.found and res.cells.shape == (0, 2) and math.isinf(res.cost)
+    res = search(occ, (4, 4), (4, 4), method="jps")
+    assert res.found and res.cost == 0.0 and res.cells.tolist() == [[4, 4]]
+    corner = np.zeros((3, 3), dtype=bool)
+    corner[0, 1] = corner[1, 0] = True  # (0, 0) is shut in: no squeezing through the corner
+    assert not search(corner, (0, 0), (2, 2), method="jps").found
+    corner[1, 0] = False  # one side free: no corner cutting, so no diagonal out of (0, 0)
+    res = search(corner, (0, 0), (2, 2), method="jps")
+    assert res.cost == pytest.approx(2.0 + SQRT2) and res.cells[1].tolist() == [1, 0]
+
+
+@pytest.mark.parametrize("options", [{"corner_cutting": True}, {"h_gain": 0.5},
+                                     {"o_gain": 1.0, "window": 2.0}, {"goal_shortcut": True}])
+def test_jps_refuses_what_it_is_not_optimal_for(options):
+    occ = np.zeros((5, 5), dtype=bool)
+    name = next(iter(options))
+    with pytest.raises(ValueError, match=f"jps.*{name}"):
+        search(occ, (0, 0), (4, 4), method="jps", **options)
+    with pytest.raises(ValueError, match="method"):
+        search(occ, (0, 0), (4, 4), method="theta")
+
+
+@pytest.mark.parametrize(("planner", "options"), [
+    ("astar", {"method": "jps", "corner_cutting": True}),
+    ("improved_astar", {"method": "jps"}),  # eq 13 defaults: alpha 0.5, beta 1
+    ("astar", {"method": "dijkstra"}),
+])
+def test_jps_bad_combinations_name_the_key(planner, options):
+    with pytest.raises(ScenarioError, match=r"leader\.planner_options\.method"):
+        scenario_from_dict(scenario_dict(planner=planner, planner_options=options), "s.toml")
+
+
+def test_jps_runs_from_a_scenario_and_plans_like_astar():
+    for planner, options in (("astar", {"method": "jps"}),
+                             ("improved_astar", {"method": "jps", "alpha": 0.0, "beta": 0.0})):
+        sc = scenario_from_dict(scenario_dict(planner=planner,
+                                              planner_options={"inflate": 0.4, **options}))
+        path = sc.leader_path
+        np.testing.assert_array_equal(path[0], [2.0, 2.0])
+        np.testing.assert_array_equal(path[-1], [17.0, 2.0])
+        assert not sc.world.grid.is_occupied_at(postprocess.sample_path(path, 0.05)).any()
+    task = random_tasks(np.random.default_rng(2), 1, (40, 40), 0.2)[0]
+    a = plan(task.grid, task.start, task.goal, AStarParams(inflate=0.0))
+    j = plan(task.grid, task.start, task.goal, AStarParams(inflate=0.0, method="jps"))
+    assert j.search.cost == pytest.approx(a.search.cost, abs=1e-9)
+    assert j.expanded < a.expanded

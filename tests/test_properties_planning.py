@@ -78,6 +78,27 @@ def test_astar_path_is_free_and_as_short_as_dijkstra(problem, heuristic, corner_
     assert abs(length - res.cost) <= 1e-9
 
 
+@settings(max_examples=300, deadline=None)
+@given(problem=grid_problems(), heuristic=st.sampled_from(["octile", "euclidean"]))
+def test_jump_point_search_is_as_short_as_dijkstra(problem, heuristic):
+    """The same properties for ``method="jps"`` (no corner cutting, its only move rule)."""
+    occ, s, g = problem
+    res = search(occ, s, g, heuristic=heuristic, method="jps")
+    ref = math.inf if occ[s] or occ[g] else dijkstra_cost(occ, s, g)
+    assert res.found == math.isfinite(ref)
+    if not res.found:
+        assert res.cells.shape == (0, 2) and math.isinf(res.cost)
+        return
+    cells = res.cells
+    assert abs(res.cost - ref) <= 1e-9
+    assert tuple(cells[0]) == s and tuple(cells[-1]) == g
+    assert (cells >= 0).all() and (cells < np.array(occ.shape)).all()
+    assert_valid_moves(occ, cells)
+    assert len({tuple(c) for c in cells.tolist()}) == len(cells)
+    length = float(np.hypot(*np.diff(cells, axis=0).T).sum())
+    assert abs(length - res.cost) <= 1e-9
+
+
 # ------------------------------------------------------------------ 2. LiDAR bounds
 def _circle(origin, size):
     return st.builds(lambda fx, fy, r: Circle((origin[0] + fx * size[0],
