@@ -5,35 +5,50 @@ paths of the 8-connected grid: straight moves cost 1 cell, diagonal moves
 sqrt(2) cells, and a diagonal move needs both orthogonal side cells free (no
 corner cutting). Among the many equal-cost (symmetric) shortest paths it keeps
 the *diagonal-first* ones, so from each expanded node it scans ahead
-(``jumps``) along straight lines instead of opening every neighbour.
+(*jumps*) along straight lines instead of opening every neighbour.
 
 Rules for this movement model (derived from its move costs; with corner
-cutting the rules would differ):
+cutting they would differ):
 
-- A cell ``y`` reached by a straight step from ``x`` has a *forced* neighbour on
-  a side where the cell beside ``x`` is blocked and the cell beside ``y`` is
-  free: the side cell (and the diagonal ahead on that side) can then only be
-  reached optimally through ``y``, so ``y`` is a jump point.
+- A cell ``y`` entered by a straight step from ``x`` has a *forced* neighbour
+  on a side where the cell beside ``x`` is blocked and the cell beside ``y`` is
+  free: that side cell (and the diagonal ahead on that side) is reached
+  optimally only through ``y``, so ``y`` is a jump point.
 - A diagonal step has no forced neighbours: every cell behind it is reached at
   least as cheaply from the previous cell, whose two side cells are free.
-- A diagonal jump stops at a cell from which a straight jump along either of
-  its two components finds a jump point (or the goal).
-- Expanding a jump point: after a straight arrival, continue straight plus the
-  side move and side diagonal of every forced side; after a diagonal arrival,
-  the diagonal and its two straight components; the start tries all eight.
+- A cell of a diagonal jump from which a straight jump along either component
+  of the diagonal finds a jump point is a jump point too. It is not put in the
+  open list: the straight jumps' results become successors directly and the
+  diagonal goes on ("pruning intermediate jump points", Harabor & Grastien
+  2014). A node's parent is therefore joined to it by the *diagonal-first*
+  octile path (a straight or diagonal segment, or a diagonal then a straight
+  one), whose last step is the direction the node was reached in.
+- Expanding a node: after a straight arrival, straight on plus the side move
+  and the side diagonal of every forced side; after a diagonal arrival, the
+  diagonal and its two straight components; the start tries all eight.
 
-The search over jump points is the A* of :mod:`.astar_kernel` (same indexed
-4-ary heap, same equal-f LIFO stack, same deeper-first tie key). Edges are
-straight or diagonal segments of exact octile length, and the octile and
-Euclidean heuristics stay consistent on them, so closed jump points are never
-reopened and the first goal pop is optimal. Call
-:func:`dfcoa_opt.planning.astar.search` with ``method="jps"``, not this kernel.
+The search over jump points is the A* of :mod:`.astar_kernel`: the same
+indexed 4-ary min-heap with decrease-key, the same equal-f LIFO stack and the
+same deeper-first tie key. Edges have exact octile lengths, and the octile and
+Euclidean heuristics stay consistent on them, so closed nodes are never
+reopened and the first goal pop is optimal.
+
+The heap and the jumps are closures inside the kernel rather than shared
+``njit`` functions: a call to a compiled function that takes arrays costs
+atomic reference-count updates of each array argument (measured: 9 % of the
+1024 x 1024 benchmark for the heap alone, 13 % in the A* kernel), which
+numba does not remove in a loop. The A* kernel writes the same heap inline for
+the same reason. Call :func:`dfcoa_opt.planning.astar.search` with
+``method="jps"``, not these functions.
 """
 
 from __future__ import annotations
 
+import threading
+
 import numba
 import numpy as np
+from numpy.typing import NDArray
 
 from dfcoa_opt.planning.astar_kernel import (
     _BLOCKED,
@@ -46,82 +61,134 @@ from dfcoa_opt.planning.astar_kernel import (
     SQRT2,
     _heuristic,
 )
-from dfcoa_opt.planning.heap4 import heap_pop, heap_sift_up
+
+_WORK = threading.local()
+
+
+def _workspace(n: int) -> tuple[NDArray, ...]:
+    """Per-thread work arrays for ``n`` cells, kept between searches.
+
+    Fresh arrays cost a page fault per 4 KiB page touched (about 2.5 ms, 10 %,
+    on the 1024 x 1024 benchmark). Their contents are never read before the
+    kernel writes them. The arrays of the largest grid searched so far stay
+    allocated (28 bytes a cell).
+    """
+    arrays = getattr(_WORK, "arrays", None)
+    if arrays is None or arrays[0].size < n:
+        arrays = (np.empty(n), np.empty(n, np.int32), np.empty(n, np.int32), np.empty(n),
+                  np.empty(n, np.int32), np.empty(n, np.int32))
+        _WORK.arrays = arrays
+    return tuple(a[:n] for a in arrays)
+
+
+def jps_kernel(st: NDArray[np.uint8], wp: int, s: int, t: int,
+               kind: int) -> tuple[NDArray[np.int64], float, int]:
+    """JPS on the padded flat state array ``st`` (row stride ``wp``), from ``s`` to ``t``.
+
+    Args:
+        st: Flat ``uint8`` grid with a one-cell blocked border: 1 = blocked,
+            0 = free. The search marks open and closed cells in it.
+        wp: Row stride (columns + 2).
+        s: Start index into ``st``.
+        t: Goal index into ``st``.
+        kind: Heuristic, octile (0) or Euclidean (1).
+
+    Returns:
+        ``(cells, cost, expanded)``: path cells ``(P, 2)`` (row, col) of the
+        unpadded grid, consecutive cells 8-neighbours (each edge written out
+        cell by cell), empty when the goal is unreachable; g(goal) in cells
+        (``inf`` when unreachable); the number of closed jump points.
+    """
+    return _jps(st, wp, s, t, kind, *_workspace(st.size))
 
 
 @numba.njit(cache=True)
-def _jump_straight(st, x, d, side, t):  # pragma: no cover - numba
-    """Straight jump from ``x`` by offset ``d``; ``side`` = the perpendicular offset.
-
-    Returns the first jump point (the goal ``t``, or a cell with a forced
-    neighbour) or -1 at a blocked cell (the padded border included).
-    """
-    while True:
-        y = x + d
-        if st[y] == _BLOCKED:
-            return -1
-        if y == t:
-            return y
-        if st[x + side] == _BLOCKED and st[y + side] != _BLOCKED:
-            return y
-        if st[x - side] == _BLOCKED and st[y - side] != _BLOCKED:
-            return y
-        x = y
-
-
-@numba.njit(cache=True)
-def _jump_diagonal(st, wp, x, dv, dh, t, out, k):  # pragma: no cover - numba
-    """Diagonal jump from ``x`` by ``dv + dh`` (``dv = +-wp`` rows, ``dh = +-1`` columns).
-
-    Each step needs both side cells free. A cell of the diagonal from which a
-    straight jump along ``dv`` or ``dh`` finds a jump point is a jump point
-    itself, but it is not returned: its straight jumps' results are written to
-    ``out[k:]`` instead and the diagonal goes on (intermediate jump points
-    pruned, Harabor & Grastien 2014), so they become successors of ``x``
-    directly, joined to it by the diagonal-first path. Stops at a blocked step
-    or at the goal ``t`` (written too). Returns the new ``k``.
-    """
-    while True:
-        if st[x + dv] == _BLOCKED or st[x + dh] == _BLOCKED or st[x + dv + dh] == _BLOCKED:
-            return k
-        x += dv + dh
-        if x == t:
-            out[k] = x
-            return k + 1
-        z = _jump_straight(st, x, dv, 1, t)
-        if z >= 0:
-            out[k] = z
-            k += 1
-        z = _jump_straight(st, x, dh, wp, t)
-        if z >= 0:
-            out[k] = z
-            k += 1
-
-
-@numba.njit(cache=True)
-def jps_kernel(st, wp, s, t, kind):  # pragma: no cover - numba
-    """JPS on the padded flat state array ``st`` (row stride ``wp``), s -> t.
-
-    ``st`` is 1 on blocked cells (its one-cell border included) and 0 elsewhere;
-    the kernel marks open and closed cells in it. ``kind``: heuristic, octile
-    (0) or Euclidean (1). A node's parent is joined to it by the diagonal-first
-    octile path (a straight or diagonal segment, or a diagonal then a straight
-    one); the direction of that path's last step is the node's arrival
-    direction.
-
-    Returns ``(path cells (P, 2) (row, col) unpadded, g(goal) in cells,
-    expanded)``: consecutive path cells are 8-neighbours (each edge is written
-    out cell by cell) and ``expanded`` counts closed jump points.
-    """
-    n = st.size
-    n_rows = n // wp
-    g = np.empty(n)
-    parent = np.empty(n, np.int32)
-    pos = np.empty(n, np.int32)
-    hk = np.empty(n)
-    hn = np.empty(n, np.int32)
-    stack = np.empty(n, np.int32)
+def _jps(st, wp, s, t, kind, g, parent, pos, hk, hn, stack):  # pragma: no cover - numba
+    """The search of :func:`jps_kernel` with its work arrays (each ``st.size`` long)."""
+    n_rows = st.size // wp
     cand = np.empty(8 * (max(n_rows, wp) + 2), np.int64)  # successors of one expansion
+
+    def jump_straight(x, d, side):
+        # first jump point (the goal, or a cell with a forced neighbour) from x
+        # by steps d; side = the perpendicular offset; -1 at a blocked cell
+        while True:
+            y = x + d
+            if st[y] == _BLOCKED:
+                return -1
+            if y == t:
+                return y
+            if st[x + side] == _BLOCKED and st[y + side] != _BLOCKED:
+                return y
+            if st[x - side] == _BLOCKED and st[y - side] != _BLOCKED:
+                return y
+            x = y
+
+    def add_straight(x, d, side, k):
+        v = jump_straight(x, d, side)
+        if v >= 0:
+            cand[k] = v
+            k += 1
+        return k
+
+    def jump_diagonal(x, dv, dh, k):
+        # diagonal steps dv + dh (dv = +-wp, dh = +-1) while both side cells are
+        # free; writes the goal and the straight jumps' results to cand[k:]
+        while True:
+            if st[x + dv] == _BLOCKED or st[x + dh] == _BLOCKED or st[x + dv + dh] == _BLOCKED:
+                return k
+            x += dv + dh
+            if x == t:
+                cand[k] = x
+                return k + 1
+            k = add_straight(x, dv, 1, k)
+            k = add_straight(x, dh, wp, k)
+
+    def heap_pop(size):
+        # remove the minimum (hn[0], key hk[0]); returns the new size
+        size -= 1
+        if size > 0:
+            lk = hk[size]
+            ln = hn[size]
+            i = 0
+            while True:
+                ch = 4 * i + 1
+                if ch >= size:
+                    break
+                best = ch
+                bk = hk[ch]
+                for j in range(ch + 1, min(ch + 4, size)):
+                    if hk[j] < bk:
+                        bk = hk[j]
+                        best = j
+                if bk < lk:
+                    hk[i] = bk
+                    m = hn[best]
+                    hn[i] = m
+                    pos[m] = i
+                    i = best
+                else:
+                    break
+            hk[i] = lk
+            hn[i] = ln
+            pos[ln] = i
+        return size
+
+    def heap_sift_up(i, key, v):
+        # place v with key at slot i or above (push: i = size; decrease-key: pos[v])
+        while i > 0:
+            p = (i - 1) >> 2
+            if key < hk[p]:
+                hk[i] = hk[p]
+                m = hn[p]
+                hn[i] = m
+                pos[m] = i
+                i = p
+            else:
+                break
+        hk[i] = key
+        hn[i] = v
+        pos[v] = i
+
     gr = t // wp
     gc = t - gr * wp
     sr = s // wp
@@ -141,7 +208,7 @@ def jps_kernel(st, wp, s, t, kind):  # pragma: no cover - numba
         else:
             u = hn[0]
             f_cur = hk[0] + _DEPTH * g[u]
-            size = heap_pop(hk, hn, pos, size)
+            size = heap_pop(size)
         st[u] = _CLOSED
         expanded += 1
         if u == t:
@@ -152,17 +219,11 @@ def jps_kernel(st, wp, s, t, kind):  # pragma: no cover - numba
         nc = 0
         if u == s:
             for dv in (-wp, wp):
-                v = _jump_straight(st, u, dv, 1, t)
-                if v >= 0:
-                    cand[nc] = v
-                    nc += 1
+                nc = add_straight(u, dv, 1, nc)
                 for dh in (-1, 1):
-                    nc = _jump_diagonal(st, wp, u, dv, dh, t, cand, nc)
+                    nc = jump_diagonal(u, dv, dh, nc)
             for dh in (-1, 1):
-                v = _jump_straight(st, u, dh, wp, t)
-                if v >= 0:
-                    cand[nc] = v
-                    nc += 1
+                nc = add_straight(u, dh, wp, nc)
         else:
             p = parent[u]
             pr = p // wp
@@ -176,31 +237,21 @@ def jps_kernel(st, wp, s, t, kind):  # pragma: no cover - numba
                 else:
                     dv = 0
             if dv != 0 and dh != 0:  # diagonal arrival: the diagonal and its components
-                nc = _jump_diagonal(st, wp, u, dv, dh, t, cand, nc)
-                v = _jump_straight(st, u, dv, 1, t)
-                if v >= 0:
-                    cand[nc] = v
-                    nc += 1
-                v = _jump_straight(st, u, dh, wp, t)
-                if v >= 0:
-                    cand[nc] = v
-                    nc += 1
+                nc = jump_diagonal(u, dv, dh, nc)
+                nc = add_straight(u, dv, 1, nc)
+                nc = add_straight(u, dh, wp, nc)
             else:  # straight arrival along d: straight on, and each forced side
                 d = dv + dh
                 side = 1 if dh == 0 else wp
-                v = _jump_straight(st, u, d, side, t)
-                if v >= 0:
-                    cand[nc] = v
-                    nc += 1
+                nc = add_straight(u, d, side, nc)
                 for sd in (side, -side):
                     # forced: the cell beside the previous one blocked, the one beside u free
                     if st[u - d + sd] == _BLOCKED and st[u + sd] != _BLOCKED:
-                        v = _jump_straight(st, u, sd, wp if dh == 0 else 1, t)
-                        if v >= 0:
-                            cand[nc] = v
-                            nc += 1
-                        nc = _jump_diagonal(st, wp, u, d if dh == 0 else sd,
-                                            sd if dh == 0 else d, t, cand, nc)
+                        nc = add_straight(u, sd, wp if dh == 0 else 1, nc)
+                        if dh == 0:
+                            nc = jump_diagonal(u, d, sd, nc)
+                        else:
+                            nc = jump_diagonal(u, sd, d, nc)
         gu = g[u]
         for k in range(nc):
             v = cand[k]
@@ -211,7 +262,7 @@ def jps_kernel(st, wp, s, t, kind):  # pragma: no cover - numba
             vc = v - vr * wp
             a = abs(vr - ur)
             b = abs(vc - uc)
-            ng = gu + (abs(a - b) + min(a, b) * SQRT2)
+            ng = gu + (abs(a - b) + min(a, b) * SQRT2)  # the diagonal-first path
             if sv == _OPEN and ng >= g[v]:
                 continue
             g[v] = ng
@@ -228,7 +279,7 @@ def jps_kernel(st, wp, s, t, kind):  # pragma: no cover - numba
                 st[v] = _OPEN
                 i = size
                 size += 1
-            heap_sift_up(hk, hn, pos, i, fv - _DEPTH * ng, v)
+            heap_sift_up(i, fv - _DEPTH * ng, v)
     if not found:
         return np.zeros((0, 2), np.int64), np.inf, expanded
     count = 1
