@@ -17,6 +17,10 @@ Problems:
   bottom-left to the top-right corner (the 2 x 2 corner blocks are cleared);
 - improved vs traditional A* per expanded node on the DFCOA S1 and S2 maps at
   10 cells/m (:func:`per_node_rows`).
+
+:func:`jps_rows` times jump point search (``method="jps"``) on the first two
+problems against pyastar2d and against our A*, after checking that it returns
+A*'s cost.
 """
 
 from __future__ import annotations
@@ -204,6 +208,37 @@ def run() -> list[dict]:
     rows.append(row(what, ref["search"], ref_name, ref["heapq"]))
     if peer is not None:
         rows.append(row(what, t["search"], PEER, t["peer"]))
+    return rows + jps_rows()
+
+
+def jps_rows() -> list[dict]:
+    """Jump point search (``search(..., method="jps")``) on the same two problems.
+
+    Each problem is checked first: JPS must return A*'s (optimal) cost. Then
+    JPS, our A* and pyastar2d are timed in interleaved repetitions
+    (:func:`~benchmarks.timing.interleave`).
+    """
+    rows = []
+    grid = s1_grid()
+    s1 = (grid.occupied, tuple(int(v) for v in grid.world_to_cell(np.array([7.0, 7.0]))),
+          tuple(int(v) for v in grid.world_to_cell(np.array([12.0, 29.0]))))
+    big = random_grid()
+    problems = [("35x35 (dfcoa_s1 at 1 cell/m)", s1, 200),
+                ("1024x1024, 20% random cells, corner to corner", (big, (0, 0), (1023, 1023)), 3)]
+    for name, (occ, start, goal), samples in problems:
+        jps = search(occ, start, goal, method="jps")
+        ref = search(occ, start, goal)
+        _check(jps.cost, ref.cost, f"JPS {name}")
+        what = f"JPS search {name} ({jps.expanded} jump points; A* {ref.expanded} nodes)"
+        calls = {"jps": (lambda k, o=occ, s=start, g=goal: search(o, s, g, method="jps"), samples),
+                 "astar": (lambda k, o=occ, s=start, g=goal: search(o, s, g), samples)}
+        peer = pyastar2d_call(occ, start, goal)
+        if peer is not None:
+            calls["peer"] = (peer, samples)
+        t = interleave(calls)
+        if peer is not None:
+            rows.append(row(what, t["jps"], PEER, t["peer"]))
+        rows.append(row(what, t["jps"], "our A* search (same problem, same cost)", t["astar"]))
     return rows
 
 
