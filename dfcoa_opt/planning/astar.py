@@ -43,7 +43,7 @@ from scipy.signal import fftconvolve
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.params import param
 from dfcoa_opt.planning import postprocess
-from dfcoa_opt.planning.astar_kernel import astar_kernel
+from dfcoa_opt.planning.astar_kernel import astar_kernel, workspace
 from dfcoa_opt.planning.jps_kernel import jps_kernel
 from dfcoa_opt.planning.registry import register_planner
 from dfcoa_opt.world.grid import OccupancyGrid
@@ -283,7 +283,8 @@ def search(occupied: ArrayLike, start: ArrayLike, goal: ArrayLike, *, method: st
     cells, cost, expanded = astar_kernel(
         st.reshape(-1), wp, (sr + 1) * wp + sc + 1, (gr + 1) * wp + gc + 1,
         0 if heuristic == "octile" else 1, bool(corner_cutting), float(h_gain),
-        math.hypot(sr - gr, sc - gc), float(o_gain), obst, bool(goal_shortcut))
+        math.hypot(sr - gr, sc - gc), float(o_gain), obst, bool(goal_shortcut),
+        *workspace(st.size))
     return SearchResult(cells, float(cost), int(expanded), time.perf_counter() - t0)
 
 

@@ -44,8 +44,6 @@ the same reason. Call :func:`dfcoa_opt.planning.astar.search` with
 
 from __future__ import annotations
 
-import threading
-
 import numba
 import numpy as np
 from numpy.typing import NDArray
@@ -60,30 +58,8 @@ from dfcoa_opt.planning.astar_kernel import (
     _TIE,
     SQRT2,
     _heuristic,
+    workspace,
 )
-
-_WORK = threading.local()
-
-
-def _workspace(n: int) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
-    """Per-thread work arrays for ``n`` cells, kept between searches.
-
-    Fresh arrays cost a page fault per 4 KiB page touched (about 2.5 ms, 10 %,
-    on the 1024 x 1024 benchmark). Their contents are never read before the
-    kernel writes them. Returns ``(2, n)`` float64 (g, heap keys) and ``(4, n)``
-    int32 (parent, heap slot, heap nodes, stack); the arrays of the largest grid
-    searched so far stay allocated (32 bytes a cell).
-    """
-    last = getattr(_WORK, "last", None)
-    if last is not None and last[0] == n:
-        return last[1]
-    full = getattr(_WORK, "full", None)
-    if full is None or full[0].size < 2 * n:
-        full = (np.empty(2 * n), np.empty(4 * n, np.int32))
-        _WORK.full = full
-    views = (full[0][:2 * n].reshape(2, n), full[1][:4 * n].reshape(4, n))  # C-contiguous
-    _WORK.last = (n, views)
-    return views
 
 
 def jps_kernel(st: NDArray[np.uint8], wp: int, s: int, t: int,
@@ -104,13 +80,13 @@ def jps_kernel(st: NDArray[np.uint8], wp: int, s: int, t: int,
         cell by cell), empty when the goal is unreachable; g(goal) in cells
         (``inf`` when unreachable); the number of closed jump points.
     """
-    wf, wi = _workspace(st.size)
+    wf, wi = workspace(st.size)
     return _jps(st, wp, s, t, kind, wf, wi)
 
 
 @numba.njit(cache=True)
 def _jps(st, wp, s, t, kind, wf, wi):  # pragma: no cover - numba
-    """The search of :func:`jps_kernel` with its work arrays (see :func:`_workspace`)."""
+    """The search of :func:`jps_kernel` with its work arrays (:func:`.astar_kernel.workspace`)."""
     g = wf[0]
     hk = wf[1]
     parent = wi[0]
