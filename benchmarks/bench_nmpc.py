@@ -1,23 +1,28 @@
 """Benchmark of the ``nmpc`` controller: solver choice, warm start, run time per scenario.
 
-Run ``python -m benchmarks.bench_nmpc`` (about 3 min on the 2-core machine;
-``--parts solvers`` alone takes about 1 min). Everything is measured in this one process, so
+Run ``python -m benchmarks.bench_nmpc`` (about 5 min on the 2-core machine;
+``--parts solvers`` alone takes about 2 min). Everything is measured in this one process, so
 ratios compare like with like:
 
 1. **solvers** -- the whole of S1 (``scenarios/dfcoa_s1.toml``) and the first
-   ``S2_SECONDS`` s of S2 with each solver option (SQP + IPOPT rescue, the default;
-   SQP alone; IPOPT), ``ROUNDS`` interleaved rounds. Per option: median and p95
-   solve time per robot per step (``comparisons.nmpc.solve_time_stats``), mean
-   iterations, failures, rescues and the run's wall time; the ratio is the IPOPT
-   median over the option's median.
+   ``S2_SECONDS`` s of S2 with each solver option (the default: condensed SQP compiled
+   to C + IPOPT rescue; the same interpreted; multiple shooting, the default before,
+   interpreted and compiled; SQP alone; IPOPT), ``ROUNDS`` interleaved rounds. Per
+   option: median and p95 solve time per robot per step
+   (``comparisons.nmpc.solve_time_stats``), mean iterations of the first solver
+   (rescued solves left out; the compiled solver does not count them), failures,
+   rescues and the run's wall time; the ratios are the
+   medians of the old default and of IPOPT over the option's median.
 2. **warm** -- the first ``WARM_STEPS`` steps of S1: the iterations of the
    controller's warm-started solves against a cold start of the very same problems
-   (controls 0 at the current pose, no multipliers), per solver.
+   (controls 0 at the current pose, no multipliers), per solver (interpreted, which
+   counts iterations).
 3. **scenarios** -- the wall time of one whole run of every scenario ``make figures``
    may run nmpc on (S1, S2, ``scenarios/bench/*.toml``, the two example scenarios),
-   with the default parameters and with ``solver = "ipopt"``; ``large_100`` is
-   measured on its first ``LARGE_100_SECONDS`` s and scaled to its ``t_max`` (an
-   estimate, stated as such).
+   with the default parameters, with the old default (multiple shooting, interpreted)
+   and with ``solver = "ipopt"``; ``large_100`` is measured on its first
+   ``LARGE_100_SECONDS`` s and scaled to its ``t_max`` (an estimate, stated as such).
+   The problems are built (and compiled, once per machine) before the timed runs.
 """
 
 from __future__ import annotations
@@ -29,7 +34,6 @@ from pathlib import Path
 import numpy as np
 
 from comparisons.nmpc import Nmpc, solve_time_stats
-from comparisons.nmpc.problem import NW
 from dfcoa_opt.control.registry import build_controller
 from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.simulator import Simulator
@@ -41,9 +45,14 @@ ROUNDS = 2
 WARM_STEPS = 60
 LARGE_100_SECONDS = 10.0
 #: Solver options compared in part 1 (label, ``[controllers.nmpc]`` keys).
-OPTIONS = (("sqp + ipopt rescue (default)", {}),
-           ("sqp alone", {"rescue": False}),
-           ("ipopt", {"solver": "ipopt"}))
+OLD = {"formulation": "multiple-shooting", "compiled": False}
+OPTIONS = (("condensed, compiled + ipopt rescue (default)", {}),
+           ("condensed, interpreted", {"compiled": False}),
+           ("multiple shooting, compiled", {"formulation": "multiple-shooting"}),
+           ("multiple shooting, interpreted (old default)", OLD),
+           ("condensed, compiled, sqp alone", {"rescue": False}),
+           ("ipopt (multiple shooting)", {"solver": "ipopt", "formulation": "multiple-shooting"}),
+           ("ipopt (condensed)", {"solver": "ipopt"}))
 
 
 class _Counting:
@@ -61,8 +70,8 @@ class _Counting:
         self.inner.reset(scenario, rng)
 
     def act(self, obs):
-        out = self.inner.act(obs)
-        self.iterations.extend(self.inner.last_iterations.tolist())
+        out = self.inner.act(obs)  # iterations of the first solver (rescued solves left out)
+        self.iterations.extend(self.inner.last_iterations[~self.inner.last_rescued].tolist())
         self.rescues += int(self.inner.last_rescued.sum())
         return out
 
@@ -77,8 +86,10 @@ def one_run(path: Path, params: dict, t_max: float | None = None) -> dict:
     t0 = time.perf_counter()
     log = Simulator(sc, ctrl).run()
     wall = time.perf_counter() - t0
+    known = [i for i in ctrl.iterations if i >= 0]  # the compiled solver does not count
     return {**solve_time_stats(log), "wall": wall, "steps": log.meta["steps"], "n": sc.spec.team.n,
-            "iterations": float(np.mean(ctrl.iterations)), "rescues": ctrl.rescues,
+            "iterations": float(np.mean(known)) if known else float("nan"),
+            "rescues": ctrl.rescues,
             "sim_time": float(log.t[-1]), "t_max": sc.spec.t_max,
             "reached": bool(log.meta["reached_goal"]),
             "events": int(log.collision_events.sum())}
@@ -91,22 +102,24 @@ def solvers() -> None:
         for _ in range(ROUNDS):
             for label, params in OPTIONS:
                 runs[label].append(one_run(path, params, t_max))
-        ref = np.mean([r["median"] for r in runs["ipopt"]])
+        old = np.median([r["median"] for r in runs[OPTIONS[3][0]]])
+        ref = np.median([r["median"] for r in runs[OPTIONS[5][0]]])
         what = path.stem + ("" if t_max is None else f", first {t_max:g} s")
-        print(f"\n### {what}: solve time per robot per step ({ROUNDS} rounds, mean of the "
-              "rounds' medians)\n")
-        print("| solver | median (ms) | p95 (ms) | ipopt / this | mean iterations | failures "
-              "| rescues | run wall (s) |")
-        print("|---|---|---|---|---|---|---|---|")
+        print(f"\n### {what}: solve time per robot per step ({ROUNDS} rounds, median of the "
+              "rounds' medians and p95s)\n")
+        print("| solver | median (ms) | p95 (ms) | old default / this | ipopt / this | mean "
+              "iterations | failures | rescues | run wall (s) |")
+        print("|---|---|---|---|---|---|---|---|---|")
         for label, rs in runs.items():
-            med = np.mean([r["median"] for r in rs])
-            p95 = np.mean([r["p95"] for r in rs])
+            med = np.median([r["median"] for r in rs])
+            p95 = np.median([r["p95"] for r in rs])
             fails = "/".join(str(r["failures"]) for r in rs)
             rescues = "/".join(str(r["rescues"]) for r in rs)
             walls = "/".join(format(r["wall"], ".2f") for r in rs)
-            print(f"| {label} | {1e3 * med:.3f} | {1e3 * p95:.3f} | {ref / med:.2f}x | "
-                  f"{np.mean([r['iterations'] for r in rs]):.2f} | {fails} of "
-                  f"{rs[0]['entries']} | {rescues} | {walls} |")
+            its = np.mean([r["iterations"] for r in rs])
+            print(f"| {label} | {1e3 * med:.3f} | {1e3 * p95:.3f} | {old / med:.2f}x | "
+                  f"{ref / med:.2f}x | {'-' if np.isnan(its) else format(its, '.2f')} | "
+                  f"{fails} of {rs[0]['entries']} | {rescues} | {walls} |", flush=True)
 
 
 def warm_start(steps: int = WARM_STEPS) -> None:
@@ -117,7 +130,8 @@ def warm_start(steps: int = WARM_STEPS) -> None:
     for solver in ("sqp", "ipopt"):
         sc = load_scenario(S1, overrides={"t_max": steps * 0.1,
                                           "controllers.nmpc.solver": solver,
-                                          "controllers.nmpc.rescue": False})
+                                          "controllers.nmpc.rescue": False,
+                                          "controllers.nmpc.compiled": False})
         ctrl = build_controller("nmpc", sc.spec.controllers, sc.source)
         totals = {"warm": 0, "cold": 0}
         act = ctrl.act
@@ -128,12 +142,12 @@ def warm_start(steps: int = WARM_STEPS) -> None:
                 ctrl._r = {k: v.copy() for k, v in ctrl._w.items()}
                 ctrl._t = float(obs.t)
                 u0, age = ctrl._shifted(float(obs.t), ids)
-                guess, params, lbg = ctrl._problems(obs, u0, age >= ctrl.p.horizon)
-                zero = guess.reshape(obs.n, -1, NW).copy()
-                zero[..., :2], zero[..., 2:5] = 0.0, obs.pose[:, None, :]
+                _, params, lbg = ctrl._problems(obs, u0, age >= ctrl.p.horizon)
+                h = ctrl.p.horizon
+                zero = ctrl.problem.guesses(np.zeros((obs.n, h, 2)),
+                                            np.repeat(obs.pose[:, None, :], h, axis=1))
                 for i in range(obs.n):
-                    totals["cold"] += ctrl.problem.solve(zero[i].ravel(), params[i],
-                                                         lbg[i]).iterations
+                    totals["cold"] += ctrl.problem.solve(zero[i], params[i], lbg[i]).iterations
                 out = act(obs)
                 totals["warm"] += int(ctrl.last_iterations.sum())
                 return out
@@ -149,24 +163,30 @@ def scenarios() -> None:
     """Part 3: wall time of one whole run per scenario (large_100: scaled prefix), both solvers."""
     paths = [S1, S2, *sorted((ROOT / "scenarios/bench").glob("*.toml")),
              *sorted((ROOT / "scenarios").glob("example_*.toml"))]
-    print("\n### One run per scenario: the default (sqp + ipopt rescue), and ipopt alone\n")
+    print("\n### One run per scenario: the default (condensed, compiled, ipopt rescue), the "
+          "old default (multiple shooting, interpreted) and ipopt alone (multiple shooting)\n")
     print("| scenario | robots | simulated (s) | steps | wall (s) | ms per step | solve median "
-          "(ms) | p95 (ms) | failures | rescues | reached goal | collisions | ipopt wall (s) | "
-          "ipopt failures |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "(ms) | p95 (ms) | failures | rescues | reached goal | collisions | old wall (s) | "
+          "old median / p95 (ms) | ipopt wall (s) | ipopt failures |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for path in paths:
         prefix = LARGE_100_SECONDS if path.stem == "large_100" else None
+        for params in ({}, OLD):  # build (and compile) the problems outside the timed runs
+            one_run(path, params, 0.1)
         r = one_run(path, {}, prefix)
-        ip = one_run(path, {"solver": "ipopt"}, prefix)
-        wall, ip_wall = f"{r['wall']:.1f}", f"{ip['wall']:.1f}"
+        old = one_run(path, OLD, prefix)
+        ip = one_run(path, {"solver": "ipopt", "formulation": "multiple-shooting"}, prefix)
+        wall, old_wall, ip_wall = (f"{x['wall']:.1f}" for x in (r, old, ip))
         if prefix is not None:
             scale = load_scenario(path).spec.t_max / prefix
             wall = f"{r['wall']:.1f} for the first {prefix:g} s (est. {r['wall'] * scale:.0f})"
+            old_wall = f"{old['wall']:.1f} (est. {old['wall'] * scale:.0f})"
             ip_wall = f"{ip['wall']:.1f} (est. {ip['wall'] * scale:.0f})"
         print(f"| {path.stem} | {r['n']} | {r['sim_time']:.1f} | {r['steps']} | {wall} | "
               f"{1e3 * r['wall'] / r['steps']:.1f} | {1e3 * r['median']:.3f} | "
               f"{1e3 * r['p95']:.3f} | {r['failures']} | {r['rescues']} | "
-              f"{'yes' if r['reached'] else 'no'} | {r['events']} | {ip_wall} | "
+              f"{'yes' if r['reached'] else 'no'} | {r['events']} | {old_wall} | "
+              f"{1e3 * old['median']:.3f} / {1e3 * old['p95']:.3f} | {ip_wall} | "
               f"{ip['failures']} |", flush=True)
 
 

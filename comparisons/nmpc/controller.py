@@ -23,12 +23,12 @@ control ``(v, omega)`` (``command = "unicycle"``):
   robot ``i`` reads only the plans of its neighbours in ``obs.neighbours`` (plans
   written at time ``t`` are visible from the next step on).
 * **Solver.** ``"sqp"`` (default: casadi ``sqpmethod`` + ``daqp`` with a
-  Gauss-Newton Hessian, at most 20 iterations, re-solved by IPOPT when it fails;
-  2.2-2.6x faster per solve than IPOPT on S1/S2 in ``benchmarks/bench_nmpc.py``) or
-  ``"ipopt"``; warm-started from the shifted previous solution and multipliers. A
-  failed solve (no success, an exception, a non-finite value) applies
-  ``on_failure`` and is logged with status ``STATUS_SOLVER_FAIL``;
-  ``last_result.solve_time`` is the solver time per robot, s.
+  Gauss-Newton Hessian, at most 20 iterations, on the condensed problem (the states
+  eliminated by the dynamics), compiled to C once per machine; re-solved by IPOPT on
+  the multiple-shooting problem when it fails) or ``"ipopt"``; warm-started from the
+  shifted previous solution and multipliers. A failed solve (no success, an
+  exception, a non-finite value) applies ``on_failure`` and is logged with status
+  ``STATUS_SOLVER_FAIL``; ``last_result.solve_time`` is the solver time per robot, s.
 
 Formulation, measurements and limits: ``docs/methods/nmpc.md``.
 """
@@ -51,7 +51,13 @@ from comparisons.nmpc.geometry import (
     robot_halfplanes,
     slot_reference,
 )
-from comparisons.nmpc.problem import NW, NmpcProblem, ProblemSpec, SolveOutput, rollout
+from comparisons.nmpc.problem import (
+    NmpcProblem,
+    ProblemSpec,
+    SolveOutput,
+    map_multipliers,
+    rollout,
+)
 from dfcoa_opt.control.base import FilterResult, Observation
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.geometry import wrap_angle
@@ -125,6 +131,12 @@ class Nmpc:
         sqp_hessian: Literal["gauss-newton", "exact"] = param(
             "gauss-newton", doc="Hessian of the 'sqp' solver: Gauss-Newton of the squared "
                                 "residuals (convex QPs) or the exact, unconvexified one.")
+        formulation: Literal["condensed", "multiple-shooting"] = param(
+            "condensed", doc="'condensed' (the states eliminated by the dynamics: 3 H "
+                             "variables) or 'multiple-shooting' (6 H); same minimisers.")
+        compiled: bool = param(True, doc="Compile the 'sqp' solver to C once per machine "
+                                         "(cached; falls back to casadi's interpreter, with "
+                                         "the same results, without a C compiler).")
         rescue: bool = param(True, doc="When an 'sqp' solve fails, solve again with IPOPT "
                                        "before applying on_failure.")
         max_iter: int | None = param(None, doc="Iteration limit of the solver (hitting it is "
@@ -161,12 +173,13 @@ class Nmpc:
             v_min=rob.v_lower, v_max=rob.v_max, w_max=rob.w_max, wheel=wheel,
             solver=p.solver, qp_solver=p.qp_solver, hessian=p.sqp_hessian,
             max_iter=p.max_iter or (SQP_MAX_ITER if p.solver == "sqp" else IPOPT_MAX_ITER),
-            tol=p.tol)
+            tol=p.tol, formulation=p.formulation, compiled=p.compiled)
         self.problem = _problem(self.spec)
         self.rescuer = None
-        if p.rescue and p.solver == "sqp":
+        if p.rescue and p.solver == "sqp":  # multiple shooting: IPOPT is faster on it
             self.rescuer = _problem(replace(self.spec, solver="ipopt", hessian="exact",
-                                            qp_solver="qrqp", max_iter=IPOPT_MAX_ITER))
+                                            qp_solver="qrqp", max_iter=IPOPT_MAX_ITER,
+                                            formulation="multiple-shooting", compiled=False))
         self.radius = rob.radius
         self.static = StaticObstacles.from_shapes(scenario.world.shapes)
         self._t: float | None = None
@@ -177,7 +190,7 @@ class Nmpc:
         """Plan buffers for ``n`` robots (by global id): written (``_w``) and read (``_r``)."""
         h, rows = self.p.horizon, self.spec.rows
         self._w = {"t": np.full(n, np.nan), "u": np.zeros((n, h, 2)),
-                   "x": np.zeros((n, h + 1, 3)), "lam_x": np.zeros((n, NW * h)),
+                   "x": np.zeros((n, h + 1, 3)), "lam_x": np.zeros((n, self.spec.nw * h)),
                    "lam_g": np.zeros((n, rows * h)), "lam_ok": np.zeros(n, dtype=bool)}
         self._r = {k: v.copy() for k, v in self._w.items()}
 
@@ -209,16 +222,19 @@ class Nmpc:
             u[live] = np.take_along_axis(self._r["u"][ids[live]], idx[..., None], axis=1)
         return u, age
 
-    def _shifted_multipliers(self, g: int, age: float
-                             ) -> tuple[FloatArray, FloatArray] | tuple[None, None]:
-        """Robot ``g``'s last multipliers shifted by ``age`` stages (None without them)."""
-        h = self.p.horizon
-        if not (age < h and self._r["lam_ok"][g]):
-            return None, None
-        idx = np.minimum(np.arange(h) + int(math.floor(age + 1e-6)), h - 1)
-        lam_x = self._r["lam_x"][g].reshape(h, -1)[idx].ravel()
-        lam_g = self._r["lam_g"][g].reshape(h, -1)[idx].ravel()
-        return lam_x, lam_g
+    def _shifted_multipliers(self, ids: NDArray[np.intp], age: FloatArray
+                             ) -> tuple[FloatArray, FloatArray]:
+        """The robots' last multipliers shifted by ``age`` stages (zeros without them)."""
+        h, n = self.p.horizon, len(ids)
+        live = (age < h) & self._r["lam_ok"][ids]
+        shift = np.floor(np.where(live, age, 0.0) + 1e-6).astype(np.intp)
+        idx = np.minimum(np.arange(h) + shift[:, None], h - 1)[..., None]
+        out = []
+        for key in ("lam_x", "lam_g"):
+            lam = np.take_along_axis(self._r[key][ids].reshape(n, h, -1), idx, axis=1)
+            lam[~live] = 0.0
+            out.append(lam.reshape(n, -1))
+        return out[0], out[1]
 
     def _store(self, g: int, t: float, pose: FloatArray, u: FloatArray,
                x: FloatArray | None = None, out: SolveOutput | None = None) -> None:
@@ -231,13 +247,16 @@ class Nmpc:
             w["lam_x"][g], w["lam_g"][g] = out.lam_x, out.lam_g
 
     # ------------------------------------------------------------------ step
-    def _problems(self, obs: Observation, u0: FloatArray, fresh: NDArray[np.bool_]
+    def _problems(self, obs: Observation, u0: FloatArray, fresh: NDArray[np.bool_],
+                  problem: NmpcProblem | None = None
                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Initial guesses ``(N, 6H)``, parameter vectors and constraint lower bounds.
+        """Initial guesses ``(N, nw H)``, parameter vectors and constraint lower bounds.
 
         Linearisation points: the rollout of the shifted plan, or the current
-        position for robots without a plan (``fresh``).
+        position for robots without a plan (``fresh``). In ``problem``'s layout
+        (default: the controller's problem).
         """
+        problem = problem or self.problem
         p, h, n = self.p, self.p.horizon, obs.n
         x0 = rollout(obs.pose, u0, self.tau)
         lin = np.where(fresh[:, None, None], obs.pose[:, None, :2], x0[:, 1:, :2])
@@ -252,26 +271,42 @@ class Nmpc:
         normals = np.concatenate((on, rn), axis=2).reshape(n, h, -1)
         stage = np.concatenate((ref, psi[..., None], uref, normals), axis=2).reshape(n, -1)
         params = np.concatenate((obs.pose, obs.twist, stage), axis=1)
-        lbg = np.tile(self.problem.lbg_template, (n, 1)).reshape(n, h, -1)
-        lbg[:, :, 3:3 + self.spec.slots] = np.concatenate((oc, rc), axis=2)
-        guess = np.zeros((n, h, NW))
-        guess[..., :2], guess[..., 2:5] = u0, x0[:, 1:]
-        return guess.reshape(n, -1), params, lbg.reshape(n, -1)
+        lbg = np.tile(problem.lbg_template, (n, 1)).reshape(n, h, -1)
+        d = problem.spec.dyn_rows
+        lbg[:, :, d:d + self.spec.slots] = np.concatenate((oc, rc), axis=2)
+        return problem.guesses(u0, x0[:, 1:]), params, lbg.reshape(n, -1)
 
-    def _solve(self, i: int, args: tuple) -> SolveOutput | None:
-        """Solve robot row ``i``'s problem; IPOPT rescues a failed SQP (``rescue``)."""
+    def _solve(self, i: int, z: FloatArray, step: dict) -> SolveOutput | None:
+        """Solve robot row ``i``'s packed problem ``z``; IPOPT rescues a failed SQP.
+
+        The rescuer's inputs are made only when it runs (from ``step``: the
+        observation, shifted controls, ``fresh`` and shifted multipliers); its
+        multipliers come back in the controller's layout.
+        """
         out = None
-        for problem in (self.problem, self.rescuer):
-            if problem is None:
-                break
-            try:
-                out = problem.solve(*args)
-            except RuntimeError:
-                out = None
-            if out is not None and out.success:
-                self.last_rescued[i] = problem is self.rescuer
-                return out
+        try:
+            out = self.problem.solve_packed(z)
+        except RuntimeError:
+            out = None
+        if (out is not None and out.success) or self.rescuer is None:
+            return out
+        try:
+            rescue = self.rescuer.solve(*self._inputs(i, step, self.rescuer))
+        except RuntimeError:
+            return out
+        if rescue.success:
+            self.last_rescued[i] = True
+            rescue.lam_x, rescue.lam_g = map_multipliers(rescue.lam_x, rescue.lam_g,
+                                                         self.rescuer.spec, self.spec)
+            return rescue
         return out
+
+    def _inputs(self, i: int, step: dict, problem: NmpcProblem) -> tuple[FloatArray, ...]:
+        """Row ``i``'s ``(w0, p, lbg, lam_x0, lam_g0)`` of this step in ``problem``'s layout."""
+        guess, params, lbg = self._problems(step["obs"].take([i]), step["u0"][i:i + 1],
+                                            step["fresh"][i:i + 1], problem)
+        lam = map_multipliers(step["lam_x"][i], step["lam_g"][i], self.spec, problem.spec)
+        return guess[0], params[0], lbg[0], *lam
 
     def act(self, obs: Observation) -> FloatArray:
         """One solve per robot; row i uses row i of ``obs`` and its neighbours' last plans."""
@@ -287,6 +322,9 @@ class Nmpc:
         for i in np.flatnonzero(fresh):
             u0[i] = goto_command(obs.pose[i], obs.slot[i], self.p.goto_gain, self.spec)
         guess, params, lbg = self._problems(obs, u0, fresh)
+        lam_x, lam_g = self._shifted_multipliers(ids, age)
+        z = self.problem.pack(guess, params, lbg, lam_x, lam_g)
+        step = {"obs": obs, "u0": u0, "fresh": fresh, "lam_x": lam_x, "lam_g": lam_g}
         cmd, slack, solve_time = np.zeros((n, 2)), np.zeros(n), np.zeros(n)
         status = np.full(n, STATUS_OK, dtype=np.int8)
         self.last_iterations = np.full(n, -1, dtype=np.intp)
@@ -294,17 +332,15 @@ class Nmpc:
         for i in range(n):
             g = int(ids[i])
             t0 = time.perf_counter()
-            out = self._solve(i, (guess[i], params[i], lbg[i],
-                                  *self._shifted_multipliers(g, age[i])))
+            out = self._solve(i, z[i], step)
             solve_time[i] = time.perf_counter() - t0
             if out is not None:
                 self.last_iterations[i] = out.iterations
             if out is not None and out.success:
-                w = out.w.reshape(h, NW)
-                cmd[i] = w[0, :2]
-                slack[i] = max(float(w[:, 5].max()), 0.0)
-                self._store(g, t, obs.pose[i], w[:, :2].copy(),
-                            np.vstack((obs.pose[i], w[:, 2:5])), out)
+                cmd[i] = out.u[0]
+                slack[i] = max(float(out.slack.max()), 0.0)
+                self._store(g, t, obs.pose[i], out.u.copy(), np.vstack((obs.pose[i], out.x)),
+                            out)
             else:
                 status[i] = STATUS_SOLVER_FAIL
                 cmd[i] = self._fallback(obs, i, u0[i], age[i])

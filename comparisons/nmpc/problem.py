@@ -1,13 +1,20 @@
 """The casadi problem of one robot's NMPC (:mod:`comparisons.nmpc`), built once per run.
 
-Multiple shooting over ``H`` stages of length ``tau`` (s). Decision vector,
-stage-major (stage ``k = 0 .. H-1``)::
+Two formulations of the same NLP over ``H`` stages of length ``tau`` (s), with the
+controls ``u_k = (v_k, w_k)`` (m/s, rad/s) held over ``[k tau, (k+1) tau)``, the
+predicted poses ``x_{k+1}`` (m, m, rad) and one slack ``s_{k+1} >= 0`` (m) shared by
+the distance constraints of a stage. Decision vector, stage-major (``k = 0 .. H-1``):
 
-    w = [v_0, w_0, x_1, y_1, th_1, s_1,  v_1, w_1, x_2, ..., s_H]      (6 H values)
+* ``"condensed"`` (default): the states are eliminated by the dynamics (``x_{k+1} =
+  f(x_k, u_k)`` from the current pose ``x_0``, single shooting)::
 
-with the controls ``u_k = (v_k, w_k)`` (m/s, rad/s) held over ``[k tau, (k+1) tau)``,
-the predicted pose ``x_{k+1}`` (m, m, rad) and one slack ``s_{k+1} >= 0`` (m) shared by
-the distance constraints of that stage. Parameter vector::
+      w = [v_0, w_0, s_1,  v_1, w_1, s_2, ...]                 (3 H values)
+
+* ``"multiple-shooting"``: the states are variables, tied by equality rows::
+
+      w = [v_0, w_0, x_1, y_1, th_1, s_1,  v_1, ..., s_H]      (6 H values)
+
+Parameter vector (both)::
 
     p = [x_0 (3), u_prev (2), stage 1 .. H: r_k (2), psi_k (1), u_ref_k (2), n_{k,c} (2 C)]
 
@@ -16,9 +23,12 @@ with the current pose ``x_0``, the last applied twist ``u_prev``, the slot refer
 unit normals of the ``C = M + K`` distance half-planes of the stage. Constraint
 rows per stage ``k = 1 .. H`` (stage-major too, so a plan shifts by whole blocks)::
 
-    x_k - f(x_{k-1}, u_{k-1}) = 0                      (3 rows, exact unicycle arc)
+    x_k - f(x_{k-1}, u_{k-1}) = 0                      (3 rows, multiple shooting only)
     n_{k,c} . p_k + s_k >= c_{k,c}                      (C rows; c in lbg, -inf = off)
     |v_{k-1} +- d/2 w_{k-1}| <= r phi_max               (2 rows, only with a wheel limit)
+
+Both have the same minimisers: eliminating an equality by its solution changes the
+iterates of the solver, not the problem.
 """
 
 from __future__ import annotations
@@ -31,13 +41,18 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
+from comparisons.nmpc.compiled import CompiledFunction, compile_function
+from comparisons.nmpc.model import arc_step, rollout
+
+__all__ = ["NW", "NmpcProblem", "ProblemSpec", "SolveOutput", "arc_step", "map_multipliers",
+           "rollout"]
+
 FloatArray = NDArray[np.float64]
 SolverName = Literal["ipopt", "sqp"]
+Formulation = Literal["condensed", "multiple-shooting"]
 
-#: Variables per stage: v, omega, x, y, theta, slack.
+#: Variables per stage of the multiple-shooting formulation: v, omega, x, y, theta, slack.
 NW = 6
-#: Below this half turn angle (rad) the arc's sinc uses its Taylor series.
-_SMALL = 1e-4
 
 
 @dataclass(frozen=True)
@@ -58,11 +73,14 @@ class ProblemSpec:
         v_max: Largest forward speed, m/s.
         w_max: Largest turn rate, rad/s.
         wheel: ``(track width m, largest wheel rim speed m/s)``, or None without a limit.
-        solver: ``"ipopt"`` or ``"sqp"`` (casadi ``sqpmethod`` with ``qrqp``).
+        solver: ``"ipopt"`` or ``"sqp"`` (casadi ``sqpmethod``).
         qp_solver: QP solver of the SQP: ``"qrqp"`` or ``"daqp"``.
         hessian: SQP Hessian: ``"gauss-newton"`` (convex QPs) or ``"exact"`` (not convexified).
         max_iter: Iteration limit of the solver.
         tol: Solver tolerance (primal and dual).
+        formulation: ``"condensed"`` (states eliminated) or ``"multiple-shooting"``.
+        compiled: Compile the SQP solver to C (:mod:`comparisons.nmpc.compiled`);
+            it falls back to the interpreted one without a compiler.
     """
 
     horizon: int
@@ -83,11 +101,23 @@ class ProblemSpec:
     hessian: Literal["gauss-newton", "exact"]
     max_iter: int
     tol: float
+    formulation: Formulation = "condensed"
+    compiled: bool = False
+
+    @property
+    def nw(self) -> int:
+        """Variables per stage: 3 condensed (v, omega, slack), 6 with the states."""
+        return 3 if self.formulation == "condensed" else NW
+
+    @property
+    def dyn_rows(self) -> int:
+        """Dynamics rows per stage (before the half-planes): 0 condensed, 3 otherwise."""
+        return 0 if self.formulation == "condensed" else 3
 
     @property
     def rows(self) -> int:
         """Constraint rows per stage."""
-        return 3 + self.slots + (2 if self.wheel is not None else 0)
+        return self.dyn_rows + self.slots + (2 if self.wheel is not None else 0)
 
     @property
     def stage_params(self) -> int:
@@ -100,11 +130,14 @@ class SolveOutput:
     """One solve's result.
 
     Attributes:
-        w: ``(6 H,)`` decision vector (see the module layout).
+        w: ``(nw H,)`` decision vector (see the module layout).
         lam_x: Bound multipliers.
         lam_g: Constraint multipliers.
         success: The solver reported success and every value is finite.
-        iterations: Solver iterations.
+        iterations: Solver iterations (-1 when unknown: the compiled solver does not count).
+        u: ``(H, 2)`` planned controls (v m/s, omega rad/s).
+        x: ``(H, 3)`` planned poses at stages 1 .. H (m, m, rad).
+        slack: ``(H,)`` slacks ``s_1 .. s_H``, m.
     """
 
     w: FloatArray
@@ -112,56 +145,22 @@ class SolveOutput:
     lam_g: FloatArray
     success: bool
     iterations: int
-
-
-def _sinc(a: ca.SX) -> ca.SX:
-    """``sin(a) / a``, smooth at 0."""
-    small = ca.fabs(a) < _SMALL
-    return ca.if_else(small, 1.0 - a * a / 6.0, ca.sin(a) / ca.if_else(small, 1.0, a))
-
-
-def arc_step(x: ca.SX, u: ca.SX, tau: float) -> ca.SX:
-    """Exact unicycle motion under constant (v, omega) for ``tau`` s (the simulator's model).
-
-    The chord ``v tau sinc(omega tau / 2)`` points along ``theta + omega tau / 2``
-    (:func:`dfcoa_opt.robots.models.integrate_unicycle`, without wrapping the heading).
-    """
-    half = 0.5 * u[1] * tau
-    chord = u[0] * tau * _sinc(half)
-    return ca.vertcat(x[0] + chord * ca.cos(x[2] + half), x[1] + chord * ca.sin(x[2] + half),
-                      x[2] + 2.0 * half)
-
-
-def rollout(pose: FloatArray, controls: FloatArray, tau: float) -> FloatArray:
-    """Numpy twin of :func:`arc_step` over a horizon, batched over robots.
-
-    Args:
-        pose: ``(N, 3)`` start poses (m, m, rad).
-        controls: ``(N, H, 2)`` (v m/s, omega rad/s) per stage.
-        tau: Stage length, s.
-
-    Returns:
-        ``(N, H + 1, 3)`` poses, heading not wrapped.
-    """
-    n, h = controls.shape[:2]
-    out = np.empty((n, h + 1, 3))
-    out[:, 0] = pose
-    for k in range(h):
-        v, w = controls[:, k, 0], controls[:, k, 1]
-        half = 0.5 * w * tau
-        small = np.abs(half) < _SMALL
-        sinc = np.where(small, 1.0 - half * half / 6.0,
-                        np.sin(half) / np.where(small, 1.0, half))
-        chord = v * tau * sinc
-        th = out[:, k, 2]
-        out[:, k + 1, 0] = out[:, k, 0] + chord * np.cos(th + half)
-        out[:, k + 1, 1] = out[:, k, 1] + chord * np.sin(th + half)
-        out[:, k + 1, 2] = th + 2.0 * half
-    return out
+    u: FloatArray | None = None
+    x: FloatArray | None = None
+    slack: FloatArray | None = None
 
 
 class NmpcProblem:
-    """One robot's NLP as a casadi ``nlpsol`` Function with a parameter vector.
+    """One robot's NLP as a casadi ``nlpsol`` behind one packed Function.
+
+    ``function`` maps the packed input ``z = [w0, p, lbg, lam_x0, lam_g0]`` to the
+    packed output ``[w, lam_x, lam_g, x_1 .. x_H (3 H), pr_inf, du_inf]``: the
+    solution, its multipliers, the planned poses and (``sqp``) the solver's own
+    convergence measures at the solution (largest bound or constraint violation,
+    largest entry of the Lagrangian's gradient). With ``spec.compiled`` (``sqp``
+    only) it runs compiled (:func:`comparisons.nmpc.compiled.compile_function`); a
+    solve then succeeds when both measures are below ``tol``, which is the test
+    ``sqpmethod`` stops on (``stats()["success"]``, used by the interpreted solver).
 
     Args:
         spec: Shape, weights, limits and solver.
@@ -171,32 +170,8 @@ class NmpcProblem:
     def __init__(self, spec: ProblemSpec, options: dict | None = None) -> None:
         self.spec = spec
         h, c = spec.horizon, spec.slots
-        w = ca.SX.sym("w", NW * h)
-        p = ca.SX.sym("p", 5 + h * spec.stage_params)
-        x_prev, u_prev = p[0:3], p[3:5]
-        res, g = [], []
-        for k in range(h):
-            base = NW * k
-            u, x, s = w[base:base + 2], w[base + 2:base + 5], w[base + 5]
-            q = p[5 + k * spec.stage_params: 5 + (k + 1) * spec.stage_params]
-            ref, psi, u_ref, normals = q[0:2], q[2], q[3:5], q[5:]
-            wt = spec.w_terminal if k == h - 1 else spec.w_track
-            # squared residuals: 2 (1 - cos(th - psi)) = |(cos th - cos psi, sin th - sin psi)|^2
-            res += [math.sqrt(wt) * (x[0:2] - ref),
-                    math.sqrt(0.5 * spec.w_heading) * ca.vertcat(ca.cos(x[2]) - ca.cos(psi),
-                                                                 ca.sin(x[2]) - ca.sin(psi)),
-                    math.sqrt(spec.w_effort) * (u - u_ref), math.sqrt(spec.w_rate) * (u - u_prev),
-                    math.sqrt(spec.w_slack[1]) * s]
-            g.append(x - arc_step(x_prev, u, spec.tau))
-            for j in range(c):
-                g.append(normals[2 * j] * x[0] + normals[2 * j + 1] * x[1] + s)
-            if spec.wheel is not None:
-                half_track = 0.5 * spec.wheel[0]
-                g.append(ca.vertcat(u[0] + half_track * u[1], u[0] - half_track * u[1]))
-            x_prev, u_prev = x, u
-        r, gv = ca.vertcat(*res), ca.vertcat(*g)
-        slacks = w[NW - 1::NW]
-        cost = ca.sumsqr(r) + spec.w_slack[0] * ca.sum1(slacks)
+        w, p, r, gv, states = _nlp(spec)
+        cost = ca.sumsqr(r) + spec.w_slack[0] * ca.sum1(w[spec.nw - 1::spec.nw])
         opts = _options(spec)
         if spec.solver == "sqp" and spec.hessian == "gauss-newton":
             opts["hess_lag"] = _gauss_newton(w, p, r, gv.numel())
@@ -204,25 +179,71 @@ class NmpcProblem:
         self.solver = ca.nlpsol("nmpc", plugin, {"x": w, "p": p, "f": cost,
                                                   "g": gv}, {**opts, **(options or {})})
         self.lbx, self.ubx = self._bounds()
-        inf = np.inf
+        inf, d = np.inf, spec.dyn_rows
         rim = spec.wheel[1] if spec.wheel is not None else inf
-        stage_lbg = np.r_[np.zeros(3), np.full(c, -inf), np.full(spec.rows - 3 - c, -rim)]
-        stage_ubg = np.r_[np.zeros(3), np.full(c, inf), np.full(spec.rows - 3 - c, rim)]
+        stage_lbg = np.r_[np.zeros(d), np.full(c, -inf), np.full(spec.rows - d - c, -rim)]
+        stage_ubg = np.r_[np.zeros(d), np.full(c, inf), np.full(spec.rows - d - c, rim)]
         self.lbg_template = np.tile(stage_lbg, h)
         self.ubg = np.tile(stage_ubg, h)
+        self.sizes = (spec.nw * h, p.numel(), spec.rows * h)
+        self.states = ca.Function("states", [w, p], [states])
+        self.function = self._packed()
+        self.compiled: CompiledFunction | None = None
+        if spec.compiled and spec.solver == "sqp":
+            self.compiled = compile_function(self.function, (spec.qp_solver,)
+                                             if spec.qp_solver == "daqp" else ())
 
     def _bounds(self) -> tuple[FloatArray, FloatArray]:
         s, inf = self.spec, np.inf
+        if s.formulation == "condensed":
+            return (np.tile([s.v_min, -s.w_max, 0.0], s.horizon),
+                    np.tile([s.v_max, s.w_max, inf], s.horizon))
         lo = np.tile([s.v_min, -s.w_max, -inf, -inf, -inf, 0.0], s.horizon)
         hi = np.tile([s.v_max, s.w_max, inf, inf, inf, inf], s.horizon)
         return lo, hi
 
+    def _packed(self) -> ca.Function:
+        """The solver behind one dense input and one dense output (class docstring)."""
+        nx, n_p, ng = self.sizes
+        z = ca.MX.sym("z", 2 * nx + n_p + 2 * ng)
+        w0, p, lbg, lam_x0, lam_g0 = ca.vertsplit(
+            z, [int(i) for i in np.cumsum([0, nx, n_p, ng, nx, ng])])
+        sol = self.solver(x0=w0, p=p, lbx=self.lbx, ubx=self.ubx, lbg=lbg, ubg=self.ubg,
+                          lam_x0=lam_x0, lam_g0=lam_g0)
+        w, lam_x, lam_g = sol["x"], sol["lam_x"], sol["lam_g"]
+        kkt = ca.MX.zeros(2)
+        if self.spec.solver == "sqp":  # sqpmethod's own measures (same Function, same numbers)
+            _, grad, g, jac = self.solver.get_function("nlp_jac_fg")(w, p)
+            viol = ca.vertcat(w - self.ubx, self.lbx - w, g - self.ubg, lbg - g)
+            kkt = ca.vertcat(ca.mmax(ca.fmax(viol, 0.0)),
+                             ca.norm_inf(grad + ca.mtimes(jac.T, lam_g) + lam_x))
+        out = ca.vertcat(w, lam_x, lam_g, self.states(w, p), kkt)
+        return ca.Function("nmpc_solve", [z], [out])
+
+    def pack(self, w0: FloatArray, p: FloatArray, lbg: FloatArray,
+             lam_x0: FloatArray | None = None, lam_g0: FloatArray | None = None) -> FloatArray:
+        """Packed inputs of ``function`` (``(..., n)`` rows; missing multipliers are 0)."""
+        lead = np.shape(w0)[:-1]
+        nx, _, ng = self.sizes
+        lam_x0 = np.zeros((*lead, nx)) if lam_x0 is None else lam_x0
+        lam_g0 = np.zeros((*lead, ng)) if lam_g0 is None else lam_g0
+        return np.concatenate((w0, p, lbg, lam_x0, lam_g0), axis=-1)
+
+    def guesses(self, u: FloatArray, x: FloatArray) -> FloatArray:
+        """Initial guesses ``(N, nw H)`` from controls ``(N, H, 2)`` and poses ``(N, H, 3)``."""
+        n, h = u.shape[:2]
+        guess = np.zeros((n, h, self.spec.nw))
+        guess[..., :2] = u
+        if self.spec.formulation != "condensed":
+            guess[..., 2:5] = x
+        return guess.reshape(n, -1)
+
     def solve(self, w0: FloatArray, p: FloatArray, lbg: FloatArray,
               lam_x0: FloatArray | None = None, lam_g0: FloatArray | None = None) -> SolveOutput:
-        """Solve once from the initial guess ``w0`` (and multipliers, for IPOPT's warm start).
+        """Solve once from the initial guess ``w0`` (and multipliers, for a warm start).
 
         Args:
-            w0: ``(6 H,)`` initial guess.
+            w0: ``(nw H,)`` initial guess.
             p: Parameter vector (module docstring).
             lbg: Lower constraint bounds (the half-plane offsets ``c``; ``-inf`` = off).
             lam_x0: Initial bound multipliers, or None (zeros).
@@ -231,16 +252,92 @@ class NmpcProblem:
         Returns:
             The solution; exceptions of the solver propagate.
         """
-        args = {"x0": w0, "p": p, "lbx": self.lbx, "ubx": self.ubx, "lbg": lbg, "ubg": self.ubg}
-        if lam_x0 is not None and lam_g0 is not None:
-            args["lam_x0"], args["lam_g0"] = lam_x0, lam_g0
-        out = self.solver(**args)
-        stats = self.solver.stats()
-        w = np.asarray(out["x"], dtype=float).ravel()
-        lam_x = np.asarray(out["lam_x"], dtype=float).ravel()
-        lam_g = np.asarray(out["lam_g"], dtype=float).ravel()
-        ok = bool(stats.get("success", False)) and bool(np.all(np.isfinite(w)))
-        return SolveOutput(w, lam_x, lam_g, ok, int(stats.get("iter_count", -1)))
+        return self.solve_packed(self.pack(w0, p, lbg, lam_x0, lam_g0))
+
+    def solve_packed(self, z: FloatArray) -> SolveOutput:
+        """Solve from packed inputs (:meth:`pack`); exceptions of the solver propagate."""
+        nx, n_p, ng = self.sizes
+        h = self.spec.horizon
+        if self.compiled is not None:
+            out = self.compiled(z)
+            w, lam_x, lam_g = out[:nx], out[nx:2 * nx], out[2 * nx:2 * nx + ng]
+            states = out[2 * nx + ng:2 * nx + ng + 3 * h]
+            converged = out[-2] < self.spec.tol and out[-1] < self.spec.tol
+            iterations = -1
+        else:  # the solver itself (its stats are those of this call)
+            w0, p, lbg, lam_x0, lam_g0 = np.split(z, np.cumsum([nx, n_p, ng, nx]))
+            sol = self.solver(x0=w0, p=p, lbx=self.lbx, ubx=self.ubx, lbg=lbg, ubg=self.ubg,
+                              lam_x0=lam_x0, lam_g0=lam_g0)
+            stats = self.solver.stats()
+            w, lam_x, lam_g = (np.asarray(sol[k], dtype=float).ravel()
+                               for k in ("x", "lam_x", "lam_g"))
+            states = np.asarray(self.states(w, p), dtype=float).ravel()
+            converged = bool(stats.get("success", False))
+            iterations = int(stats.get("iter_count", -1))
+        ok = converged and bool(np.all(np.isfinite(w)))
+        wk = w.reshape(h, -1)
+        return SolveOutput(w, lam_x, lam_g, ok, iterations, wk[:, :2], states.reshape(h, 3),
+                           wk[:, -1])
+
+
+def map_multipliers(lam_x: FloatArray, lam_g: FloatArray, src: ProblemSpec, dst: ProblemSpec
+                    ) -> tuple[FloatArray, FloatArray]:
+    """Multipliers of ``src``'s layout in ``dst``'s (those of the states and dynamics: 0).
+
+    The bounds of the controls and slacks and the half-plane and wheel rows are the
+    same constraints in both formulations.
+
+    Args:
+        lam_x: ``(nw H,)`` bound multipliers in ``src``'s layout.
+        lam_g: ``(rows H,)`` constraint multipliers in ``src``'s layout.
+        src: The layout of the given multipliers.
+        dst: The layout wanted.
+
+    Returns:
+        ``(lam_x, lam_g)`` in ``dst``'s layout.
+    """
+    if src.formulation == dst.formulation:
+        return lam_x.copy(), lam_g.copy()
+    h = src.horizon
+    lx, lg = lam_x.reshape(h, src.nw), lam_g.reshape(h, src.rows)
+    out_x, out_g = np.zeros((h, dst.nw)), np.zeros((h, dst.rows))
+    out_x[:, :2], out_x[:, -1] = lx[:, :2], lx[:, -1]
+    out_g[:, dst.dyn_rows:] = lg[:, src.dyn_rows:]
+    return out_x.ravel(), out_g.ravel()
+
+
+def _nlp(spec: ProblemSpec) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """Variables, parameters, weighted residuals, constraints and planned poses (3 H)."""
+    h, c, nw = spec.horizon, spec.slots, spec.nw
+    w = ca.SX.sym("w", nw * h)
+    p = ca.SX.sym("p", 5 + h * spec.stage_params)
+    x_prev, u_prev = p[0:3], p[3:5]
+    res, g, states = [], [], []
+    for k in range(h):
+        base = nw * k
+        u, s = w[base:base + 2], w[base + nw - 1]
+        q = p[5 + k * spec.stage_params: 5 + (k + 1) * spec.stage_params]
+        ref, psi, u_ref, normals = q[0:2], q[2], q[3:5], q[5:]
+        wt = spec.w_terminal if k == h - 1 else spec.w_track
+        if spec.formulation == "condensed":
+            x = arc_step(x_prev, u, spec.tau)
+        else:
+            x = w[base + 2:base + 5]
+            g.append(x - arc_step(x_prev, u, spec.tau))
+        # squared residuals: 2 (1 - cos(th - psi)) = |(cos th - cos psi, sin th - sin psi)|^2
+        res += [math.sqrt(wt) * (x[0:2] - ref),
+                math.sqrt(0.5 * spec.w_heading) * ca.vertcat(ca.cos(x[2]) - ca.cos(psi),
+                                                             ca.sin(x[2]) - ca.sin(psi)),
+                math.sqrt(spec.w_effort) * (u - u_ref), math.sqrt(spec.w_rate) * (u - u_prev),
+                math.sqrt(spec.w_slack[1]) * s]
+        for j in range(c):
+            g.append(normals[2 * j] * x[0] + normals[2 * j + 1] * x[1] + s)
+        if spec.wheel is not None:
+            half_track = 0.5 * spec.wheel[0]
+            g.append(ca.vertcat(u[0] + half_track * u[1], u[0] - half_track * u[1]))
+        states.append(x)
+        x_prev, u_prev = x, u
+    return w, p, ca.vertcat(*res), ca.vertcat(*g), ca.vertcat(*states)
 
 
 def _gauss_newton(w: ca.SX, p: ca.SX, r: ca.SX, ng: int) -> ca.Function:
@@ -258,8 +355,14 @@ def _gauss_newton(w: ca.SX, p: ca.SX, r: ca.SX, ng: int) -> ca.Function:
 
 
 def _options(spec: ProblemSpec) -> dict:
-    """Silent solver options with warm starts."""
+    """Silent solver options with warm starts.
+
+    The condensed problem's solver leaves out casadi's post-processing (``lam_p`` and
+    moving the solution onto its bounds), which the compiled code does not have.
+    """
     common = {"print_time": False, "error_on_fail": False}
+    if spec.formulation == "condensed":
+        common.update(calc_lam_p=False, bound_consistency=False)
     if spec.solver == "ipopt":
         return {**common, "ipopt": {
             "print_level": 0, "sb": "yes", "max_iter": spec.max_iter, "tol": spec.tol,
