@@ -2,6 +2,20 @@
 
 The DFCOA reference implementation (paper 000), companion-paper controllers
 (package ``comparisons``), a simulator with LiDAR and a benchmark harness.
+
+From Python (:mod:`dfcoa_opt.api`)::
+
+    import dfcoa_opt as d
+
+    s = d.load("scenarios/dfcoa_s1.toml")      # a Scenario (overrides as keywords)
+    r = d.run(s, "dfcoa", seed=0)              # a Run: .log, .metrics, .plot(), .animate()
+    print(r.metrics["outcome"], d.controllers())
+
+``d.register("my_id")`` registers a controller class (README, "Add your own
+controller").
 """
 
+from dfcoa_opt.api import Run, controllers, load, register, run
+
 __version__ = "0.1.0"
+__all__ = ["Run", "__version__", "controllers", "load", "register", "run"]

@@ -123,11 +123,11 @@ def draw_world(ax: Axes, grid: OccupancyGrid, goal: ArrayLike | None = None,
     ax.set_ylabel("y (m)")
 
 
-def plot_run(log: RunLog, grid: OccupancyGrid, path: str | Path, goal: ArrayLike | None = None,
-             start: ArrayLike | None = None, title: str | None = None, *,
-             shapes: Iterable[Shape] = (), figsize: tuple[float, float] = (7.0, 6.0),
-             dpi: float = 100.0) -> Path:
-    """Save a PNG summary of a run.
+def run_figure(log: RunLog, grid: OccupancyGrid, goal: ArrayLike | None = None,
+               start: ArrayLike | None = None, title: str | None = None, *,
+               shapes: Iterable[Shape] = (), figsize: tuple[float, float] = (7.0, 6.0),
+               dpi: float = 100.0) -> Figure:
+    """The summary figure of a run (what :func:`plot_run` saves).
 
     Shows the map, each robot's trajectory (legend "robot i"), the virtual
     leader's path (dashed black), the final robot discs with heading lines, the
@@ -137,16 +137,12 @@ def plot_run(log: RunLog, grid: OccupancyGrid, path: str | Path, goal: ArrayLike
     Args:
         log: The run.
         grid: The map the run used.
-        path: Output ``.png`` file; parent directories are created.
         goal: Leader goal ``(x, y)`` in m.
         start: Leader start ``(x, y)`` in m.
         title: Figure title; default ``"{scenario} - {controller} - seed {seed}"``.
         shapes: Exact static shapes to outline.
         figsize: ``(width, height)`` in inches.
         dpi: Pixels per inch (image is ``figsize * dpi`` pixels).
-
-    Returns:
-        The written path.
 
     Raises:
         ValueError: On an empty log.
@@ -174,13 +170,41 @@ def plot_run(log: RunLog, grid: OccupancyGrid, path: str | Path, goal: ArrayLike
     ax.set_title(_default_title(log) if title is None else title)
     _set_view(ax, grid, log, radius, goal, start)
     fig.legend(loc="outside right upper", fontsize="small")
+    return fig
+
+
+def plot_run(log: RunLog, grid: OccupancyGrid, path: str | Path, goal: ArrayLike | None = None,
+             start: ArrayLike | None = None, title: str | None = None, *,
+             shapes: Iterable[Shape] = (), figsize: tuple[float, float] = (7.0, 6.0),
+             dpi: float = 100.0) -> Path:
+    """Save a PNG summary of a run (:func:`run_figure`; same arguments and ``path``).
+
+    Args:
+        log: The run.
+        grid: The map the run used.
+        path: Output ``.png`` file; parent directories are created.
+        goal: Leader goal ``(x, y)`` in m.
+        start: Leader start ``(x, y)`` in m.
+        title: Figure title; default ``"{scenario} - {controller} - seed {seed}"``.
+        shapes: Exact static shapes to outline.
+        figsize: ``(width, height)`` in inches.
+        dpi: Pixels per inch (image is ``figsize * dpi`` pixels).
+
+    Returns:
+        The written path.
+
+    Raises:
+        ValueError: On an empty log.
+    """
+    fig = run_figure(log, grid, goal, start, title, shapes=shapes, figsize=figsize, dpi=dpi)
     return _save_atomic(path, lambda tmp: fig.savefig(tmp, format="png"), ".png")
 
 
 def animate_run(log: RunLog, grid: OccupancyGrid, path: str | Path,
                 goal: ArrayLike | None = None, fps: float = 10.0, max_frames: int = 200,
                 start: ArrayLike | None = None, *, shapes: Iterable[Shape] = (),
-                figsize: tuple[float, float] = (7.0, 6.0), dpi: float = 80.0) -> Path:
+                figsize: tuple[float, float] = (7.0, 6.0), dpi: float = 80.0,
+                figure: list[Figure] | None = None) -> Path:
     """Save a GIF animation of a run.
 
     The ``T`` logged steps are subsampled uniformly (first and last included) to
@@ -200,6 +224,7 @@ def animate_run(log: RunLog, grid: OccupancyGrid, path: str | Path,
         shapes: Exact static shapes to outline.
         figsize: ``(width, height)`` in inches.
         dpi: Pixels per inch (frames are ``figsize * dpi`` pixels).
+        figure: When given, the animation's figure (at its last frame) is appended.
 
     Returns:
         The written path.
@@ -251,7 +276,10 @@ def animate_run(log: RunLog, grid: OccupancyGrid, path: str | Path,
     anim = FuncAnimation(fig, draw, frames=[int(k) for k in steps], blit=False,
                          repeat=False, cache_frame_data=False)
     writer = PillowWriter(fps=fps)
-    return _save_atomic(path, lambda tmp: anim.save(tmp, writer=writer, dpi=dpi), ".gif")
+    out = _save_atomic(path, lambda tmp: anim.save(tmp, writer=writer, dpi=dpi), ".gif")
+    if figure is not None:
+        figure.append(fig)
+    return out
 
 
 def plot_timeseries(log: RunLog, series: Mapping[str, ArrayLike], path: str | Path,

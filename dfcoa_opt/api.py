@@ -1,0 +1,195 @@
+"""The Python facade: load a scenario, run a controller, read the metrics, plot.
+
+Everything here is re-exported by :mod:`dfcoa_opt`, so a notebook needs one
+import::
+
+    import dfcoa_opt as d
+
+    s = d.load("scenarios/dfcoa_s1.toml")
+    r = d.run(s, "dfcoa")
+    r.metrics["outcome"]          # 'success'
+    r.plot()                      # a matplotlib Figure
+
+The facade calls the same code as the ``dfcoa`` command line
+(:func:`~dfcoa_opt.sim.loader.load_scenario`,
+:class:`~dfcoa_opt.sim.simulator.Simulator`, :func:`~dfcoa_opt.metrics.summary`,
+:mod:`~dfcoa_opt.plotting`), so a run from Python gives the same numbers, bit
+for bit, as ``dfcoa run`` with the same scenario, controller and seed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from dfcoa_opt.control.registry import register
+from dfcoa_opt.errors import DfcoaError
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from dfcoa_opt.sim.log import RunLog
+    from dfcoa_opt.sim.scenario import Scenario
+
+__all__ = ["Run", "controllers", "load", "register", "run"]
+
+
+def load(path: str | Path, *, seed: int | None = None,
+         overrides: Mapping[str, Any] | None = None, **keys: Any) -> Scenario:
+    """Load and validate a scenario file.
+
+    Args:
+        path: The ``.toml`` file.
+        seed: Replaces the file's ``seed``.
+        overrides: Dotted keys set before validation, e.g.
+            ``{"leader.speed": 0.4, "controllers.dfcoa.k1": 2.0}``.
+        **keys: More overrides as keywords, ``__`` standing for the dot:
+            ``load(path, t_max=30, leader__speed=0.4)``.
+
+    Returns:
+        The :class:`~dfcoa_opt.sim.scenario.Scenario`.
+
+    Raises:
+        ScenarioError: A bad file or key, in one line naming the file, the key
+            and the problem (as ``dfcoa run`` prints it).
+
+    Example:
+        >>> import dfcoa_opt as d
+        >>> s = d.load("scenarios/dfcoa_s1.toml", t_max=20.0)
+        >>> s.spec.t_max
+        20.0
+    """
+    from dfcoa_opt.sim.loader import load_scenario
+
+    merged = {**dict(overrides or {}), **{k.replace("__", "."): v for k, v in keys.items()}}
+    return load_scenario(path, seed, merged or None)
+
+
+def controllers() -> list[str]:
+    """Ids of every registered controller, sorted (built-in, entry points, ``register``-ed).
+
+    A safety filter is added to any of them as ``"<controller>+<filter>"``, e.g.
+    ``"goto_slot+cbf"``.
+
+    Example:
+        >>> import dfcoa_opt as d
+        >>> "dfcoa" in d.controllers()
+        True
+    """
+    from dfcoa_opt.control.registry import available
+
+    return available()
+
+
+def run(scenario: Scenario | str | Path, controller: str | Any,
+        seed: int | None = None) -> Run:
+    """Simulate one scenario with one controller.
+
+    Args:
+        scenario: A loaded scenario, or the path of a scenario file.
+        controller: A registry id (see :func:`controllers`; ``"a+cbf"`` adds a
+            filter), built with the scenario's ``[controllers.<id>]`` parameters;
+            or a controller object (see README, "Add your own controller").
+        seed: The run's seed (default: the scenario's). One
+            ``numpy.random.Generator`` made from it is the run's only random
+            source: the same seed gives the same run, bit for bit.
+
+    Returns:
+        The :class:`Run`: ``.log`` (every array), ``.metrics``, ``.plot()``,
+        ``.animate(path)``.
+
+    Raises:
+        ScenarioError: A bad scenario file or controller parameter.
+        UnknownNameError: An unknown controller id, with a "did you mean" hint.
+        ControllerError: The controller returned a bad command.
+
+    Example:
+        >>> import dfcoa_opt as d
+        >>> r = d.run("scenarios/example_empty.toml", "goto_slot", seed=1)
+        >>> r.metrics["outcome"]
+        'success'
+    """
+    from dfcoa_opt.control.registry import build_controller
+    from dfcoa_opt.sim.simulator import Simulator
+
+    sc = scenario if not isinstance(scenario, str | Path) else load(scenario)
+    if isinstance(controller, str):
+        ctrl = build_controller(controller, sc.spec.controllers, sc.source)
+    elif callable(getattr(controller, "act", None)):
+        ctrl = controller
+    else:
+        raise DfcoaError(f"run: controller must be a registry id or an object with act(obs), "
+                         f"got {type(controller).__name__}")
+    return Run(sc, Simulator(sc, ctrl, seed).run())
+
+
+@dataclass
+class Run:
+    """One simulated run: the scenario, its log, its metrics and its plots.
+
+    Attributes:
+        scenario: The scenario that was run.
+        log: Every logged array (:class:`~dfcoa_opt.sim.log.RunLog`: ``t``,
+            ``pose`` ``(T, N, 3)``, ``slots``, ``leader``, ...; ``log.meta`` holds
+            the run's facts such as ``seed`` and ``time_to_goal``).
+    """
+
+    scenario: Scenario
+    log: RunLog = field(repr=False)
+
+    @cached_property
+    def metrics(self) -> dict[str, Any]:
+        """Every metric of the run (``outcome``, ``fce_rms``, ...; ``docs/metrics.md``).
+
+        The scenario's ``[metrics]`` settings apply, as in ``dfcoa run``.
+        """
+        from dfcoa_opt import metrics
+
+        return metrics.summary(self.log, self.scenario.spec.metrics)
+
+    def plot(self, path: str | Path | None = None) -> Figure:
+        """The map, the trajectories, the leader and the final formation.
+
+        Args:
+            path: Also save the figure there as a PNG (folders are created).
+
+        Returns:
+            The matplotlib ``Figure`` (shown inline in a notebook).
+        """
+        from dfcoa_opt import plotting
+
+        sc = self.scenario
+        fig = plotting.run_figure(self.log, sc.world.grid, sc.spec.leader.goal,
+                                  sc.spec.leader.start, shapes=sc.world.shapes)
+        if path is not None:
+            plotting.plot_run(self.log, sc.world.grid, path, sc.spec.leader.goal,
+                              sc.spec.leader.start, shapes=sc.world.shapes)
+        return fig
+
+    def animate(self, path: str | Path, fps: float = 10.0, max_frames: int = 200) -> Figure:
+        """Write a GIF animation of the run (as ``dfcoa run --animate``).
+
+        Args:
+            path: The ``.gif`` file (folders are created).
+            fps: Frames per second.
+            max_frames: Most frames; the steps are subsampled evenly.
+
+        Returns:
+            The animation's matplotlib ``Figure``, at its last frame.
+
+        Raises:
+            DfcoaError: ``path`` does not end in ``.gif``.
+        """
+        from dfcoa_opt import plotting
+
+        if not str(path).lower().endswith(".gif"):
+            raise DfcoaError(f"animate: '{path}' must end in .gif")
+        sc = self.scenario
+        out: list[Figure] = []
+        plotting.animate_run(self.log, sc.world.grid, path, sc.spec.leader.goal, fps,
+                             max_frames, sc.spec.leader.start, shapes=sc.world.shapes,
+                             figure=out)
+        return out[0]

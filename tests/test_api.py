@@ -1,0 +1,105 @@
+"""The Python facade (dfcoa_opt.load / run / controllers / register, Run)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+
+import dfcoa_opt as d
+from dfcoa_opt.errors import DfcoaError, ScenarioError, UnknownNameError
+from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.sim.simulator import run_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+EMPTY = ROOT / "scenarios" / "example_empty.toml"
+
+
+def test_the_readme_line_runs_dfcoa_on_s1_to_success():
+    s = d.load(ROOT / "scenarios" / "dfcoa_s1.toml")
+    assert d.run(s, "dfcoa").metrics["outcome"] == "success"
+
+
+def test_load_takes_dotted_and_keyword_overrides_and_names_a_bad_key():
+    s = d.load(EMPTY, seed=7, overrides={"leader.speed": 0.2}, t_max=12.5)
+    assert (s.spec.seed, s.spec.leader.speed, s.spec.t_max) == (7, 0.2, 12.5)
+    assert d.load(EMPTY, leader__speed=0.25).spec.leader.speed == 0.25
+    with pytest.raises(ScenarioError, match=r"example_empty\.toml: robots\.radios: unknown key"):
+        d.load(EMPTY, robots__radios=0.3)
+
+
+def test_run_is_the_command_line_run_bit_for_bit_and_seeded():
+    s = load_scenario(EMPTY)
+    a, b = d.run(s, "goto_slot", seed=3), d.run(EMPTY, "goto_slot", seed=3)
+    assert a.log.digest() == b.log.digest() == run_scenario(s, "goto_slot", 3).digest()
+    assert a.log.meta["seed"] == 3
+    noisy = d.load(EMPTY, overrides={"sensors.lidar.noise_std": 0.05})
+    assert d.run(noisy, "dfcoa", seed=1).log.digest() != d.run(noisy, "dfcoa", seed=2).log.digest()
+
+
+def test_metrics_use_the_scenario_settings():
+    r = d.run(EMPTY, "goto_slot")
+    assert r.metrics["outcome"] == "success" and r.metrics["reached"]
+    assert set(r.metrics) >= {"fce_rms", "fse_rms", "time_to_goal", "min_inter_robot_distance"}
+
+
+class Hold:
+    """Stands still: zero velocity for every robot."""
+
+    command = "velocity"
+    uses_scan = False
+
+    @dataclass(frozen=True)
+    class Params:
+        pass
+
+    def __init__(self, params: Params) -> None:
+        self.p = params
+
+    def reset(self, scenario, rng) -> None:
+        pass
+
+    def act(self, obs):
+        return np.zeros((len(obs.pose), 2))
+
+
+@pytest.fixture
+def hold_registered(monkeypatch):
+    """``Hold`` registered as ``api_test_hold`` for one test (the registry is restored)."""
+    from dfcoa_opt.control import registry
+
+    registry.available()  # load the built-ins before the copy
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    assert d.register("api_test_hold")(Hold) is Hold
+
+
+def test_registered_controllers_are_listed_and_run_by_id_or_object(hold_registered):
+    assert {"dfcoa", "reshape", "api_test_hold"} <= set(d.controllers())
+    s = d.load(EMPTY, t_max=3.0)
+    by_id, by_object = d.run(s, "api_test_hold"), d.run(s, Hold(Hold.Params()))
+    assert by_id.log.digest() == by_object.log.digest()
+    np.testing.assert_array_equal(by_id.log.pose[-1], by_id.log.pose[0])
+    with pytest.raises(UnknownNameError, match="did you mean 'dfcoa'"):
+        d.run(s, "dfcao")
+    with pytest.raises(DfcoaError, match="registry id or an object with act"):
+        d.run(s, 42)
+
+
+def test_plot_and_animate_return_figures_and_write_files(tmp_path):
+    r = d.run(d.load(EMPTY, t_max=2.0), "goto_slot")
+    fig = r.plot(tmp_path / "a" / "run.png")
+    assert isinstance(fig, Figure) and fig.axes[0].get_title().startswith("example_empty")
+    assert (tmp_path / "a" / "run.png").read_bytes()[:4] == b"\x89PNG"
+    gif = tmp_path / "run.gif"
+    assert isinstance(r.animate(gif, max_frames=5), Figure)
+    assert gif.read_bytes()[:3] == b"GIF"
+    with pytest.raises(DfcoaError, match="must end in .gif"):
+        r.animate(tmp_path / "run.mp4")
+
+
+def test_the_package_ships_its_type_information():
+    assert (Path(d.__file__).parent / "py.typed").is_file()
+    assert set(d.__all__) >= {"load", "run", "controllers", "register", "Run"}
