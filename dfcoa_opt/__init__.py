@@ -10,12 +10,15 @@ From Python (:mod:`dfcoa_opt.api`)::
     s = d.load("scenarios/dfcoa_s1.toml")      # a Scenario (overrides as keywords)
     r = d.run(s, "dfcoa", seed=0)              # a Run: .log, .metrics, .plot(), .animate()
     print(r.metrics["outcome"], d.controllers())
+    res = d.sweep("scenarios/sweeps/examples.toml", "results/examples")   # a Results
+    res.table(); res.report()                  # rows (a DataFrame with pandas); report.md
 
 ``d.register("my_id")`` registers a controller class (README, "Add your own
 controller").
 """
 
-from dfcoa_opt.api import Run, controllers, load, register, run
+from dfcoa_opt.api import Results, Run, controllers, load, register, report, run, sweep
 
 __version__ = "0.1.0"
-__all__ = ["Run", "__version__", "controllers", "load", "register", "run"]
+__all__ = ["Results", "Run", "__version__", "controllers", "load", "register", "report", "run",
+           "sweep"]

@@ -9,6 +9,10 @@ import::
     r = d.run(s, "dfcoa")
     r.metrics["outcome"]          # 'success'
     r.plot()                      # a matplotlib Figure
+    res = d.sweep({"scenarios": ["scenarios/dfcoa_s1.toml"],
+                   "controllers": ["dfcoa", "goto_slot"], "seeds": 5})
+    res.table()                   # one row per run (a DataFrame with pandas)
+    res.report()                  # report.md, paired statistics and figures
 
 The facade calls the same code as the ``dfcoa`` command line
 (:func:`~dfcoa_opt.sim.loader.load_scenario`,
@@ -19,6 +23,7 @@ for bit, as ``dfcoa run`` with the same scenario, controller and seed.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -34,7 +39,7 @@ if TYPE_CHECKING:
     from dfcoa_opt.sim.log import RunLog
     from dfcoa_opt.sim.scenario import Scenario
 
-__all__ = ["Run", "controllers", "load", "register", "run"]
+__all__ = ["Results", "Run", "controllers", "load", "register", "report", "run", "sweep"]
 
 
 def load(path: str | Path, *, seed: int | None = None,
@@ -193,3 +198,132 @@ class Run:
                              max_frames, sc.spec.leader.start, shapes=sc.world.shapes,
                              figure=out)
         return out[0]
+
+
+def sweep(spec: str | Path | Mapping[str, Any], out: str | Path | None = None, *,
+          jobs: int | None = None, seeds: int | None = None,
+          overrides: Mapping[str, Any] | None = None, rerun: bool = False,
+          progress: bool | None = None) -> Results:
+    """Run a sweep (controllers x scenarios x seeds) as ``dfcoa bench`` does.
+
+    Runs already in ``out`` are reused (the same scenario file, overrides and
+    code), so calling it again resumes.
+
+    Args:
+        spec: A sweep file, or a dict with its keys (``scenarios`` (patterns,
+            relative to the working folder), ``controllers``, ``seeds``,
+            ``grid``, ``variants``, ``baseline``, ``ladder``;
+            ``docs/benchmarking.md``).
+        out: Results folder (default ``results/<sweep name>``).
+        jobs: Worker processes (default: one per core). 1 runs every run in
+            this process, which is also what happens, with a warning, when a
+            controller of the sweep was registered in this process only (a
+            notebook cell): worker processes could not build it.
+        seeds: Replace the sweep's seed count.
+        overrides: Dotted scenario keys set in every run.
+        rerun: Run everything again.
+        progress: Progress bar (default: only on a terminal).
+
+    Returns:
+        The :class:`Results`.
+
+    Raises:
+        ScenarioError: A bad sweep or scenario key, before any run starts.
+
+    Example:
+        >>> import dfcoa_opt as d
+        >>> res = d.sweep({"scenarios": ["scenarios/example_empty.toml"],
+        ...                "controllers": ["goto_slot"], "seeds": 2}, "/tmp/demo")
+        >>> [r["outcome"] for r in res.rows]
+        ['success', 'success']
+    """
+    from dfcoa_opt.bench.executors import ExecutorConfig
+    from dfcoa_opt.bench.harness import run_sweep
+    from dfcoa_opt.bench.sweep import load_sweep, sweep_from_dict
+    from dfcoa_opt.control.registry import known_to_workers
+
+    if isinstance(spec, Mapping):
+        sw = sweep_from_dict(spec, ".", seeds, overrides)
+    else:
+        sw = load_sweep(spec, seeds, overrides)
+    local = sorted({v.controller for v in sw.variants if not known_to_workers(v.controller)})
+    if local and jobs != 1:
+        warnings.warn(f"sweep: {', '.join(local)} registered in this process only (not a "
+                      "built-in or an entry point), so the sweep runs here, one run at a "
+                      "time (jobs=1)", stacklevel=2)
+        jobs = 1
+    folder = Path(out) if out is not None else Path("results") / sw.name
+    run_sweep(sw, folder, ExecutorConfig("process", jobs), rerun=rerun, progress=progress)
+    return Results(folder)
+
+
+def report(results: str | Path | Results, out: str | Path | None = None,
+           baseline: str | None = None) -> list[Path]:
+    """Tables and figures of a results folder, as ``dfcoa report`` (never simulates).
+
+    Args:
+        results: The results folder (or :class:`Results`).
+        out: Output folder (default ``<results>/report``).
+        baseline: Variant the others are compared with, pairwise by seed
+            (default: the sweep's ``baseline``; ``""`` for none).
+
+    Returns:
+        The written files (``report.md`` first).
+    """
+    from dfcoa_opt.bench.report import make_report
+
+    folder = results.folder if isinstance(results, Results) else Path(results)
+    return make_report(folder, out, baseline=baseline)
+
+
+@dataclass
+class Results:
+    """A results folder written by :func:`sweep` (or ``dfcoa bench``).
+
+    Attributes:
+        folder: The folder (``manifest.json``, ``rows/``, ``logs/``, ``results.csv``).
+    """
+
+    folder: Path
+
+    @property
+    def rows(self) -> list[dict[str, Any]]:
+        """One dict per run: its keys (``scenario``, ``variant``, ``seed``, ...), its metrics."""
+        from dfcoa_opt.bench.store import CSV_FIELDS, ResultsStore
+
+        out = []
+        for r in ResultsStore(self.folder).rows():
+            row = {k: r.get(k) for k in CSV_FIELDS}
+            row.update(r.get("metrics") or {})
+            out.append(row)
+        return out
+
+    def table(self) -> Any:
+        """:attr:`rows` as a pandas DataFrame when pandas is installed, else the list."""
+        try:
+            import pandas as pd
+        except ImportError:
+            return self.rows
+        return pd.DataFrame(self.rows)
+
+    def report(self, out: str | Path | None = None, baseline: str | None = None) -> list[Path]:
+        """:func:`report` of this folder."""
+        return report(self, out, baseline)
+
+    def log(self, scenario: str, variant: str, seed: int) -> RunLog:
+        """The stored log of one run (:class:`~dfcoa_opt.sim.log.RunLog`).
+
+        Raises:
+            DfcoaError: No such run in the folder, naming what is there.
+        """
+        from dfcoa_opt.bench.store import ResultsStore
+        from dfcoa_opt.sim.log import RunLog
+
+        rows = ResultsStore(self.folder).rows()
+        hit = [r for r in rows if (r["scenario"], r["variant"], r["seed"])
+               == (scenario, variant, seed) and r.get("log")]
+        if not hit:
+            have = sorted({(r["scenario"], r["variant"]) for r in rows})
+            raise DfcoaError(f"{self.folder}: no logged run {scenario} / {variant} / seed "
+                             f"{seed}; it has {have}")
+        return RunLog.load(self.folder / hit[0]["log"])

@@ -103,3 +103,46 @@ def test_plot_and_animate_return_figures_and_write_files(tmp_path):
 def test_the_package_ships_its_type_information():
     assert (Path(d.__file__).parent / "py.typed").is_file()
     assert set(d.__all__) >= {"load", "run", "controllers", "register", "Run"}
+
+
+def _demo_sweep(folder: Path, **kw) -> d.Results:
+    spec = {"scenarios": [str(EMPTY)], "controllers": ["goto_slot", "api_test_hold"],
+            "seeds": 2, "baseline": "goto_slot"}
+    with pytest.warns(UserWarning, match="api_test_hold registered in this process only"):
+        return d.sweep(spec, folder, jobs=2, overrides={"t_max": 4.0}, **kw)
+
+
+def test_sweep_from_a_dict_gives_rows_logs_a_table_and_a_report(tmp_path, hold_registered,
+                                                                monkeypatch):
+    res = _demo_sweep(tmp_path / "res")
+    got = sorted((r["variant"], r["seed"], r["status"]) for r in res.rows)
+    assert got == [("api_test_hold", 0, "ok"), ("api_test_hold", 1, "ok"),
+                   ("goto_slot", 0, "ok"), ("goto_slot", 1, "ok")]
+    hold = [r for r in res.rows if r["variant"] == "api_test_hold"]
+    assert all(r["outcome"] == "deadlock" or r["outcome"] == "timeout" for r in hold)
+    log = res.log("example_empty", "goto_slot", 1)
+    direct = d.run(d.load(EMPTY, t_max=4.0), "goto_slot", seed=1).log
+    assert log.digest() == direct.digest()  # a sweep's run is the facade's run
+    assert res.table() == res.rows  # without pandas: the list itself
+    fake = type("pandas", (), {"DataFrame": staticmethod(lambda rows: ("frame", len(rows)))})
+    monkeypatch.setitem(__import__("sys").modules, "pandas", fake)
+    assert res.table() == ("frame", 4)
+    files = res.report()
+    assert files[0].name == "report.md" and "api_test_hold" in files[0].read_text()
+    with pytest.raises(DfcoaError, match="no logged run example_empty / dfcoa / seed 0"):
+        res.log("example_empty", "dfcoa", 0)
+    again = _demo_sweep(tmp_path / "res")  # resumes: every row is reused
+    assert [r["digest"] for r in again.rows] == [r["digest"] for r in res.rows]
+
+
+def test_only_controllers_registered_here_keep_a_sweep_in_this_process(hold_registered):
+    from dfcoa_opt.control.registry import known_to_workers
+
+    assert known_to_workers("dfcoa") and known_to_workers("goto_slot+cbf")
+    assert not known_to_workers("api_test_hold") and not known_to_workers("api_test_hold+cbf")
+
+
+def test_a_bad_sweep_dict_is_one_line_naming_the_key(tmp_path):
+    with pytest.raises(ScenarioError, match=r"<dict>: seeds"):
+        d.sweep({"scenarios": [str(EMPTY)], "controllers": ["goto_slot"], "seeds": 0},
+                tmp_path)

@@ -290,9 +290,36 @@ def load_sweep(path: str | Path, seeds: int | None = None,
         ScenarioError: One line naming the file, the key and the problem.
     """
     path = Path(path)
-    src = str(path)
     data = read_toml(path)
     data.setdefault("name", path.stem)
+    text = path.read_bytes().decode("utf-8")
+    return expand_sweep(data, str(path), path.parent, text, seeds, overrides)
+
+
+def sweep_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".",
+                    seeds: int | None = None,
+                    overrides: Mapping[str, Any] | None = None) -> Sweep:
+    """A sweep given as a dict with the keys of a sweep file (the Python facade's).
+
+    Args:
+        data: Sweep keys (``scenarios``, ``controllers``, ``seeds``, ...); ``name``
+            defaults to ``"sweep"``.
+        base_dir: Folder that relative scenario patterns start from.
+        seeds: As :func:`load_sweep`.
+        overrides: As :func:`load_sweep`.
+
+    Raises:
+        ScenarioError: One line naming the key and the problem (file ``<dict>``).
+    """
+    data = {"name": "sweep", **dict(data)}
+    text = json.dumps(data, sort_keys=True, default=str)
+    return expand_sweep(data, "<dict>", Path(base_dir), text, seeds, overrides)
+
+
+def expand_sweep(data: dict[str, Any], src: str, base: Path, text: str,
+                 seeds: int | None = None,
+                 overrides: Mapping[str, Any] | None = None) -> Sweep:
+    """Validate and expand sweep keys read from ``src`` (its ``text`` goes in the manifest)."""
     spec = build(SweepSpec, data, src)
     if spec.max_seeds and spec.max_seeds < spec.seeds:
         raise ScenarioError(src, "max_seeds", f"must be 0 or >= seeds ({spec.seeds}), got "
@@ -304,9 +331,9 @@ def load_sweep(path: str | Path, seeds: int | None = None,
     own = [lad for lad in ladders if lad.scenarios]
     if spec.scenarios:
         shared = next((lad for lad in ladders if not lad.scenarios), None)
-        groups.append((_scenario_files(spec.scenarios, src, path.parent, "scenarios"), shared))
+        groups.append((_scenario_files(spec.scenarios, src, base, "scenarios"), shared))
     for i, lad in enumerate(own):
-        groups.append((_scenario_files(lad.scenarios, src, path.parent,
+        groups.append((_scenario_files(lad.scenarios, src, base,
                                        f"ladder[{i}].scenarios"), lad))
     if not groups:
         raise ScenarioError(src, "scenarios", "lists no scenario")
@@ -332,8 +359,8 @@ def load_sweep(path: str | Path, seeds: int | None = None,
                      for seed in range(spec.first_seed, spec.first_seed + n_seeds)]
     unique = list(dict.fromkeys(runs))  # controller-specific keys can make duplicates
     _check_unique(unique, src)
-    sweep = Sweep(spec, src, hashlib.sha256(path.read_bytes()).hexdigest(),
-                  path.read_bytes().decode("utf-8"), tuple(unique), tuple(variants),
+    sweep = Sweep(spec, src, hashlib.sha256(text.encode()).hexdigest(), text,
+                  tuple(unique), tuple(variants),
                   tuple(ladders), spec.max_seeds if seeds is None else 0)
     names_run = list(dict.fromkeys(r.variant_name for r in unique))
     if spec.baseline and spec.baseline not in names_run:

@@ -92,6 +92,24 @@ def _load_all() -> None:
             _REGISTRY[ep.name].name = ep.name
 
 
+def known_to_workers(controller_id: str) -> bool:
+    """Whether a fresh process finds ``controller_id`` (and its filter) in the registry.
+
+    True for classes of :data:`BUILTIN_MODULES` and of the entry-point group; a
+    class registered with :func:`register` in a notebook or a script is known
+    only to the process that ran it, so a sweep's worker processes cannot build it.
+    """
+    _load_all()
+    points = {ep.name for ep in entry_points(group=ENTRY_POINT_GROUP)}
+    for part, table in zip(_parts(controller_id), (_REGISTRY, _FILTERS), strict=True):
+        if part is None or part in points:
+            continue
+        module = getattr(table.get(part), "__module__", "")
+        if not any(module == m or module.startswith(m + ".") for m in BUILTIN_MODULES):
+            return False
+    return True
+
+
 def available() -> list[str]:
     """Sorted ids of all registered controllers (built-in and entry points)."""
     _load_all()
