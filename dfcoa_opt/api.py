@@ -269,6 +269,11 @@ def report(results: str | Path | Results, out: str | Path | None = None,
 
     Returns:
         The written files (``report.md`` first).
+
+    Example:
+        >>> import dfcoa_opt as d
+        >>> d.report("results/examples")[0].name      # after d.sweep(..., "results/examples")
+        'report.md'
     """
     from dfcoa_opt.bench.report import make_report
 

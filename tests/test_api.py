@@ -146,3 +146,15 @@ def test_a_bad_sweep_dict_is_one_line_naming_the_key(tmp_path):
     with pytest.raises(ScenarioError, match=r"<dict>: seeds"):
         d.sweep({"scenarios": [str(EMPTY)], "controllers": ["goto_slot"], "seeds": 0},
                 tmp_path)
+
+
+def test_trajectories_are_records_with_named_fields():
+    r = d.run(d.load(EMPTY, t_max=2.0), "goto_slot")
+    traj = r.log.trajectories()
+    n, steps = r.log.n_robots, r.log.n_steps
+    assert traj.shape == (n * steps,) and traj.dtype.names == r.log.TRAJECTORY_FIELDS
+    two = traj[traj["robot"] == 2]
+    np.testing.assert_array_equal(two["x"], r.log.pose[:, 2, 0])
+    np.testing.assert_array_equal(two["slot_y"], r.log.slots[:, 2, 1])
+    np.testing.assert_array_equal(two["t"], r.log.t)
+    np.testing.assert_array_equal(traj["clearance"][:n], r.log.clearance[0])

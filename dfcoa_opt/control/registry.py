@@ -58,7 +58,19 @@ def _registrar(table: dict[str, type], kind: str, key: str) -> Callable[[C], C]:
 
 
 def register(controller_id: str) -> Callable[[C], C]:
-    """Class decorator registering a controller under ``controller_id``."""
+    """Class decorator registering a controller under ``controller_id``.
+
+    Example (README, "Add your own controller", for the whole interface)::
+
+        import dfcoa_opt as d
+
+        @d.register("my_goto")
+        class MyGoto:
+            command = "velocity"
+            ...
+
+        d.run("scenarios/example_empty.toml", "my_goto")
+    """
     return _registrar(_REGISTRY, "controller", controller_id)
 
 

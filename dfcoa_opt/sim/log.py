@@ -130,6 +130,32 @@ class RunLog:
         """Number of robots N."""
         return self.pose.shape[1]
 
+    #: Fields of :meth:`trajectories`: time (s), robot index, true pose (m, m, rad),
+    #: world velocity (m/s), formation slot (m), static-obstacle clearance (m).
+    TRAJECTORY_FIELDS = ("t", "robot", "x", "y", "theta", "vx", "vy", "slot_x", "slot_y",
+                         "clearance")
+
+    def trajectories(self) -> np.ndarray:
+        """The robots' trajectories as one record per (step, robot), with named fields.
+
+        Returns:
+            A ``(T * N,)`` numpy structured array with the fields of
+            :data:`TRAJECTORY_FIELDS` (``robot`` int, the others float), step by
+            step: ``traj[traj["robot"] == 2]["x"]`` is robot 2's x over time, and
+            ``pandas.DataFrame(traj)`` is a long table.
+        """
+        n_steps, n = self.n_steps, self.n_robots
+        dtype = [(f, np.int64 if f == "robot" else np.float64) for f in self.TRAJECTORY_FIELDS]
+        out = np.empty(n_steps * n, dtype=dtype)
+        cols = {"t": np.repeat(self.t, n), "robot": np.tile(np.arange(n), n_steps),
+                "x": self.pose[..., 0], "y": self.pose[..., 1], "theta": self.pose[..., 2],
+                "vx": self.velocity[..., 0], "vy": self.velocity[..., 1],
+                "slot_x": self.slots[..., 0], "slot_y": self.slots[..., 1],
+                "clearance": self.clearance}
+        for name, values in cols.items():
+            out[name] = np.asarray(values).reshape(-1)
+        return out
+
     def arrays(self) -> dict[str, np.ndarray]:
         """All array fields by name."""
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "meta"}
