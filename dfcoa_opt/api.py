@@ -165,13 +165,13 @@ class Run:
             The matplotlib ``Figure`` (shown inline in a notebook).
         """
         from dfcoa_opt import plotting
+        from dfcoa_opt.bench.plots import save_png
 
         sc = self.scenario
         fig = plotting.run_figure(self.log, sc.world.grid, sc.spec.leader.goal,
                                   sc.spec.leader.start, shapes=sc.world.shapes)
         if path is not None:
-            plotting.plot_run(self.log, sc.world.grid, path, sc.spec.leader.goal,
-                              sc.spec.leader.start, shapes=sc.world.shapes)
+            save_png(fig, path)
         return fig
 
     def animate(self, path: str | Path, fps: float = 10.0, max_frames: int = 200) -> Figure:

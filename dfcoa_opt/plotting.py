@@ -177,18 +177,9 @@ def plot_run(log: RunLog, grid: OccupancyGrid, path: str | Path, goal: ArrayLike
              start: ArrayLike | None = None, title: str | None = None, *,
              shapes: Iterable[Shape] = (), figsize: tuple[float, float] = (7.0, 6.0),
              dpi: float = 100.0) -> Path:
-    """Save a PNG summary of a run (:func:`run_figure`; same arguments and ``path``).
+    """Save :func:`run_figure` of a run as a PNG at ``path`` (folders are created).
 
-    Args:
-        log: The run.
-        grid: The map the run used.
-        path: Output ``.png`` file; parent directories are created.
-        goal: Leader goal ``(x, y)`` in m.
-        start: Leader start ``(x, y)`` in m.
-        title: Figure title; default ``"{scenario} - {controller} - seed {seed}"``.
-        shapes: Exact static shapes to outline.
-        figsize: ``(width, height)`` in inches.
-        dpi: Pixels per inch (image is ``figsize * dpi`` pixels).
+    The other arguments are :func:`run_figure`'s.
 
     Returns:
         The written path.
