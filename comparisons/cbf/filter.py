@@ -140,6 +140,15 @@ class CbfFilter:
         self._gamma = min(self.p.gamma, 1.0 / dt) if self.p.discrete_time else self.p.gamma
         self._static = StaticObstacles.from_shapes(scenario.world.shapes)
 
+    @property
+    def pair_distance(self) -> float:
+        """Distance (m) the filter keeps between two robots' controlled points.
+
+        ``2 (r + offset) + margin``: a gap narrower than this between two robots'
+        centres (give or take the near-identity offsets) is closed to a third.
+        """
+        return 2.0 * (self._radius + self._offset) + self.p.margin
+
     def _points(self, position: np.ndarray, heading: np.ndarray | None) -> np.ndarray:
         """The controlled points: centres, or the near-identity points of unicycles."""
         if self._offset == 0.0 or heading is None:
@@ -159,7 +168,7 @@ class CbfFilter:
         nb = obs.neighbours
         q = self._points(nb.position, nb.heading)
         delta, normal = pair_geometry(p, q)
-        h, _ = barrier(delta, normal, 2.0 * r + m)
+        h, _ = barrier(delta, normal, self.pair_distance)
         pairs = BarrierRows(normal, -g * h / (2.0 * np.maximum(delta, MIN_DELTA)), nb.mask,
                             nb.index)
         near = self._static.nearest(p, self.p.max_obstacles, self.p.obstacle_range)

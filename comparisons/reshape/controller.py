@@ -47,7 +47,13 @@ from scipy.optimize import linear_sum_assignment
 from comparisons.cbf.filter import CbfFilter
 from comparisons.reshape import planner
 from comparisons.reshape.region import grow_region, shape_segments, swept_disc_segments
-from comparisons.reshape.routes import ConfigurationSpace, RoutePlanner, bin_heading, heading_bin
+from comparisons.reshape.routes import (
+    ConfigurationSpace,
+    Route,
+    RoutePlanner,
+    bin_heading,
+    heading_bin,
+)
 from comparisons.reshape.tracking import Guidance, StuckMonitor
 from dfcoa_opt.control.base import FilterResult, Observation, slot_velocity
 from dfcoa_opt.control.registry import register
@@ -321,9 +327,12 @@ class Reshape:
         way, way_scale = self._routes.update(obs.t, centroid, k)
         if way is None:
             return False
-        ahead = way.project(centroid) + self.p.route_lead + (
-            0.0 if way_scale is not None else 0.5 * self._spacing * (self._n - 1))
-        if ahead >= way.length:  # the goal within reach: the formation of the goal, if free
+        here = way.project(centroid)
+        head = 0.0 if way_scale is not None else 0.5 * self._spacing * (self._n - 1)
+        centre, leader_near = self._route_centre(way, here, obs.leader)
+        ahead = centre + head
+        if here + self.p.route_lead + head >= way.length and leader_near:
+            # the goal within reach: the formation of the goal, if free
             if not self._cspace.free_at(self._goal_centre[None], 1.0,
                                         heading_bin(self._goal_heading))[0]:
                 return False
@@ -346,9 +355,38 @@ class Reshape:
         self._waypoint = self._waypoints(obs.t, pos)
         return True
 
+    def _route_centre(self, way: Route, here: float, leader: FloatArray) -> tuple[float, bool]:
+        """Arc length (m) along the route where the formation's centre is sent.
+
+        ``route_lead`` beyond ``here`` (the centroid's projection on the route,
+        m), but not past the leader's progress: the route point's arc length
+        along the leader's path stays at most that of the centre of the leader's
+        formation (and at least ``here``, so the formation never goes back). A
+        column that crossed a doorway at ``v_max`` would otherwise get ahead of
+        the leader and stand there, waiting for its slots; a formation that
+        reached the goal long before the leader would stand there too. Once the
+        leader's formation is within ``route_lead`` of the goal (the leader
+        stops up to its settle tolerance short of the path's end), the cap is off.
+
+        Returns:
+            The arc length, and whether the cap is off (so the formation may take
+            its goal slots).
+        """
+        nominal = leader[:2] + rotate(self._centre, float(leader[2]))
+        cap = float(self._path.arc_length(nominal[None])[0])
+        arcs = here + np.linspace(0.0, self.p.route_lead, 9)
+        progress = self._path.arc_length(np.vstack([way.along(arcs), self._goal_centre]))
+        if cap + self.p.route_lead >= progress[-1]:
+            return float(arcs[-1]), True
+        within = np.flatnonzero(progress[:-1] <= cap + 1e-9)
+        return (float(arcs[within[-1]]) if within.size else here), False
+
     def _waypoints(self, t: float, pos: FloatArray) -> dict[int, FloatArray]:
         """Guidance waypoints towards the targets (stuck robots: around the others too)."""
-        return self._guide.waypoints(pos, self._targets, self._stuck.stuck(t), self._r)
+        assert self.safety is not None, "reset() first"
+        keep = self.safety.pair_distance + self._guide.inflated.cell_size
+        return self._guide.waypoints(pos, self._targets, self._stuck.stuck(t), keep,
+                                     self._stuck.freed(t))
 
     def _assignment(self, pos: FloatArray, slots: FloatArray, template: str) -> NDArray[np.intp]:
         """Robot i -> slot index: its own for the scenario's template, else Hungarian."""
@@ -371,19 +409,18 @@ class Reshape:
         pos = obs.pose[:, :2]
         ids = obs.robot_ids
         if self._nominal:
-            target = obs.slot
-            u = self.p.kp * (target - pos) + slot_velocity(obs.leader, target)
-        else:
-            if self._carried is None:
-                target = self._targets[ids].copy()
-                ff = np.zeros_like(target)
-            else:  # a plan made while keeping up: carried along in the leader's frame
-                target = obs.leader[:2] + rotate(self._carried[ids], float(obs.leader[2]))
-                ff = slot_velocity(obs.leader, target)
-            for row, i in enumerate(ids):
-                if int(i) in self._waypoint:
-                    target[row], ff[row] = self._waypoint[int(i)], 0.0
-            u = self.p.kp * (target - pos) + ff
+            target = obs.slot.copy()
+            ff = slot_velocity(obs.leader, target)
+        elif self._carried is None:
+            target = self._targets[ids].copy()
+            ff = np.zeros_like(target)
+        else:  # a plan made while keeping up: carried along in the leader's frame
+            target = obs.leader[:2] + rotate(self._carried[ids], float(obs.leader[2]))
+            ff = slot_velocity(obs.leader, target)
+        for row, i in enumerate(ids):
+            if int(i) in self._waypoint:
+                target[row], ff[row] = self._waypoint[int(i)], 0.0
+        u = self.p.kp * (target - pos) + ff
         u, turned = self._stuck.turn(obs.t, ids, pos, target, u)
         self.counters["unsticks"] += turned
         speed = np.hypot(u[:, 0], u[:, 1])

@@ -18,7 +18,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.geometry import rotate
+from dfcoa_opt.geometry import point_segment_distance, rotate
 from dfcoa_opt.planning.astar import search
 from dfcoa_opt.world.grid import OccupancyGrid
 
@@ -31,6 +31,9 @@ GUIDANCE_REACH = 1.5
 DETOUR_STEP = 0.6
 #: A robot that stays within this of one point is still; one this near its target is not stuck, m.
 STILL_RADIUS = 0.1
+#: A robot freed from being stuck keeps its path around the others this long while
+#: its straight line to the target still passes another robot, s.
+FREED_MEMORY = 15.0
 
 
 class Guidance:
@@ -53,18 +56,29 @@ class Guidance:
         pts = a + np.linspace(0.0, 1.0, steps)[:, None] * (b - a)
         return bool(np.all(self.grid.clearance(pts) >= clearance))
 
-    def path(self, a: FloatArray, b: FloatArray,
-             blocked: NDArray[np.bool_] | None = None) -> FloatArray | None:
+    def path(self, a: FloatArray, b: FloatArray, blocked: NDArray[np.bool_] | None = None,
+             reach: float = 0.0) -> FloatArray | None:
         """Cell centres (m) of an A* path from ``a`` to ``b`` on the inflated map, or None.
 
-        ``blocked``: the cells to avoid, when not the inflated map's.
+        Args:
+            a: Start, m.
+            b: Goal, m.
+            blocked: The cells to avoid, when not the inflated map's.
+            reach: When ``a``'s cell is blocked, the path starts from the nearest
+                free cell within this distance (a robot already nearer another
+                than the path keeps), m.
         """
         grid = self.inflated
         occ = grid.occupied if blocked is None else blocked
         ca = tuple(int(v) for v in grid.world_to_cell(a))
         cb = tuple(int(v) for v in grid.world_to_cell(b))
-        if not (grid.in_bounds(*ca) and grid.in_bounds(*cb)) or occ[ca] or occ[cb]:
+        if not (grid.in_bounds(*ca) and grid.in_bounds(*cb)) or occ[cb]:
             return None
+        if occ[ca]:
+            near = _nearest_free(occ, ca, int(math.ceil(reach / grid.cell_size)))
+            if near is None:
+                return None
+            ca = near
         res = search(occ, ca, cb)
         if not res.found or len(res.cells) < 2:
             return None
@@ -85,23 +99,29 @@ class Guidance:
         return pts[min(int(np.searchsorted(along, reach)), len(pts) - 1)]
 
     def waypoints(self, pos: FloatArray, targets: FloatArray,
-                  stuck: NDArray[np.intp] | None = None,
-                  robot_radius: float = 0.0) -> dict[int, FloatArray]:
+                  stuck: NDArray[np.intp] | None = None, keep: float = 0.0,
+                  freed: NDArray[np.intp] | None = None) -> dict[int, FloatArray]:
         """A waypoint for each robot whose straight line to its target is blocked.
 
         The farthest point of its A* path within ``GUIDANCE_REACH`` that the
         robot sees with the clearance (pure pursuit on the path): a point at a
         fixed distance could sit behind a corner, where the safety filter stops
         a robot heading straight at it. A ``stuck`` robot plans around the
-        other robots too (their discs, grown by ``robot_radius``, as obstacles)
-        and heads ``DETOUR_STEP`` along that path: a robot settled on its slot
-        does not make way.
+        other robots too (every point within ``keep`` of another robot's centre
+        is an obstacle) and heads ``DETOUR_STEP`` along that path: a robot
+        settled on its slot does not make way. A ``freed`` robot (stuck until
+        lately) keeps that path while its straight line to the target passes
+        within ``keep`` of another robot: otherwise, once moving, it would drive
+        straight back into the pocket it left.
 
         Args:
             pos: ``(N, 2)`` robot positions, m.
             targets: ``(N, 2)`` their targets, m.
             stuck: Indices of stuck robots.
-            robot_radius: Robot radius, m.
+            keep: Distance a stuck robot's path keeps from the other robots'
+                centres: at least the safety filter's pair distance, so that the
+                path does not lead into a gap the filter will not let it through, m.
+            freed: Indices of robots stuck until lately.
 
         Returns:
             Robot index -> ``(2,)`` waypoint, m (robots with a free line, or no
@@ -110,9 +130,14 @@ class Guidance:
         out: dict[int, FloatArray] = {}
         reach = int(round(GUIDANCE_REACH / self.inflated.cell_size))
         step = int(round(DETOUR_STEP / self.inflated.cell_size))
-        for i in (() if stuck is None else stuck):
+        around = set(() if stuck is None else stuck.tolist())
+        for i in (() if freed is None else freed.tolist()):
             others = np.delete(pos, i, axis=0)
-            pts = self.path(pos[i], targets[i], self._with_robots(others, 2.0 * robot_radius))
+            if np.any(point_segment_distance(others, pos[i], targets[i]) < keep):
+                around.add(i)
+        for i in sorted(around):
+            others = np.delete(pos, i, axis=0)
+            pts = self.path(pos[i], targets[i], self._with_robots(others, keep), reach=keep)
             if pts is not None:
                 out[int(i)] = pts[min(len(pts) - 1, step)]
         for i in range(len(pos)):
@@ -147,6 +172,19 @@ class Guidance:
         return occ
 
 
+def _nearest_free(blocked: NDArray[np.bool_], cell: tuple[int, int],
+                  span: int) -> tuple[int, int] | None:
+    """The free cell nearest ``cell`` within ``span`` cells (Euclidean), or None."""
+    row, col = cell
+    r0, r1 = max(row - span, 0), min(row + span + 1, blocked.shape[0])
+    c0, c1 = max(col - span, 0), min(col + span + 1, blocked.shape[1])
+    rows, cols = np.nonzero(~blocked[r0:r1, c0:c1])
+    if rows.size == 0:
+        return None
+    k = int(np.argmin((rows + r0 - row) ** 2 + (cols + c0 - col) ** 2))
+    return int(rows[k] + r0), int(cols[k] + c0)
+
+
 class StuckMonitor:
     """Turns the command of robots stuck away from their targets.
 
@@ -168,12 +206,17 @@ class StuckMonitor:
     def __init__(self, start: FloatArray, after: float, angle: float) -> None:
         self.anchor = np.array(start, dtype=float)
         self.since = np.zeros(len(self.anchor))
+        self.left = np.full(len(self.anchor), -np.inf)
         self.after = after
         self.angle = angle
 
     def stuck(self, t: float) -> NDArray[np.intp]:
         """Indices of the robots still for ``after`` s or more (their targets unchecked)."""
         return np.flatnonzero(t - self.since >= self.after)
+
+    def freed(self, t: float) -> NDArray[np.intp]:
+        """Robots that got moving again from being stuck less than ``FREED_MEMORY`` s ago."""
+        return np.flatnonzero(t - self.left < FREED_MEMORY)
 
     def turn(self, t: float, ids: NDArray[np.intp], pos: FloatArray, target: FloatArray,
              u: FloatArray) -> tuple[FloatArray, int]:
@@ -187,6 +230,8 @@ class StuckMonitor:
             u: ``(N, 2)`` velocity commands, m/s.
         """
         moved = np.hypot(*(pos - self.anchor[ids]).T) > STILL_RADIUS
+        freed = moved & (t - self.since[ids] >= self.after)
+        self.left[ids[freed]] = t
         self.anchor[ids[moved]] = pos[moved]
         self.since[ids[moved]] = t
         periods = np.floor((t - self.since[ids]) / self.after)
