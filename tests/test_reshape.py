@@ -9,9 +9,10 @@ import pytest
 from comparisons.reshape import planner
 from comparisons.reshape.controller import Reshape
 from comparisons.reshape.region import Region, grow_region, shape_segments
-from comparisons.reshape.tracking import Guidance, StuckMonitor
+from comparisons.reshape.tracking import FREED_MEMORY, Guidance, StuckMonitor
 from dfcoa_opt.control.registry import make_controller
 from dfcoa_opt.formation import line_offsets, v_offsets
+from dfcoa_opt.outcome import formation_progress, leader_path, stalled_steps
 from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.simulator import Simulator
 from dfcoa_opt.world.shapes import Circle, Rectangle
@@ -113,6 +114,14 @@ def test_corridor_the_v_becomes_a_column_at_the_doorway_and_a_v_behind_it():
     inside = np.flatnonzero(((x >= 10.0) & (x <= 11.5)).sum(axis=1) >= 2)
     assert first_col < log.t[inside[0]] < back  # a column before the doorway, a V after
     assert log.meta["controller_counters"]["switches"] >= 2
+    # the column does not get ahead of the leader's formation and stand waiting for it:
+    # the centroid's progress stays behind that of the leader's slots' centre, and no
+    # 10 s window is stalled (so stop_on_deadlock, as in the ladders, would not end it)
+    path = leader_path(log)
+    centroid = formation_progress(log.pose[..., :2], path)
+    nominal = formation_progress(log.slots, path)
+    assert np.max(centroid - nominal) < 0.3
+    assert not stalled_steps(log, load_scenario(CORRIDOR).spec.metrics).any()
 
 
 def test_when_only_the_v_may_pass_the_look_ahead_shrinks_and_the_team_stops_counted():
@@ -159,6 +168,8 @@ def test_a_robot_held_still_away_from_its_target_is_turned():
     np.testing.assert_array_equal(out, u)
     assert n == 0 and monitor.since[0] == 6.1 and monitor.anchor[0].tolist() == [0.5, 0.0]
     assert monitor.stuck(6.1).tolist() == [1]
+    assert monitor.freed(6.1).tolist() == [0]  # it got moving from being stuck
+    assert monitor.freed(6.1 + FREED_MEMORY).tolist() == []
 
 
 def test_a_stuck_robot_plans_around_the_robots_settled_in_its_way():
@@ -168,10 +179,29 @@ def test_a_stuck_robot_plans_around_the_robots_settled_in_its_way():
     pos = np.array([[2.0, 5.0], [3.0, 5.0]])
     targets = np.array([[4.0, 5.0], [3.0, 5.0]])
     assert guide.waypoints(pos, targets) == {}  # no static obstacle: no waypoint
-    wp = guide.waypoints(pos, targets, np.array([0]), robot_radius=0.2)
+    wp = guide.waypoints(pos, targets, np.array([0]), keep=0.65)
     assert set(wp) == {0}
     assert abs(wp[0][1] - 5.0) > 0.2  # off the line, around robot 1
-    assert np.hypot(*(wp[0] - pos[1])) > 0.4  # outside robot 1's contact disc
+    assert np.hypot(*(wp[0] - pos[1])) >= 0.65  # outside what the filter keeps
+    # freed (stuck until lately): it keeps the path while its line passes robot 1 ...
+    assert set(guide.waypoints(pos, targets, np.array([], int), 0.65, np.array([0]))) == {0}
+    # ... and drops it once the line is clear of the others by keep
+    clear = np.array([[2.0, 5.0], [3.0, 6.0]])
+    assert guide.waypoints(clear, targets, np.array([], int), 0.65, np.array([0])) == {}
+
+
+def test_a_stuck_robot_in_a_pocket_backs_out_rather_than_squeeze_through_a_narrow_gap():
+    from dfcoa_opt.world.grid import OccupancyGrid
+    guide = Guidance(OccupancyGrid.empty((10.0, 10.0), 10.0), 0.3)
+    # robot 0 inside a V (robots 1-4 settled), its slot at the apex beyond the 1.12 m gap
+    # between robots 1 and 2; it is nearer them than keep, so its own cell is blocked
+    pos = np.array([[5.0, 5.0], [5.3, 5.56], [5.3, 4.44], [4.5, 6.1], [4.5, 3.9]])
+    targets = pos.copy()
+    targets[0] = [6.2, 5.0]
+    wp = guide.waypoints(pos, targets, np.array([0]), keep=0.75)
+    assert wp[0][0] < pos[0, 0]  # backs out of the V's open side
+    # a keep below half the gap would send it through the gap
+    assert guide.waypoints(pos, targets, np.array([0]), keep=0.4)[0][0] > pos[0, 0]
 
 
 def test_guidance_heads_for_the_farthest_visible_point_of_the_path_around_a_wall():
