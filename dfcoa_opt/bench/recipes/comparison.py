@@ -4,16 +4,32 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.report import make_report
+from dfcoa_opt.bench.shared_open import shared_open_table
 from dfcoa_opt.bench.store import ResultsStore
+
+#: The two variants compared on shared open stretches (docs/methods/reshape.md).
+SHARED_OPEN = ("reshape", "goto_slot+cbf")
 
 
 @recipe("comparison", sweep="sweeps/comparison.toml",
         title="Cross-method comparison on the common scenarios (scenarios/bench/)")
 def render_comparison(store: ResultsStore, dest: Path) -> list[Artefact]:
-    """Mean ± 95 % CI tables, per-metric box plots and one-seed trajectory overlays."""
-    return report_artefacts(store, dest, "paper 000 Table 6 (qualitative there)")
+    """Mean ± 95 % CI tables, per-metric box plots and one-seed trajectory overlays.
+
+    Also ``shared_open.md``: ``reshape`` against ``goto_slot+cbf`` over the instants
+    open in both runs of a seed (issue 20's formation-error target).
+    """
+    arts = report_artefacts(store, dest, "paper 000 Table 6 (qualitative there)")
+    table = shared_open_table(store.root, *SHARED_OPEN)
+    if table:
+        atomic_write(dest / "shared_open.md", table)
+        arts.append(Artefact("shared_open.md", "-", f"{SHARED_OPEN[0]} against "
+                             f"{SHARED_OPEN[1]}: formation errors over the instants open "
+                             "in both runs of a seed"))
+    return arts
 
 
 #: File-name prefix -> what the file shows (report artefacts other than tables).
