@@ -298,3 +298,16 @@ def test_safe_mode_with_fewer_neighbours_than_robots_in_reach_never_overlaps():
                        "goto_slot+orca")
     assert min(min_pair_distance(pose[:, :2]) for pose in log.pose) >= 2 * r - 1e-9
     assert (log.filter_status == STATUS_FALLBACK).any()
+
+
+def test_scale_into_shrinks_to_a_violated_line_and_leaves_a_line_that_excludes_the_origin():
+    # robot 0: the line y <= 0.5 (allowed side on the left of direction (-1, 0)), v = (0, 2)
+    # robot 1: a line that excludes v = 0 (y <= -0.5), with v parallel to it (a = 0)
+    points = np.array([[[0.0, 0.5]], [[0.0, -0.5]]])
+    directions = np.array([[[-1.0, 0.0]], [[-1.0, 0.0]]])
+    vel = np.array([[0.0, 2.0], [1.0, 0.0]])
+    with np.errstate(all="raise"):  # no division by zero on robot 1's row
+        out, scaled = safe.scale_into(vel, points, directions, np.array([1, 1]))
+    np.testing.assert_allclose(out[0], [0.0, 0.5])  # shrunk onto its line
+    np.testing.assert_array_equal(out[1], vel[1])  # shrinking cannot help: left as it is
+    assert scaled.tolist() == [True, True]

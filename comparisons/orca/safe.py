@@ -133,7 +133,8 @@ def scale_into(vel: FloatArray, points: FloatArray, directions: FloatArray,
     taken. This guards the guarantee against a degenerate linear program (for
     example a robot boxed in by touching neighbours, whose lines all pass
     through the origin and leave only ``v = 0``), where the least-violation
-    fallback may not keep hard lines exactly.
+    fallback may not keep hard lines exactly. A line that excludes ``v = 0``
+    (the robots already overlap) cannot be met by shrinking and sets no scale.
 
     Args:
         vel: ``(N, 2)`` candidate velocities, m/s.
@@ -150,6 +151,9 @@ def scale_into(vel: FloatArray, points: FloatArray, directions: FloatArray,
     c = directions[..., 0] * points[..., 1] - directions[..., 1] * points[..., 0]
     a = directions[..., 0] * vel[:, None, 1] - directions[..., 1] * vel[:, None, 0]
     bad = used & (a < c)  # violated at s = 1; then a < c <= 0 and s <= c / a < 1
-    ratio = np.where(bad, np.divide(c, a, out=np.ones_like(a), where=bad), 1.0)
+    # a line that excludes the origin (c > 0: the robots already overlap) cannot be
+    # met by shrinking v, so it sets no scale (a may then be 0)
+    shrink = bad & (a < 0.0)
+    ratio = np.divide(c, a, out=np.ones_like(a), where=shrink)
     s = np.clip(ratio.min(axis=1, initial=1.0), 0.0, 1.0)
     return vel * s[:, None], bad.any(axis=1)
