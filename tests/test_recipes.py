@@ -155,12 +155,15 @@ def test_paper001_table2_has_every_variant_and_the_leader_arrival(tmp_path):
     text = (tmp_path / "table2.md").read_text()
     assert rp.PAPER_TABLE2 in text
     body = [ln for ln in text.splitlines() if ln.startswith("| consensus")]
-    assert len(body) == 6 == len(store.rows())  # 3 controller variants x 2 speed limits
-    assert sum("8.485" in ln for ln in body) == 3
+    # consensus, and consensus_ivo x 2 laws x with and without the next-step filter,
+    # each at 2 speed limits
+    assert len(body) == 10 == len(store.rows())
+    assert sum("8.485" in ln for ln in body) == 5
+    assert sum("safe_discrete" in ln for ln in body) == 4
     for row in store.rows():  # the leader (4.24 m/s, 35 m) is still moving at 1 s
         log = rp.RunLog.load(store.root / row["log"])
         assert rp.leader_arrival(log) == log.n_steps - 1
-    assert sum(a.path.startswith("fig8_") for a in arts) == 6
+    assert sum(a.path.startswith("fig8_") for a in arts) == 10
 
 
 def test_paper002_tables_put_the_papers_values_beside_the_logs_own(tmp_path):

@@ -159,12 +159,14 @@ def render_ivo(store: ResultsStore, dest: Path) -> list[Artefact]:
 
 
 def _variant(row: dict[str, Any]) -> tuple[str, str]:
-    """(label, file tag) of a Table II run: controller, eq-17 law and speed limit."""
+    """(label, file tag) of a Table II run: controller, eq-17 law, next-step filter, speed."""
     ov = row.get("overrides") or {}
     law = ov.get("controllers.consensus_ivo.pref_law")
+    safe = bool(ov.get("controllers.consensus_ivo.safe_discrete"))
     v_max = ov.get("robots.v_max")
-    label = row["controller"] + (f" (pref_law={law})" if law else "")
-    tag = row["controller"] + (f"_{law}" if law else "")
+    options = [f"pref_law={law}"] * bool(law) + ["safe_discrete"] * safe
+    label = row["controller"] + (f" ({', '.join(options)})" if options else "")
+    tag = row["controller"] + (f"_{law}" if law else "") + ("_safe" if safe else "")
     if v_max is not None:
         tag += f"_vmax{float(v_max):.2f}"
     return label, tag
