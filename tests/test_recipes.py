@@ -188,7 +188,14 @@ def test_paper002_tables_put_the_papers_values_beside_the_logs_own(tmp_path):
         assert err[2] == "—" and err[3] == "—"  # the paper and we give none for Robot 1
         # 2 s is too short to reach the target: never reached, said so
         assert _cells(section, "Time to target")[3] == "—"
-    assert {a.path for a in arts} == {"tables.md", *(f"fig_{n}.png" for n in rp.SCENARIOS)}
+    # every run that did not succeed (at 2 s: all of them, timeouts) is listed with a snapshot
+    failed = [r for r in rows if r["metrics"]["outcome"] != "success"]
+    assert failed and all(f"`{r['scenario']}` seed {r['seed']}: **{r['metrics']['outcome']}**"
+                          in text for r in failed)
+    shots = {f"fail_{r['scenario']}_s{r['seed']}.png" for r in failed}
+    assert {a.path for a in arts} == {"tables.md", *(f"fig_{n}.png" for n in rp.SCENARIOS),
+                                      *shots}
+    assert all((tmp_path / name).stat().st_size > 0 for name in shots)
 
 
 def test_paper004_tables_put_the_papers_values_beside_the_logs_own(tmp_path):

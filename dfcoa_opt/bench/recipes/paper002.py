@@ -18,6 +18,7 @@ from matplotlib.patches import Circle as CirclePatch
 
 from dfcoa_opt import plotting
 from dfcoa_opt.atomic import atomic_write
+from dfcoa_opt.bench import failures, trajectories
 from dfcoa_opt.bench.plots import ok_runs, save_png, scenario_for_row
 from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.store import ResultsStore
@@ -184,5 +185,32 @@ def render_tables(store: ResultsStore, dest: Path) -> list[Artefact]:
             lines += _table(name, per[name])
     if missing:
         lines.append(f"No successful run of {', '.join(missing)}.")
+    lines += _failures(store, dest, arts)
     atomic_write(dest / "tables.md", "\n".join(lines) + "\n")
     return arts
+
+
+def _failures(store: ResultsStore, dest: Path, arts: list[Artefact]) -> list[str]:
+    """A section on the runs that did not succeed, each with its snapshot (appended to arts).
+
+    The snapshot is the failure's instant (first contact, deadlock onset, else
+    the end), as in the comparison report; why they fail is in
+    docs/reproduction.md, "Paper 002".
+    """
+    bad = sorted((r for r in store.rows() if r["status"] == "ok" and r["scenario"] in SCENARIOS
+                  and failures.run_outcome(r) != "success"),
+                 key=lambda r: (r["scenario"], int(r["seed"])))
+    if not bad:
+        return []
+    lines = ["## Runs that did not succeed", "",
+             "Snapshot at the first contact, the deadlock onset or the end; why: "
+             "docs/reproduction.md, \"Paper 002\".", ""]
+    for row in bad:
+        t = failures.snapshot_time(row)
+        name = f"fail_{row['scenario']}_s{row['seed']}.png"
+        trajectories.snapshot_figure(row, store.root, dest / name, t)
+        arts.append(Artefact(name, "-", f"snapshot of a failing run ({failures.run_outcome(row)})"))
+        when = "the end" if t == float("inf") else f"{t:.1f} s"
+        lines.append(f"- `{row['scenario']}` seed {row['seed']}: "
+                     f"**{failures.run_outcome(row)}**, [snapshot at {when}]({name})")
+    return lines + [""]
