@@ -342,3 +342,31 @@ def test_numba_and_numpy_kernels_give_the_same_run():
     fast = run_scenario(sc, "lf_vo")
     ref = Simulator(sc, ctrl(sc, kernel="numpy")).run()
     assert fast.digest() == ref.digest()
+
+
+def test_escape_turn_lets_a_robot_on_a_discs_margin_turn_away():
+    # paper 002, -90 deg, seed 3 at 11 s: Robot 3 on disc A's margin (clearance ~0), its
+    # target beyond the disc; every sample that moves dips inside the margin
+    sc = v_scenario(circles=[((4.5, 5.0), 0.4)])
+    obs = observation([[4.405, 5.694, -0.304]], [[10.66, 4.94]],
+                      leader=(11.0, 5.0, 0.0, 0.0, 0.0))
+    c = ctrl(sc)
+    np.testing.assert_array_equal(c.act(obs), [[0.0, 0.0]])  # the penalties pick (0, 0)
+    c = ctrl(sc, escape_turn=True)
+    cmd = c.act(obs)
+    assert c.last_fallbacks == 0
+    assert cmd[0, 0] == 0.0 and cmd[0, 1] > 0.0  # turns in place, left, away from the disc
+
+
+def test_escape_turn_frees_robot_3_of_the_papers_minus_90_degree_run():
+    from pathlib import Path
+
+    from dfcoa_opt.sim.loader import load_scenario
+
+    path = Path(__file__).resolve().parents[1] / "scenarios" / "paper002" / "lf_vo_m90deg.toml"
+    lengths = {}
+    for esc in (False, True):
+        sc = load_scenario(path, 3, {"controllers.lf_vo.escape_turn": esc})
+        log = run_scenario(sc, "lf_vo", seed=3)
+        lengths[esc] = float(np.sum(np.linalg.norm(np.diff(log.pose[:, 2, :2], axis=0), axis=1)))
+    assert lengths[False] < 6.0 < 13.0 < lengths[True]  # stuck at disc A; then through

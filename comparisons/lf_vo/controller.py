@@ -149,6 +149,10 @@ class LeaderFollowerVO:
         turn_weight: float = param(0.01, doc="Weight of the turn-rate distance to eq 4's "
                                              "(breaks ties: a stopped robot does not spin).",
                                    unit="s/rad", ge=0.0)
+        escape_turn: bool = param(False, doc="Not in the paper: a robot away from its target "
+                                             "whose only safe samples stand still turns at the "
+                                             "rate whose forward samples are least blocked, "
+                                             "instead of the (0, 0) the penalties pick.")
         fallback: Literal["least_penetration", "stop"] = param(
             "least_penetration", doc="Command when every sample is rejected.")
         kernel: Literal["numba", "numpy"] = param(
@@ -271,6 +275,25 @@ class LeaderFollowerVO:
         w = np.broadcast_to(w_row, v.shape).copy()
         return v, w
 
+    @staticmethod
+    def _escape(cmd: np.ndarray, v: np.ndarray, w: np.ndarray, clear: np.ndarray,
+                skip: np.ndarray) -> np.ndarray:
+        """``escape_turn``: rows whose safe samples all stand still turn in place.
+
+        The turn rate is that of the moving sample with the largest clearance
+        (the direction least blocked); rows in ``skip`` (no safe sample, or at
+        the target) keep their command.
+        """
+        safe = clear >= 0.0
+        moving = v > 0.0
+        stuck = ~skip & safe.any(axis=1) & ~(safe & moving).any(axis=1) & moving.any(axis=1)
+        if not stuck.any():
+            return cmd
+        k = np.argmax(np.where(moving, clear, -np.inf), axis=1)
+        out = cmd.copy()
+        out[stuck] = np.column_stack((np.zeros(int(stuck.sum())), w[stuck, k[stuck]]))
+        return out
+
     def act(self, obs: Observation) -> np.ndarray:
         """Row i uses robot i's pose, neighbours, sensed humans, slot and the broadcast leader."""
         p = self.p
@@ -297,6 +320,8 @@ class LeaderFollowerVO:
             best = np.where(fell, np.argmax(clear, axis=1), best)
         rows = np.arange(obs.n)
         cmd = np.column_stack((v[rows, best], w[rows, best]))
+        if p.escape_turn:
+            cmd = self._escape(cmd, v, w, clear, fell | (dist <= p.arrival_radius))
         if p.fallback == "stop":
             cmd[fell] = 0.0
         self.last_fallbacks = int(fell.sum())
