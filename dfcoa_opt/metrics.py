@@ -73,7 +73,7 @@ def _radius(log: RunLog) -> float:
     return float(log.meta["robot_radius"])
 
 
-def _rms(x: np.ndarray) -> float:
+def rms(x: np.ndarray) -> float:
     """Root mean square of all entries; NaN when empty."""
     return float(np.sqrt(np.mean(np.square(x)))) if np.size(x) else math.nan
 
@@ -183,8 +183,8 @@ def rms_velocities(log: RunLog) -> tuple[FloatArray, FloatArray]:
         ``(v_rms, w_rms)``, each ``(T,)``: ``sqrt(mean_i v_i^2)`` in m/s and
         ``sqrt(mean_i omega_i^2)`` in rad/s per step.
     """
-    rms = np.sqrt(np.mean(np.square(log.twist), axis=1))
-    return rms[:, 0], rms[:, 1]
+    per = np.sqrt(np.mean(np.square(log.twist), axis=1))
+    return per[:, 0], per[:, 1]
 
 
 def _robot_pair_term(pos: FloatArray, cutoff: float) -> FloatArray:
@@ -401,20 +401,20 @@ def summary(log: RunLog, spec: Settings = None) -> dict[str, Any]:
     end = classify(log, cfg)
     is_open = open_steps(log, cfg)
     return {
-        "fce_rms": _rms(fce),
+        "fce_rms": rms(fce),
         "fce_mean": _mean(fce),
         "fce_max": _max(fce),
-        "fce_x_rms": _rms(off[:, 0]),
-        "fce_y_rms": _rms(off[:, 1]),
-        "fse_rms": _rms(fse),
+        "fce_x_rms": rms(off[:, 0]),
+        "fce_y_rms": rms(off[:, 1]),
+        "fse_rms": rms(fse),
         "fse_mean": _mean(fse),
-        "fce_open_rms": _rms(fce[is_open]),
-        "fse_open_rms": _rms(fse[is_open]),
+        "fce_open_rms": rms(fce[is_open]),
+        "fse_open_rms": rms(fse[is_open]),
         "open_pct": 100.0 * _mean(is_open),
         "fste_max": _max(fste),
         "fste_final": float(fste[-1]) if len(fste) else math.nan,
         "stability_pct": formation_stability_pct(log, cfg),
-        "vce_rms": _rms(velocity_centroid_error(log)),
+        "vce_rms": rms(velocity_centroid_error(log)),
         "v_rms": _mean(v_rms),
         "w_rms": _mean(w_rms),
         "risk_mean": _mean(risk),
@@ -439,7 +439,7 @@ def summary(log: RunLog, spec: Settings = None) -> dict[str, Any]:
         **filter_counts(log),
         "mse_mean": _mean(mse_per_robot(log)),
         "lf_error_mean": _mean(leader_follower_position_error(log)),
-        "loc_rmse": _rms(localization_error(log)),
+        "loc_rmse": rms(localization_error(log)),
         "steps": int(log.n_steps),
         **{f"ctl_{k}": int(v) for k, v in (log.meta.get("controller_counters") or {}).items()},
     }

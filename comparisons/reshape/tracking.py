@@ -132,8 +132,9 @@ class Guidance:
         step = int(round(DETOUR_STEP / self.inflated.cell_size))
         around = set(() if stuck is None else stuck.tolist())
         for i in (() if freed is None else freed.tolist()):
-            others = np.delete(pos, i, axis=0)
-            if np.any(point_segment_distance(others, pos[i], targets[i]) < keep):
+            gap = point_segment_distance(pos, pos[i], targets[i])
+            gap[i] = np.inf  # its own centre
+            if np.any(gap < keep):
                 around.add(i)
         for i in sorted(around):
             others = np.delete(pos, i, axis=0)

@@ -22,7 +22,12 @@ import numpy as np
 
 from dfcoa_opt.bench.plots import scenario_for_row, variant_name
 from dfcoa_opt.bench.report import load_rows
-from dfcoa_opt.metrics import formation_centroid_error, formation_shape_error, open_steps
+from dfcoa_opt.metrics import (
+    formation_centroid_error,
+    formation_shape_error,
+    open_steps,
+    rms,
+)
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.sim.schema import MetricSpec
 
@@ -45,10 +50,6 @@ class SharedOpen:
     fse: tuple[float, float]
 
 
-def _rms(x: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(x ** 2))) if x.size else math.nan
-
-
 def shared_open_errors(a: RunLog, b: RunLog, cfg: MetricSpec) -> SharedOpen:
     """Errors of runs ``a`` and ``b`` (one scenario, one seed) where both are open.
 
@@ -60,14 +61,28 @@ def shared_open_errors(a: RunLog, b: RunLog, cfg: MetricSpec) -> SharedOpen:
     Raises:
         ValueError: The two logs do not share their first instants.
     """
-    n = min(len(a.t), len(b.t))
-    if not np.allclose(a.t[:n], b.t[:n]):
-        raise ValueError("shared_open_errors: the two runs are not logged at the same instants")
-    both = open_steps(a, cfg)[:n] & open_steps(b, cfg)[:n]
-    fce = [np.asarray(formation_centroid_error(x))[:n][both] for x in (a, b)]
-    fse = [np.asarray(formation_shape_error(x))[:n][both] for x in (a, b)]
-    return SharedOpen(float(both.mean()) if n else math.nan, (_rms(fce[0]), _rms(fce[1])),
-                      (_rms(fse[0]), _rms(fse[1])))
+    return _PairErrors(a, b).at(cfg)
+
+
+class _PairErrors:
+    """Both runs' error series, computed once; :meth:`at` masks them per clearance."""
+
+    def __init__(self, a: RunLog, b: RunLog) -> None:
+        n = min(len(a.t), len(b.t))
+        if not np.allclose(a.t[:n], b.t[:n]):
+            raise ValueError("shared_open_errors: the two runs are not logged at the same "
+                             "instants")
+        self.logs, self.n = (a, b), n
+        self.fce = [np.asarray(formation_centroid_error(x))[:n] for x in (a, b)]
+        self.fse = [np.asarray(formation_shape_error(x))[:n] for x in (a, b)]
+
+    def at(self, cfg: MetricSpec) -> SharedOpen:
+        """:func:`shared_open_errors` with the settings ``cfg``."""
+        a, b = self.logs
+        both = open_steps(a, cfg)[:self.n] & open_steps(b, cfg)[:self.n]
+        return SharedOpen(float(both.mean()) if self.n else math.nan,
+                          (rms(self.fce[0][both]), rms(self.fce[1][both])),
+                          (rms(self.fse[0][both]), rms(self.fse[1][both])))
 
 
 def shared_open_table(results_dir: str | Path, a: str, b: str,
@@ -92,10 +107,10 @@ def shared_open_table(results_dir: str | Path, a: str, b: str,
         if not seeds:
             continue
         cfg = scenario_for_row(by[(scen, a, seeds[0])]).spec.metrics
-        logs = [(RunLog.load(root / by[(scen, a, k)]["log"]),
-                 RunLog.load(root / by[(scen, b, k)]["log"])) for k in seeds]
+        pairs = [_PairErrors(RunLog.load(root / by[(scen, a, k)]["log"]),
+                             RunLog.load(root / by[(scen, b, k)]["log"])) for k in seeds]
         for c in clearances:
-            res = [shared_open_errors(x, y, replace(cfg, open_clearance=c)) for x, y in logs]
+            res = [p.at(replace(cfg, open_clearance=c)) for p in pairs]
             used = [r for r in res if not math.isnan(r.fce[0])]
 
             def med(values: list[float]) -> str:
