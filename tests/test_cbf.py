@@ -233,3 +233,21 @@ def test_solver_errors_are_counted_and_stop_the_robot(monkeypatch):
 def test_bad_settings_are_scenario_errors(table, key):
     with pytest.raises(ScenarioError, match=key.replace(".", r"\.")):
         run_scenario(swap_scenario(n=2, controllers={"cbf": table}), "goto_slot+cbf")
+
+
+def test_pinning_osqps_algebra_keeps_its_default_and_an_explicit_choice():
+    """``Solver("osqp")`` fixes OSQP's backend lookup to the backend OSQP picks anyway."""
+    from osqp import interface
+
+    from comparisons.constraints.solvers import Solver, pin_osqp_algebra
+    saved = interface.OSQP_ALGEBRA_BACKEND
+    try:
+        interface.OSQP_ALGEBRA_BACKEND = None
+        default = interface.default_algebra()
+        Solver("osqp")
+        assert interface.OSQP_ALGEBRA_BACKEND == default
+        interface.OSQP_ALGEBRA_BACKEND = "builtin-explicit"  # a user's setting stays
+        pin_osqp_algebra()
+        assert interface.OSQP_ALGEBRA_BACKEND == "builtin-explicit"
+    finally:
+        interface.OSQP_ALGEBRA_BACKEND = saved

@@ -216,3 +216,23 @@ def test_guidance_heads_for_the_farthest_visible_point_of_the_path_around_a_wall
     path = guide.path(pos[0], target[0])
     assert path is not None and path[:, 1].max() > 7.0  # the path goes over the wall
     assert guide.path(pos[0], np.array([4.5, 3.0])) is None  # a goal in the wall
+
+
+def test_free_segment_answer_does_not_depend_on_the_clearance_cap():
+    """``Guidance.free`` caps the exact distances at the clearance it tests (speed); the
+    answer must equal the uncapped test on segments that pass near and far from walls."""
+    from dfcoa_opt.world.grid import OccupancyGrid
+    grid = OccupancyGrid.from_shapes((20.0, 20.0), 10.0, [Rectangle((4.0, 0.0), (5.0, 7.0)),
+                                                         Circle((12.0, 12.0), 1.0)])
+    guide = Guidance(grid, 0.3)
+    rng = np.random.default_rng(4)
+    answers = []
+    for _ in range(300):
+        a, b = rng.uniform(0.0, 20.0, (2, 2))
+        c = float(rng.uniform(0.05, 2.0))
+        steps = max(2, int(np.ceil(np.hypot(*(b - a)) / 0.1)) + 1)
+        pts = a + np.linspace(0.0, 1.0, steps)[:, None] * (b - a)
+        expected = bool(np.all(grid.clearance(pts) >= c))  # default 10 m cap
+        assert guide.free(a, b, c) == expected
+        answers.append(expected)
+    assert 30 < sum(answers) < 270  # both answers occur

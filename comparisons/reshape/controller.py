@@ -214,7 +214,7 @@ class Reshape(RouteMode):
         later = self._path.point_at(ahead) + rotate(self._offsets, self._tangent(ahead))
         slots = np.concatenate([obs.slot, later])
         need = self._r + self.p.margin
-        if not bool(np.all(self._world.clearance(slots) >= need)):
+        if not bool(np.all(self._world.clearance(slots, cap=need) >= need)):  # cap: same answer
             return False
         if not obs.obstacles.mask.any():
             return True
