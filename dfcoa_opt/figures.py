@@ -87,11 +87,15 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
             if r.sweep is None:
                 renderer.submit(r, scenarios, dest, "computed")
                 continue
+            # a run another recipe has already simulated (same key, code, scenario
+            # file, overrides, controller and seed) is copied, not simulated again
             result = run_sweep(scenarios / r.sweep, cache / r.name, config, seeds=seeds,
-                               progress=progress, overrides=overrides)
+                               progress=progress, overrides=overrides,
+                               reuse=[cache / n for n in names if n != r.name])
+            reused = f", {result.reused} of them from other recipes" if result.reused else ""
             renderer.submit(r, result.store.root, dest,
                             f"{result.ran} runs ({result.failed} failed), {result.skipped} "
-                            f"cached, simulated in {time.perf_counter() - t0:.1f} s")
+                            f"cached{reused}, simulated in {time.perf_counter() - t0:.1f} s")
     print(f"figures: {time.perf_counter() - start:.1f} s in all", file=sys.stderr)
     return write_index(out, names)
 

@@ -164,6 +164,34 @@ def test_resume_skips_done_rows_and_rerun_forces(tmp_path):
     assert len(lines) == 9 and len({ln.split(",")[0] for ln in lines[1:]}) == 8
 
 
+def test_runs_another_store_finished_are_reused_not_simulated(tmp_path):
+    sweep = load_sweep(DATA / "tiny_sweep.toml")
+    first = run_sweep(sweep, tmp_path / "a", ExecutorConfig("serial"), progress=False)
+    # a run from other code is not taken: it is simulated again
+    stale = sweep.runs[0].key
+    row = json.loads(first.store.row_path(stale).read_text())
+    first.store.row_path(stale).write_text(json.dumps({**row, "code": "0" * 16}))
+    second = run_sweep(sweep, tmp_path / "b", ExecutorConfig("serial"), progress=False,
+                       reuse=[tmp_path / "a", tmp_path / "missing"])
+    assert (second.ran, second.reused, second.skipped) == (1, 7, 7)
+    rows = {r["key"]: r for r in second.store.rows()}
+    fresh = {r["key"]: r for r in first.store.rows()}
+    assert "reused_from" not in rows[stale]["provenance"]
+    for key, r in rows.items():
+        if key != stale:
+            assert r["provenance"]["reused_from"] == "a"
+            assert r["digest"] == fresh[key]["digest"]
+            assert second.store.is_done(next(x for x in sweep.runs if x.key == key))
+            logs = [(s.root / r["log"]).read_bytes() for s in (first.store, second.store)]
+            assert logs[0] == logs[1]
+    # same numbers as simulating them here
+    alone = run_sweep(sweep, tmp_path / "c", ExecutorConfig("serial"), progress=False)
+    assert _deterministic(alone.store.rows()) == _deterministic(second.store.rows())
+    # rerun simulates everything, whatever the other stores hold
+    assert run_sweep(sweep, tmp_path / "b", ExecutorConfig("serial"), rerun=True,
+                     progress=False, reuse=[tmp_path / "a"]).ran == 8
+
+
 def test_sigkill_midway_then_resume_loses_and_duplicates_nothing(tmp_path):
     sweep = tmp_path / "slow.toml"
     sweep.write_text(f'scenarios = ["{TINY}"]\ncontrollers = ["goto_slot"]\nseeds = 10\n'

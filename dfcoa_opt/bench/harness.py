@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import sys
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,7 +29,8 @@ class SweepResult:
         sweep: The expanded sweep.
         ran: Runs executed now.
         failed: Of those, how many failed (their rows say why).
-        skipped: Runs already done (resumed).
+        skipped: Runs already done (resumed, or reused).
+        reused: Of those, how many were taken from another store (``reuse``).
     """
 
     store: ResultsStore
@@ -36,11 +38,14 @@ class SweepResult:
     ran: int
     failed: int
     skipped: int
+    reused: int = 0
 
     def summary(self) -> str:
         """One line for the terminal."""
+        reused = f" ({self.reused} reused from other stores)" if self.reused else ""
         return (f"{self.sweep.name}: {describe_runs(self.sweep.runs)}; ran {self.ran} "
-                f"({self.failed} failed), {self.skipped} already done -> {self.store.root}")
+                f"({self.failed} failed), {self.skipped} already done{reused} -> "
+                f"{self.store.root}")
 
 
 def _progress(total: int, desc: str, enabled: bool | None):
@@ -55,7 +60,8 @@ def _progress(total: int, desc: str, enabled: bool | None):
 def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig | None = None,
               rerun: bool = False, seeds: int | None = None,
               progress: bool | None = None,
-              overrides: dict[str, Any] | None = None) -> SweepResult:
+              overrides: dict[str, Any] | None = None,
+              reuse: Sequence[str | Path] = ()) -> SweepResult:
     """Run every pending run of a sweep and store the rows.
 
     With ``max_seeds`` in the sweep, cells whose success rate is not yet precise
@@ -70,6 +76,10 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
         seeds: Replace the sweep's seed count (only when ``sweep`` is a path).
         overrides: Dotted scenario keys set in every run (only when ``sweep`` is a path).
         progress: Show a progress bar; default: only when stdout is a terminal.
+        reuse: Other results folders: a pending run that one of them has finished
+            under the same key, code, scenario file, overrides, controller and seed
+            is copied from there instead of simulated (:meth:`ResultsStore.adopt`);
+            not with ``rerun``.
 
     Returns:
         Counts and the store; ``results.csv`` is rewritten at the end.
@@ -81,7 +91,16 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
     sw = sweep if isinstance(sweep, Sweep) else load_sweep(sweep, seeds, overrides)
     store = ResultsStore(out)
     store.write_manifest(sw)
-    todo = store.pending(sw.runs, rerun)
+    others = [] if rerun else [ResultsStore(p) for p in reuse if Path(p).is_dir()]
+    reused = [0]
+
+    def pending(runs: Sequence[RunSpec]) -> list[RunSpec]:
+        todo = store.pending(runs, rerun)
+        left = [r for r in todo if not store.adopt(r, others)]
+        reused[0] += len(todo) - len(left)
+        return left
+
+    todo = pending(sw.runs)
     ran = failed = 0
     bar = _progress(len(todo), sw.name, progress)
     try:
@@ -95,7 +114,7 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
                         bar.update()
                         if failed:
                             bar.set_postfix(failed=failed, refresh=False)
-                grown, todo = _grow(sw, store, rerun)
+                grown, todo = _grow(sw, store, pending)
                 if grown is not sw:
                     sw = grown
                     store.write_manifest(sw)
@@ -109,10 +128,11 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
     finally:
         bar.close()
         store.write_csv()
-    return SweepResult(store, sw, ran, failed, len(sw.runs) - ran)
+    return SweepResult(store, sw, ran, failed, len(sw.runs) - ran, reused[0])
 
 
-def _grow(sw: Sweep, store: ResultsStore, rerun: bool) -> tuple[Sweep, list[RunSpec]]:
+def _grow(sw: Sweep, store: ResultsStore,
+          pending: Callable[[Sequence[RunSpec]], list[RunSpec]]) -> tuple[Sweep, list[RunSpec]]:
     """Add the seeds that cells need until some are to run (none without ``max_seeds``).
 
     Seeds added by an earlier, interrupted call may already have rows: they join
@@ -128,7 +148,7 @@ def _grow(sw: Sweep, store: ResultsStore, rerun: bool) -> tuple[Sweep, list[RunS
         if not extra:
             break
         sw = sw.extended(extra)
-        todo = store.pending(extra, rerun)
+        todo = pending(extra)
         if todo:
             return sw, todo
     return sw, []

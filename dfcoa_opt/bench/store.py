@@ -141,6 +141,37 @@ class ResultsStore:
         runs = list(runs)
         return runs if rerun else [r for r in runs if not self.is_done(r)]
 
+    def adopt(self, run: RunSpec, others: Sequence[ResultsStore]) -> bool:
+        """Take ``run``'s finished result from another store that has it; True if taken.
+
+        A row there counts when it is done for ``run`` by :meth:`is_done`'s test (same
+        code, scenario file and overrides), under the same key, controller and seed,
+        with status ``ok``: the simulation is then the same, bit for bit. Its log is
+        copied, and the row gets ``run``'s identity (variant, ladder) and
+        ``provenance.reused_from`` (the other store's folder name).
+        """
+        for other in others:
+            if other.root.resolve() == self.root.resolve() or not other.is_done(run):
+                continue
+            row = other.read_row(run.key)
+            if (row is None or row.get("status") != "ok" or row.get("controller") != run.controller
+                    or row.get("seed") != run.seed or not row.get("log")):
+                continue
+            try:
+                log = (other.root / row["log"]).read_bytes()
+            except OSError:
+                continue
+            row.update(key=run.key, scenario=run.scenario, scenario_file=run.scenario_file,
+                       overrides=run.overrides_dict, overrides_hash=run.overrides_hash,
+                       variant=run.variant_name, ladder=run.ladder,
+                       ladder_value=run.ladder_value, log=f"logs/{run.key}.npz")
+            row["provenance"] = {**(row.get("provenance") or {}), "reused_from": other.root.name}
+            atomic_write(self.root / row["log"], log)
+            atomic_write(self.row_path(run.key),
+                         json.dumps(row, indent=1, sort_keys=True, allow_nan=False) + "\n")
+            return True
+        return False
+
     def write(self, outcome: Outcome) -> Path:
         """Store one finished run: its log first, then its row (both atomic)."""
         row = dict(outcome.row)
