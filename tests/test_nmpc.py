@@ -7,6 +7,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
+import comparisons.nmpc.compiled as nmpc_compiled
 import comparisons.nmpc.problem as nmpc_problem
 from comparisons.constraints.distance import StaticObstacles
 from comparisons.nmpc import Nmpc, goto_command, solve_time_stats
@@ -17,7 +18,7 @@ from comparisons.nmpc.geometry import (
     robot_halfplanes,
     slot_reference,
 )
-from comparisons.nmpc.problem import NW, arc_step, rollout
+from comparisons.nmpc.problem import arc_step, rollout
 from dfcoa_opt.control.base import MovingObstacles, Observation, slot_velocity
 from dfcoa_opt.control.registry import available, build_controller, make_controller
 from dfcoa_opt.errors import ScenarioError
@@ -292,6 +293,19 @@ def test_warm_start_needs_fewer_iterations(solver):
 
 
 # ----------------------------------------------------------------- failures
+def break_every_solver(monkeypatch):
+    """Every solve fails: the interpreted solvers raise, the compiled ones flag an error."""
+    def broken(self, *args, **kwargs):
+        raise RuntimeError("forced")
+
+    def flagged(self, z):
+        return np.full((len(z), self.n_out), np.nan), np.ones(len(z), np.intc), np.zeros(len(z))
+
+    monkeypatch.setattr(nmpc_problem.NmpcProblem, "_interpreted", broken)
+    monkeypatch.setattr(nmpc_compiled.CompiledFunction, "__call__", broken)
+    monkeypatch.setattr(nmpc_compiled.CompiledFunction, "batch", flagged)
+
+
 @pytest.mark.parametrize("policy", ["shift", "stop", "goto"])
 def test_forced_solver_failure_applies_the_policy_and_is_counted(monkeypatch, policy):
     sc = scenario(poses=[(2.0, 4.0, 0.0)], t_max=0.5)
@@ -301,11 +315,7 @@ def test_forced_solver_failure_applies_the_policy_and_is_counted(monkeypatch, po
     ctrl.act(obs0)
     plan_u = ctrl._w["u"][0].copy()
     obs1 = observation([2.02, 4.0, 0.05], [[2.03, 5.0]], t=0.1, leader=leader)
-
-    def broken(self, *args, **kwargs):
-        raise RuntimeError("forced")
-
-    monkeypatch.setattr(nmpc_problem.NmpcProblem, "solve_packed", broken)
+    break_every_solver(monkeypatch)
     u = ctrl.act(obs1)[0]
     assert ctrl.last_result.status.tolist() == [STATUS_SOLVER_FAIL]
     expected = {"shift": plan_u[1], "stop": np.zeros(2),
@@ -324,9 +334,7 @@ def test_shift_runs_out_after_the_horizon(monkeypatch):
     leader = (2.0, 5.0, 0.0, 0.3, 0.0)
     ctrl.act(observation([2.0, 4.0, 0.0], [[2.0, 5.0]], t=0.0, leader=leader))
     plan_u = ctrl._w["u"][0].copy()
-    monkeypatch.setattr(nmpc_problem.NmpcProblem, "solve_packed",
-                        lambda self, *a, **k: nmpc_problem.SolveOutput(
-                            np.full(NW * 3, np.nan), np.zeros(1), np.zeros(1), False, 3))
+    break_every_solver(monkeypatch)
     got = [ctrl.act(observation([2.0, 4.0, 0.0], [[2.0, 5.0]], t=0.1 * k, leader=leader))[0]
            for k in range(1, 5)]
     np.testing.assert_allclose(got[:2], plan_u[1:3])
@@ -336,15 +344,15 @@ def test_shift_runs_out_after_the_horizon(monkeypatch):
 def test_sqp_failure_is_rescued_by_ipopt(monkeypatch):
     sc = scenario(poses=[(2.0, 4.0, 0.0)])
     ctrl = controller(sc)
-    orig = nmpc_problem.NmpcProblem.solve_packed
+    orig = nmpc_problem.NmpcProblem._unpack
 
     def sqp_fails(self, *args, **kwargs):
         out = orig(self, *args, **kwargs)
         if self.spec.solver == "sqp":
-            out.success = False
+            out.success[:] = False
         return out
 
-    monkeypatch.setattr(nmpc_problem.NmpcProblem, "solve_packed", sqp_fails)
+    monkeypatch.setattr(nmpc_problem.NmpcProblem, "_unpack", sqp_fails)
     ctrl.act(observation([2.0, 4.0, 0.0], [[2.0, 5.0]], leader=(2.0, 5.0, 0.0, 0.3, 0.0)))
     assert ctrl.last_result.status.tolist() == [STATUS_OK]
     assert ctrl.last_rescued.tolist() == [True]

@@ -50,16 +50,18 @@ def test_condensed_run_matches_multiple_shooting_to_solver_tolerance():
 def test_condensed_and_multiple_shooting_have_the_same_minimisers(monkeypatch):
     """Problems of the first 0.5 s of S1, solved by both formulations to 1e-10 (IPOPT)."""
     captured = []
-    orig = Nmpc._solve
+    orig = Nmpc._prepare
 
-    def spy(self, i, z, step):
+    def spy(self, obs):
+        z, step = orig(self, obs)
         tight = {f: NmpcProblem(replace(self.spec, solver="ipopt", hessian="exact", tol=1e-10,
                                         max_iter=200, formulation=f, compiled=False))
                  for f in ("condensed", "multiple-shooting")}
-        captured.append({f: (pr, self._inputs(i, step, pr)) for f, pr in tight.items()})
-        return orig(self, i, z, step)
+        captured.extend({f: (pr, self._inputs(i, step, pr)) for f, pr in tight.items()}
+                        for i in range(obs.n))
+        return z, step
 
-    monkeypatch.setattr(Nmpc, "_solve", spy)
+    monkeypatch.setattr(Nmpc, "_prepare", spy)
     run_s1(0.5)
     assert len(captured) == 6 * 4
     for problems in captured[::3]:
@@ -95,15 +97,15 @@ def test_same_seed_same_run_bit_for_bit():
 def captured_inputs(monkeypatch, seconds, **params):
     """Run S1 for ``seconds``; the controller and the packed inputs of its SQP solves."""
     zs = []
-    orig = NmpcProblem.solve_packed
+    orig = NmpcProblem.solve_rows
 
     def spy(self, z):
         if self.spec.solver == "sqp":
-            zs.append(z.copy())
+            zs.extend(z.copy())
         return orig(self, z)
 
     with monkeypatch.context() as m:
-        m.setattr(NmpcProblem, "solve_packed", spy)
+        m.setattr(NmpcProblem, "solve_rows", spy)
         _, ctrl = run_s1(seconds, **params)
     return ctrl, zs
 
@@ -127,6 +129,36 @@ def test_compiled_success_flag_is_the_solvers_own_test(monkeypatch):
         assert a.success == b.success
         flags.append(a.success)
     assert any(flags) and not all(flags)
+
+
+def test_solve_rows_gives_each_rows_single_solve_bit_for_bit(monkeypatch):
+    """One batched call (compiled: one C loop) = one solve_packed per row, both solvers."""
+    ctrl, zs = captured_inputs(monkeypatch, 0.5)
+    zs = np.array(zs)
+    spec = replace(ctrl.spec, max_iter=3)  # some rows fail: their flags must match too
+    for problem in (NmpcProblem(spec), NmpcProblem(replace(spec, compiled=False))):
+        batch = problem.solve_rows(zs)
+        assert batch.seconds.shape == (len(zs),) and np.all(batch.seconds > 0.0)
+        for i, z in enumerate(zs):
+            one, row = problem.solve_packed(z), batch.row(i)
+            for key in ("w", "lam_x", "lam_g", "x", "u", "slack"):
+                np.testing.assert_array_equal(getattr(row, key), getattr(one, key))
+            assert (row.success, row.iterations) == (one.success, one.iterations)
+        assert batch.success.any() and not batch.success.all()
+        # the batch leaves the single call's buffers in place
+        np.testing.assert_array_equal(problem.solve_packed(zs[0]).w, batch.w[0])
+
+
+def test_batch_of_the_compiled_function_matches_single_calls(monkeypatch, tmp_path):
+    monkeypatch.setenv("DFCOA_NMPC_CACHE", str(tmp_path))
+    if compiled_mod.compiler() is None:
+        pytest.skip("no C compiler")
+    f = compiled_mod.compile_function(_tiny())
+    x = np.random.default_rng(1).normal(size=(5, 3))
+    out, flags, seconds = f.batch(x)
+    np.testing.assert_array_equal(out, np.array([f(r) for r in x]))
+    assert flags.tolist() == [0] * 5 and np.all(seconds >= 0.0)
+    assert f.batch(np.zeros((0, 3)))[0].shape == (0, 4)
 
 
 # ----------------------------------------------------------------- the compiled-function cache

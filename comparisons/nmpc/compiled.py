@@ -13,7 +13,11 @@ the same numbers.
 The compiled function is called through casadi's C API (``<name>_work``,
 ``<name>_checkout``, ...) with ``ctypes``: one dense input vector and one dense
 output vector, with no casadi Python wrapper in between (that wrapper alone costs
-about 35 us per call, measured in ``docs/methods/nmpc.md``).
+about 35 us per call, measured in ``docs/methods/nmpc.md``). A small C loop
+appended to the generated source, ``<name>_batch``, evaluates the function on
+every row of an ``(N, n_in)`` array in one ``ctypes`` call (:meth:`CompiledFunction.batch`),
+timing each row with ``CLOCK_MONOTONIC``: the same calls, in the same order, as
+``N`` single calls.
 """
 
 from __future__ import annotations
@@ -39,6 +43,33 @@ FloatArray = NDArray[np.float64]
 CFLAGS = ("-O2", "-fPIC", "-shared")
 #: casadi's shared libraries, linkable by name (``-l``), e.g. ``daqp``.
 CASADI_DIR = Path(ca.__file__).resolve().parent
+#: The row loop appended to the generated source (``{name}``: the function's name). It
+#: points ``arg[0]``/``res[0]`` at row ``i`` and calls the function, as a single call
+#: does, then points them back at the single call's buffers.
+BATCH_SOURCE = """
+#include <time.h>
+CASADI_SYMBOL_EXPORT int {name}_batch(const casadi_real** arg, casadi_real** res,
+    casadi_int* iw, casadi_real* w, int mem, casadi_int n, casadi_int n_in,
+    casadi_int n_out, const casadi_real* z, casadi_real* out, int* flags,
+    casadi_real* seconds) {{
+  casadi_int i;
+  struct timespec t0, t1;
+  const casadi_real* arg0 = arg[0];
+  casadi_real* res0 = res[0];
+  for (i = 0; i < n; ++i) {{
+    arg[0] = z + i * n_in;
+    res[0] = out + i * n_out;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    flags[i] = {name}(arg, res, iw, w, mem);
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    seconds[i] = (casadi_real)(t1.tv_sec - t0.tv_sec)
+                 + 1e-9 * (casadi_real)(t1.tv_nsec - t0.tv_nsec);
+  }}
+  arg[0] = arg0;
+  res[0] = res0;
+  return 0;
+}}
+"""
 
 
 def cache_dir() -> Path:
@@ -90,6 +121,11 @@ class CompiledFunction:
         fn.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int]
         fn.restype = ctypes.c_int
         self._fn = fn
+        self._batch = getattr(lib, f"{name}_batch", None)
+        if self._batch is not None:
+            self._batch.argtypes = ([ctypes.c_void_p] * 4 + [ctypes.c_int]
+                                    + [ctypes.c_longlong] * 3 + [ctypes.c_void_p] * 4)
+            self._batch.restype = ctypes.c_int
         self._call = (ctypes.addressof(self._arg), ctypes.addressof(self._res),
                       self._iw.ctypes.data, self._w.ctypes.data, self._mem)
         self._lib, self._lock = lib, threading.Lock()
@@ -108,12 +144,38 @@ class CompiledFunction:
             raise RuntimeError(f"{self.name} (compiled) returned {flag}")
         return out
 
+    def batch(self, z: FloatArray) -> tuple[FloatArray, NDArray[np.intc], FloatArray]:
+        """Evaluate every row of ``z`` ``(N, n_in)`` in one call (``<name>_batch``).
+
+        Row ``i`` gives the numbers of ``self(z[i])``: the same compiled function,
+        called in row order on the same memory.
+
+        Returns:
+            ``(out (N, n_out), flags (N,), seconds (N,))``: the outputs, each row's
+            error flag (0 = success; a row with a flag has undefined outputs) and its
+            wall time in s.
+
+        Raises:
+            RuntimeError: The library has no ``<name>_batch`` (built before it existed).
+        """
+        if self._batch is None:
+            raise RuntimeError(f"{self.path}: no {self.name}_batch")
+        z = np.ascontiguousarray(z, dtype=np.float64)
+        n = z.shape[0]
+        out, seconds = np.empty((n, self.n_out)), np.empty(n)
+        flags = np.zeros(n, dtype=np.intc)
+        arg, res, iw, w, mem = self._call
+        with self._lock:
+            self._batch(arg, res, iw, w, mem, n, self.n_in, self.n_out, z.ctypes.data,
+                        out.ctypes.data, flags.ctypes.data, seconds.ctypes.data)
+        return out, flags, seconds
+
 
 def _source(fn: ca.Function, name: str) -> str:
-    """C source of ``fn`` and its dependencies (casadi code generator)."""
+    """C source of ``fn`` and its dependencies (casadi code generator) and its row loop."""
     gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
     gen.add(fn)
-    return gen.dump()
+    return gen.dump() + BATCH_SOURCE.format(name=name)
 
 
 def library_path(source: str, cc: str, libs: tuple[str, ...]) -> Path:

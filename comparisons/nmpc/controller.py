@@ -45,6 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from comparisons.constraints.distance import StaticObstacles
+from comparisons.nmpc.fallback import goto_command, solve_time_stats
 from comparisons.nmpc.geometry import (
     neighbour_predictions,
     obstacle_halfplanes,
@@ -55,19 +56,20 @@ from comparisons.nmpc.problem import (
     NmpcProblem,
     ProblemSpec,
     SolveOutput,
+    map_lbg,
     map_multipliers,
     rollout,
 )
 from dfcoa_opt.control.base import FilterResult, Observation
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.geometry import wrap_angle
 from dfcoa_opt.params import param
-from dfcoa_opt.sim.log import STATUS_OK, STATUS_SOLVER_FAIL, RunLog
+from dfcoa_opt.sim.log import STATUS_OK, STATUS_SOLVER_FAIL
 
 if TYPE_CHECKING:
     from dfcoa_opt.sim.scenario import Scenario
 
 FloatArray = NDArray[np.float64]
+__all__ = ["SQP_MAX_ITER", "IPOPT_MAX_ITER", "Nmpc", "goto_command", "solve_time_stats"]
 
 
 @lru_cache(maxsize=8)
@@ -236,15 +238,20 @@ class Nmpc:
             out.append(lam.reshape(n, -1))
         return out[0], out[1]
 
-    def _store(self, g: int, t: float, pose: FloatArray, u: FloatArray,
-               x: FloatArray | None = None, out: SolveOutput | None = None) -> None:
-        """Write robot ``g``'s plan made at ``t`` (states rolled out when not given)."""
+    def _store(self, g: NDArray[np.intp], t: float, pose: FloatArray, u: FloatArray,
+               x: FloatArray | None = None,
+               lam: tuple[FloatArray, FloatArray] | None = None) -> None:
+        """Write the plans made at ``t`` of global ids ``g`` ``(R,)``.
+
+        Controls ``u`` ``(R, H, 2)``; poses ``x`` ``(R, H + 1, 3)`` (rolled out from
+        ``pose`` ``(R, 3)`` when not given); multipliers ``(lam_x, lam_g)`` or None.
+        """
         w = self._w
         w["t"][g], w["u"][g] = t, u
-        w["x"][g] = x if x is not None else rollout(pose[None], u[None], self.tau)[0]
-        w["lam_ok"][g] = out is not None
-        if out is not None:
-            w["lam_x"][g], w["lam_g"][g] = out.lam_x, out.lam_g
+        w["x"][g] = x if x is not None else rollout(pose, u, self.tau)
+        w["lam_ok"][g] = lam is not None
+        if lam is not None:
+            w["lam_x"][g], w["lam_g"][g] = lam
 
     # ------------------------------------------------------------------ step
     def _problems(self, obs: Observation, u0: FloatArray, fresh: NDArray[np.bool_],
@@ -276,42 +283,53 @@ class Nmpc:
         lbg[:, :, d:d + self.spec.slots] = np.concatenate((oc, rc), axis=2)
         return problem.guesses(u0, x0[:, 1:]), params, lbg.reshape(n, -1)
 
-    def _solve(self, i: int, z: FloatArray, step: dict) -> SolveOutput | None:
-        """Solve robot row ``i``'s packed problem ``z``; IPOPT rescues a failed SQP.
+    def _rescue(self, i: int, step: dict) -> SolveOutput | None:
+        """A second solve of row ``i`` after its SQP failed: IPOPT (None without a rescuer).
 
-        The rescuer's inputs are made only when it runs (from ``step``: the
-        observation, shifted controls, ``fresh`` and shifted multipliers); its
-        multipliers come back in the controller's layout.
+        Its inputs are made only when it runs (from ``step``: the observation, shifted
+        controls, parameters, bounds and shifted multipliers); its multipliers come
+        back in the controller's layout. None when it raised.
         """
-        out = None
+        if self.rescuer is None:
+            return None
         try:
-            out = self.problem.solve_packed(z)
+            out = self.rescuer.solve(*self._inputs(i, step, self.rescuer))
         except RuntimeError:
-            out = None
-        if (out is not None and out.success) or self.rescuer is None:
-            return out
-        try:
-            rescue = self.rescuer.solve(*self._inputs(i, step, self.rescuer))
-        except RuntimeError:
-            return out
-        if rescue.success:
+            return None
+        if out.success:
             self.last_rescued[i] = True
-            rescue.lam_x, rescue.lam_g = map_multipliers(rescue.lam_x, rescue.lam_g,
-                                                         self.rescuer.spec, self.spec)
-            return rescue
+            out.lam_x, out.lam_g = map_multipliers(out.lam_x, out.lam_g, self.rescuer.spec,
+                                                   self.spec)
         return out
 
     def _inputs(self, i: int, step: dict, problem: NmpcProblem) -> tuple[FloatArray, ...]:
         """Row ``i``'s ``(w0, p, lbg, lam_x0, lam_g0)`` of this step in ``problem``'s layout."""
-        guess, params, lbg = self._problems(step["obs"].take([i]), step["u0"][i:i + 1],
-                                            step["fresh"][i:i + 1], problem)
+        u0 = step["u0"][i:i + 1]
+        x0 = rollout(step["obs"].pose[i:i + 1], u0, self.tau)
+        lbg = map_lbg(step["lbg"][i], self.spec, problem.spec, problem.lbg_template)
         lam = map_multipliers(step["lam_x"][i], step["lam_g"][i], self.spec, problem.spec)
-        return guess[0], params[0], lbg[0], *lam
+        return problem.guesses(u0, x0[:, 1:])[0], step["params"][i], lbg, *lam
 
-    def act(self, obs: Observation) -> FloatArray:
-        """One solve per robot; row i uses row i of ``obs`` and its neighbours' last plans."""
-        assert self.problem is not None, "reset() first"
-        h, t, n = self.p.horizon, float(obs.t), obs.n
+    def _accept(self, rows: NDArray[np.intp], obs: Observation, u: FloatArray, x: FloatArray,
+                slack: FloatArray, lam: tuple[FloatArray, FloatArray], out: dict) -> None:
+        """Apply and store the solutions of ``rows``.
+
+        Controls ``(R, H, 2)``, poses ``(R, H, 3)``, slacks ``(R, H)`` m, multipliers;
+        ``out``: the step's commands and largest slacks, written in place.
+        """
+        out["cmd"][rows] = u[:, 0]
+        out["slack"][rows] = np.maximum(slack.max(axis=1), 0.0)
+        ids = np.asarray(obs.robot_ids, dtype=np.intp)[rows]
+        self._store(ids, float(obs.t), obs.pose[rows], u.copy(),
+                    np.concatenate((obs.pose[rows, None], x), axis=1), lam)
+
+    def _prepare(self, obs: Observation) -> tuple[FloatArray, dict]:
+        """The packed inputs ``(N, n)`` of this step's problems, and the step's arrays.
+
+        The step's arrays (observation, shifted controls and their age, parameters,
+        bounds, shifted multipliers) are those a rescue's inputs are made from.
+        """
+        h, t = self.p.horizon, float(obs.t)
         if self._t is None or t > self._t + 1e-9:  # a new step: last step's plans become readable
             self._r = {k: v.copy() for k, v in self._w.items()}
             self._t = t
@@ -323,29 +341,39 @@ class Nmpc:
             u0[i] = goto_command(obs.pose[i], obs.slot[i], self.p.goto_gain, self.spec)
         guess, params, lbg = self._problems(obs, u0, fresh)
         lam_x, lam_g = self._shifted_multipliers(ids, age)
-        z = self.problem.pack(guess, params, lbg, lam_x, lam_g)
-        step = {"obs": obs, "u0": u0, "fresh": fresh, "lam_x": lam_x, "lam_g": lam_g}
-        cmd, slack, solve_time = np.zeros((n, 2)), np.zeros(n), np.zeros(n)
+        step = {"obs": obs, "u0": u0, "age": age, "params": params, "lbg": lbg,
+                "lam_x": lam_x, "lam_g": lam_g}
+        return self.problem.pack(guess, params, lbg, lam_x, lam_g), step
+
+    def act(self, obs: Observation) -> FloatArray:
+        """One solve per robot, one compiled call for all of them.
+
+        Row i uses row i of ``obs`` and its neighbours' last plans.
+        """
+        assert self.problem is not None, "reset() first"
+        n = obs.n
+        z, step = self._prepare(obs)
+        sol = self.problem.solve_rows(z)
+        out = {"cmd": np.zeros((n, 2)), "slack": np.zeros(n)}
         status = np.full(n, STATUS_OK, dtype=np.int8)
-        self.last_iterations = np.full(n, -1, dtype=np.intp)
+        self.last_iterations = sol.iterations.copy()
         self.last_rescued = np.zeros(n, dtype=bool)
-        for i in range(n):
-            g = int(ids[i])
+        ok = np.flatnonzero(sol.success)
+        self._accept(ok, obs, sol.u[ok], sol.x[ok], sol.slack[ok],
+                     (sol.lam_x[ok], sol.lam_g[ok]), out)
+        solve_time = sol.seconds.copy()
+        for i in np.flatnonzero(~sol.success):
             t0 = time.perf_counter()
-            out = self._solve(i, z[i], step)
-            solve_time[i] = time.perf_counter() - t0
-            if out is not None:
-                self.last_iterations[i] = out.iterations
-            if out is not None and out.success:
-                cmd[i] = out.u[0]
-                slack[i] = max(float(out.slack.max()), 0.0)
-                self._store(g, t, obs.pose[i], out.u.copy(), np.vstack((obs.pose[i], out.x)),
-                            out)
+            rescue = self._rescue(i, step)
+            solve_time[i] += time.perf_counter() - t0
+            if rescue is not None and rescue.success:
+                self._accept(np.array([i]), obs, rescue.u[None], rescue.x[None],
+                             rescue.slack[None], (rescue.lam_x[None], rescue.lam_g[None]), out)
             else:
                 status[i] = STATUS_SOLVER_FAIL
-                cmd[i] = self._fallback(obs, i, u0[i], age[i])
-        self.last_result = FilterResult(cmd.copy(), status, slack, solve_time)
-        return cmd
+                out["cmd"][i] = self._fallback(obs, i, step["u0"][i], step["age"][i])
+        self.last_result = FilterResult(out["cmd"].copy(), status, out["slack"], solve_time)
+        return out["cmd"]
 
     def _fallback(self, obs: Observation, i: int, shifted: FloatArray, age: float) -> FloatArray:
         """The ``on_failure`` command of row ``i``; stores the plan it implies."""
@@ -360,44 +388,5 @@ class Nmpc:
             u = goto_command(pose, obs.slot[i], self.p.goto_gain, self.spec)
         else:
             u = np.zeros(2)
-        self._store(g, t, pose, np.tile(u, (h, 1)))
+        self._store(np.array([g]), t, pose[None], np.tile(u, (h, 1))[None])
         return u
-
-
-def goto_command(pose: FloatArray, slot: FloatArray, gain: float, spec: ProblemSpec
-                 ) -> FloatArray:
-    """Proportional unicycle command towards the slot (the ``goto`` fallback).
-
-    ``v = k (e . heading)``, ``omega = 2 k wrap(atan2(e) - theta)``, clipped to the
-    limits, with ``e = slot - p`` (m) and ``k = gain`` (1/s).
-
-    Returns:
-        ``(2,)`` (v m/s, omega rad/s).
-    """
-    e = np.asarray(slot, float) - pose[:2]
-    th = float(pose[2])
-    v = gain * (e[0] * math.cos(th) + e[1] * math.sin(th))
-    err = float(wrap_angle(math.atan2(e[1], e[0]) - th)) if np.hypot(*e) > 1e-9 else 0.0
-    return np.array([min(max(v, spec.v_min), spec.v_max),
-                     min(max(2.0 * gain * err, -spec.w_max), spec.w_max)])
-
-
-def solve_time_stats(log: RunLog) -> dict[str, float | int]:
-    """Solve time per robot per step of an ``nmpc`` run, and its failures.
-
-    Args:
-        log: The run log (``filter_time`` and ``filter_status`` hold ``last_result``).
-
-    Returns:
-        ``median`` and ``p95`` solve time (s) over every (step, robot) entry,
-        ``entries`` counted, ``failures`` (status ``STATUS_SOLVER_FAIL``) and
-        ``failure_rate`` (failures / entries).
-    """
-    times = np.asarray(log.filter_time, float).ravel()
-    fails = int(np.count_nonzero(np.asarray(log.filter_status) == STATUS_SOLVER_FAIL))
-    if times.size == 0:
-        return {"median": math.nan, "p95": math.nan, "entries": 0, "failures": fails,
-                "failure_rate": math.nan}
-    return {"median": float(np.median(times)), "p95": float(np.percentile(times, 95)),
-            "entries": int(times.size), "failures": fails,
-            "failure_rate": fails / times.size}

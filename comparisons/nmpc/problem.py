@@ -33,7 +33,7 @@ iterates of the solver, not the problem.
 
 from __future__ import annotations
 
-import math
+import time
 from dataclasses import dataclass
 from typing import Literal
 
@@ -42,10 +42,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from comparisons.nmpc.compiled import CompiledFunction, compile_function
+from comparisons.nmpc.formulation import (
+    gauss_newton,
+    map_lbg,
+    map_multipliers,
+    nlp,
+    solver_options,
+)
 from comparisons.nmpc.model import arc_step, rollout
 
-__all__ = ["NW", "NmpcProblem", "ProblemSpec", "SolveOutput", "arc_step", "map_multipliers",
-           "rollout"]
+__all__ = ["NW", "BatchOutput", "NmpcProblem", "ProblemSpec", "SolveOutput", "arc_step",
+           "map_lbg", "map_multipliers", "rollout"]
 
 FloatArray = NDArray[np.float64]
 SolverName = Literal["ipopt", "sqp"]
@@ -150,6 +157,51 @@ class SolveOutput:
     slack: FloatArray | None = None
 
 
+@dataclass
+class BatchOutput:
+    """The solves of ``N`` packed inputs (:meth:`NmpcProblem.solve_rows`), row by row.
+
+    Attributes:
+        w: ``(N, nw H)`` decision vectors.
+        lam_x: ``(N, nw H)`` bound multipliers.
+        lam_g: ``(N, rows H)`` constraint multipliers.
+        x: ``(N, H, 3)`` planned poses at stages 1 .. H (m, m, rad).
+        success: ``(N,)`` the solver's success test passed and every value is finite.
+        iterations: ``(N,)`` solver iterations (-1 when unknown, as compiled).
+        seconds: ``(N,)`` wall time of each row's solve, s.
+    """
+
+    w: FloatArray
+    lam_x: FloatArray
+    lam_g: FloatArray
+    x: FloatArray
+    success: NDArray[np.bool_]
+    iterations: NDArray[np.intp]
+    seconds: FloatArray
+
+    @property
+    def u(self) -> FloatArray:
+        """``(N, H, 2)`` planned controls (v m/s, omega rad/s)."""
+        return self.w.reshape(len(self.w), self.x.shape[1], -1)[..., :2]
+
+    @property
+    def slack(self) -> FloatArray:
+        """``(N, H)`` slacks ``s_1 .. s_H``, m."""
+        return self.w.reshape(len(self.w), self.x.shape[1], -1)[..., -1]
+
+    def row(self, i: int) -> SolveOutput:
+        """Row ``i`` as a :class:`SolveOutput` (copies)."""
+        return SolveOutput(self.w[i].copy(), self.lam_x[i].copy(), self.lam_g[i].copy(),
+                           bool(self.success[i]), int(self.iterations[i]), self.u[i].copy(),
+                           self.x[i].copy(), self.slack[i].copy())
+
+    def put(self, rows: NDArray[np.intp], other: BatchOutput) -> None:
+        """Overwrite ``rows`` with ``other``'s rows (same layout); their times add up."""
+        for key in ("w", "lam_x", "lam_g", "x", "success", "iterations"):
+            getattr(self, key)[rows] = getattr(other, key)
+        self.seconds[rows] += other.seconds
+
+
 class NmpcProblem:
     """One robot's NLP as a casadi ``nlpsol`` behind one packed Function.
 
@@ -170,11 +222,11 @@ class NmpcProblem:
     def __init__(self, spec: ProblemSpec, options: dict | None = None) -> None:
         self.spec = spec
         h, c = spec.horizon, spec.slots
-        w, p, r, gv, states = _nlp(spec)
+        w, p, r, gv, states = nlp(spec)
         cost = ca.sumsqr(r) + spec.w_slack[0] * ca.sum1(w[spec.nw - 1::spec.nw])
-        opts = _options(spec)
+        opts = solver_options(spec)
         if spec.solver == "sqp" and spec.hessian == "gauss-newton":
-            opts["hess_lag"] = _gauss_newton(w, p, r, gv.numel())
+            opts["hess_lag"] = gauss_newton(w, p, r, gv.numel())
         plugin = "ipopt" if spec.solver == "ipopt" else "sqpmethod"
         self.solver = ca.nlpsol("nmpc", plugin, {"x": w, "p": p, "f": cost,
                                                   "g": gv}, {**opts, **(options or {})})
@@ -256,122 +308,78 @@ class NmpcProblem:
 
     def solve_packed(self, z: FloatArray) -> SolveOutput:
         """Solve from packed inputs (:meth:`pack`); exceptions of the solver propagate."""
-        nx, n_p, ng = self.sizes
-        h = self.spec.horizon
-        if self.compiled is not None:
-            out = self.compiled(z)
-            w, lam_x, lam_g = out[:nx], out[nx:2 * nx], out[2 * nx:2 * nx + ng]
-            states = out[2 * nx + ng:2 * nx + ng + 3 * h]
-            converged = out[-2] < self.spec.tol and out[-1] < self.spec.tol
-            iterations = -1
-        else:  # the solver itself (its stats are those of this call)
-            w0, p, lbg, lam_x0, lam_g0 = np.split(z, np.cumsum([nx, n_p, ng, nx]))
-            sol = self.solver(x0=w0, p=p, lbx=self.lbx, ubx=self.ubx, lbg=lbg, ubg=self.ubg,
-                              lam_x0=lam_x0, lam_g0=lam_g0)
-            stats = self.solver.stats()
-            w, lam_x, lam_g = (np.asarray(sol[k], dtype=float).ravel()
-                               for k in ("x", "lam_x", "lam_g"))
-            states = np.asarray(self.states(w, p), dtype=float).ravel()
-            converged = bool(stats.get("success", False))
-            iterations = int(stats.get("iter_count", -1))
-        ok = converged and bool(np.all(np.isfinite(w)))
-        wk = w.reshape(h, -1)
-        return SolveOutput(w, lam_x, lam_g, ok, iterations, wk[:, :2], states.reshape(h, 3),
-                           wk[:, -1])
-
-
-def map_multipliers(lam_x: FloatArray, lam_g: FloatArray, src: ProblemSpec, dst: ProblemSpec
-                    ) -> tuple[FloatArray, FloatArray]:
-    """Multipliers of ``src``'s layout in ``dst``'s (those of the states and dynamics: 0).
-
-    The bounds of the controls and slacks and the half-plane and wheel rows are the
-    same constraints in both formulations.
-
-    Args:
-        lam_x: ``(nw H,)`` bound multipliers in ``src``'s layout.
-        lam_g: ``(rows H,)`` constraint multipliers in ``src``'s layout.
-        src: The layout of the given multipliers.
-        dst: The layout wanted.
-
-    Returns:
-        ``(lam_x, lam_g)`` in ``dst``'s layout.
-    """
-    if src.formulation == dst.formulation:
-        return lam_x.copy(), lam_g.copy()
-    h = src.horizon
-    lx, lg = lam_x.reshape(h, src.nw), lam_g.reshape(h, src.rows)
-    out_x, out_g = np.zeros((h, dst.nw)), np.zeros((h, dst.rows))
-    out_x[:, :2], out_x[:, -1] = lx[:, :2], lx[:, -1]
-    out_g[:, dst.dyn_rows:] = lg[:, src.dyn_rows:]
-    return out_x.ravel(), out_g.ravel()
-
-
-def _nlp(spec: ProblemSpec) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
-    """Variables, parameters, weighted residuals, constraints and planned poses (3 H)."""
-    h, c, nw = spec.horizon, spec.slots, spec.nw
-    w = ca.SX.sym("w", nw * h)
-    p = ca.SX.sym("p", 5 + h * spec.stage_params)
-    x_prev, u_prev = p[0:3], p[3:5]
-    res, g, states = [], [], []
-    for k in range(h):
-        base = nw * k
-        u, s = w[base:base + 2], w[base + nw - 1]
-        q = p[5 + k * spec.stage_params: 5 + (k + 1) * spec.stage_params]
-        ref, psi, u_ref, normals = q[0:2], q[2], q[3:5], q[5:]
-        wt = spec.w_terminal if k == h - 1 else spec.w_track
-        if spec.formulation == "condensed":
-            x = arc_step(x_prev, u, spec.tau)
+        if self.compiled is not None:  # an error flag raises
+            out, ok, its = self.compiled(z), True, -1
         else:
-            x = w[base + 2:base + 5]
-            g.append(x - arc_step(x_prev, u, spec.tau))
-        # squared residuals: 2 (1 - cos(th - psi)) = |(cos th - cos psi, sin th - sin psi)|^2
-        res += [math.sqrt(wt) * (x[0:2] - ref),
-                math.sqrt(0.5 * spec.w_heading) * ca.vertcat(ca.cos(x[2]) - ca.cos(psi),
-                                                             ca.sin(x[2]) - ca.sin(psi)),
-                math.sqrt(spec.w_effort) * (u - u_ref), math.sqrt(spec.w_rate) * (u - u_prev),
-                math.sqrt(spec.w_slack[1]) * s]
-        for j in range(c):
-            g.append(normals[2 * j] * x[0] + normals[2 * j + 1] * x[1] + s)
-        if spec.wheel is not None:
-            half_track = 0.5 * spec.wheel[0]
-            g.append(ca.vertcat(u[0] + half_track * u[1], u[0] - half_track * u[1]))
-        states.append(x)
-        x_prev, u_prev = x, u
-    return w, p, ca.vertcat(*res), ca.vertcat(*g), ca.vertcat(*states)
+            out, ok, its = self._interpreted(z)
+        return self._unpack(out[None], np.array([ok]), np.array([its]), np.zeros(1)).row(0)
 
+    def solve_rows(self, z: FloatArray) -> BatchOutput:
+        """Solve every row of packed inputs ``z`` ``(N, n)``: one compiled call for all.
 
-def _gauss_newton(w: ca.SX, p: ca.SX, r: ca.SX, ng: int) -> ca.Function:
-    """Gauss-Newton Hessian ``2 lam_f J^T J`` of ``f = |r|^2 + linear`` (convex QPs for SQP).
+        Row ``i`` gives the numbers of :meth:`solve_packed` of ``z[i]``. A row whose
+        solver raised (interpreted) or returned an error flag (compiled) is a failure
+        with NaN values, as is one whose solver did not converge.
+        """
+        n = len(z)
+        if self.compiled is not None:
+            out, flags, seconds = self.compiled.batch(z)
+            return self._unpack(out, flags == 0, np.full(n, -1), seconds)
+        out = np.full((n, self.compiled_size), np.nan)
+        ok, iterations, seconds = np.zeros(n, dtype=bool), np.full(n, -1), np.zeros(n)
+        for i in range(n):
+            t0 = time.perf_counter()
+            try:
+                out[i], ok[i], iterations[i] = self._interpreted(z[i])
+            except RuntimeError:
+                pass
+            seconds[i] = time.perf_counter() - t0
+        return self._unpack(out, ok, iterations, seconds)
 
-    The curvature of the dynamics constraints is left out; a ``1e-8`` diagonal keeps
-    the QP strictly convex when a weight is 0.
-    """
-    lam_f = ca.SX.sym("lam_f")
-    lam_g = ca.SX.sym("lam_g", ng)
-    jac = ca.jacobian(r, w)
-    hess = 2.0 * lam_f * ca.mtimes(jac.T, jac) + 1e-8 * ca.SX.eye(w.numel())
-    return ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess],
-                       ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+    def restart(self, z: FloatArray, w0: FloatArray) -> FloatArray:
+        """Packed inputs ``z`` ``(N, n)`` with the initial guesses ``w0`` and zero multipliers."""
+        nx, n_p, ng = self.sizes
+        out = z.copy()
+        out[:, :nx] = w0
+        out[:, nx + n_p + ng:] = 0.0
+        return out
 
+    @property
+    def compiled_size(self) -> int:
+        """Length of the packed output (class docstring)."""
+        nx, _, ng = self.sizes
+        return 2 * nx + ng + 3 * self.spec.horizon + 2
 
-def _options(spec: ProblemSpec) -> dict:
-    """Silent solver options with warm starts.
+    def _interpreted(self, z: FloatArray) -> tuple[FloatArray, bool, int]:
+        """The solver itself on one packed input (its stats are those of this call).
 
-    The condensed problem's solver leaves out casadi's post-processing (``lam_p`` and
-    moving the solution onto its bounds), which the compiled code does not have.
-    """
-    common = {"print_time": False, "error_on_fail": False}
-    if spec.formulation == "condensed":
-        common.update(calc_lam_p=False, bound_consistency=False)
-    if spec.solver == "ipopt":
-        return {**common, "ipopt": {
-            "print_level": 0, "sb": "yes", "max_iter": spec.max_iter, "tol": spec.tol,
-            "acceptable_tol": math.sqrt(spec.tol), "warm_start_init_point": "yes",
-            "warm_start_bound_push": 1e-6, "warm_start_mult_bound_push": 1e-6,
-            "mu_init": 1e-3, "print_user_options": "no"}}
-    qp_options = {"error_on_fail": False}
-    if spec.qp_solver == "qrqp":
-        qp_options.update(print_iter=False, print_header=False, print_info=False, max_iter=200)
-    return {**common, "qpsol": spec.qp_solver, "qpsol_options": qp_options,
-            "max_iter": spec.max_iter, "tol_pr": spec.tol, "tol_du": spec.tol,
-            "print_header": False, "print_iteration": False, "print_status": False}
+        Returns:
+            The packed output (KKT measures NaN), ``stats()["success"]``, iterations.
+        """
+        nx, n_p, ng = self.sizes
+        w0, p, lbg, lam_x0, lam_g0 = np.split(z, np.cumsum([nx, n_p, ng, nx]))
+        sol = self.solver(x0=w0, p=p, lbx=self.lbx, ubx=self.ubx, lbg=lbg, ubg=self.ubg,
+                          lam_x0=lam_x0, lam_g0=lam_g0)
+        stats = self.solver.stats()
+        w = np.asarray(sol["x"], dtype=float).ravel()
+        out = np.concatenate([w, *(np.asarray(sol[k], dtype=float).ravel()
+                                   for k in ("lam_x", "lam_g")),
+                              np.asarray(self.states(w, p), dtype=float).ravel(),
+                              np.full(2, np.nan)])
+        return out, bool(stats.get("success", False)), int(stats.get("iter_count", -1))
+
+    def _unpack(self, out: FloatArray, ok: NDArray[np.bool_], iterations: NDArray[np.intp],
+                seconds: FloatArray) -> BatchOutput:
+        """Split packed outputs ``(N, compiled_size)``; success as the solver's own test.
+
+        ``ok``: no error and (interpreted) ``stats()["success"]``. Compiled rows
+        converge when both KKT measures are below ``tol``.
+        """
+        nx, _, ng = self.sizes
+        h = self.spec.horizon
+        w = out[:, :nx]
+        if self.compiled is not None:
+            ok = ok & (out[:, -2] < self.spec.tol) & (out[:, -1] < self.spec.tol)
+        return BatchOutput(w, out[:, nx:2 * nx], out[:, 2 * nx:2 * nx + ng],
+                           out[:, 2 * nx + ng:2 * nx + ng + 3 * h].reshape(-1, h, 3),
+                           ok & np.all(np.isfinite(w), axis=1), iterations, seconds)
