@@ -90,7 +90,8 @@ class Nmpc:
     Attributes:
         last_result: The latest step's commands, status (``STATUS_OK`` or
             ``STATUS_SOLVER_FAIL``), largest slack (m) and solve time per robot (s).
-        last_iterations: ``(N,)`` iterations of the latest solves (-1 after an exception).
+        last_iterations: ``(N,)`` iterations of the latest SQP solves, not of the IPOPT
+            rescues (-1 when unknown: compiled solver, or an exception).
         last_rescued: ``(N,)`` which robots' SQP failed and IPOPT then succeeded.
     """
 
