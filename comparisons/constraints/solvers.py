@@ -68,9 +68,9 @@ def pin_osqp_algebra() -> None:
     cached: 0.26 ms a call under the profiler, about 5 % of a ``goto_slot+cbf`` run
     with the default ``osqp`` on ``clutter`` (5.3 -> 5.0 s). This sets the module's
     ``OSQP_ALGEBRA_BACKEND`` (the variable that OSQP's environment variable of that
-    name fills) to that same default
-    backend, so the answers do not change. Nothing is done when the variable is
-    already set or the installed OSQP has no such variable.
+    name fills) to that same default backend, so the answers do not change. Nothing
+    is done when the variable is already set or the installed OSQP has no such
+    variable.
     """
     try:
         from osqp import interface
