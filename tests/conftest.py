@@ -20,6 +20,33 @@ settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("DFCOA_HYPOTHESIS", "repro"))
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _one_numba_thread_per_xdist_worker():
+    """Under ``pytest -n`` (``make test``), each worker runs numba on one thread.
+
+    The workers already use every core; a parallel region of a second thread then
+    waits for a descheduled core, every call (measured 2026-11-25 on four test
+    modules: 31 s with two threads per worker against 13 s with one). The sweep
+    workers of ``make figures`` run the same way. Rows of every ``prange`` kernel
+    are independent, so results agree; ``tests/test_parallel_kernels.py`` checks
+    that with every thread (fixture ``all_numba_threads``).
+    """
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        numba.set_num_threads(1)
+    yield
+
+
+@pytest.fixture
+def all_numba_threads():
+    """Run this test's numba ``prange`` kernels on every thread numba has (restored after)."""
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has one thread here: no thread count to compare")
+    before = numba.get_num_threads()
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    yield numba.config.NUMBA_NUM_THREADS
+    numba.set_num_threads(before)
+
+
 @pytest.fixture(scope="module")
 def one_numba_thread():
     """Run the numba ``prange`` kernels on one thread in this module (restored after).
