@@ -404,3 +404,19 @@ def test_runs_never_import_the_sources_left_out_of_the_fingerprint(tmp_path):
     assert store.outside_fingerprint("dfcoa_opt/bench/recipes/ladders.py")
     assert store.outside_fingerprint("dfcoa_opt/bench/store.py")
     assert not store.outside_fingerprint("dfcoa_opt/bench/runner.py")
+
+
+def test_fingerprint_ignores_docstrings_and_comments_but_not_code():
+    """A docstring, comment or formatting edit keeps cached runs; any code edit does not."""
+    src = ('"""Module doc."""\nimport math\n\n\nclass A:\n    """Class doc."""\n\n'
+           '    def f(self, x):\n        """Doc."""\n        return math.sqrt(x)  # note\n\n\n'
+           'def g():\n    """Only a docstring."""\n')
+    reworded = ('"""Other words."""\nimport math\n\n# a comment\nclass A:\n    """Reworded."""\n'
+                '    def f(self, x):\n        """Doc, longer\n\n        text."""\n'
+                '        return math.sqrt(\n            x)\n\n\ndef g():\n    """Changed."""\n')
+    assert store.executable_source(src) == store.executable_source(reworded)
+    for edit in (src.replace("sqrt", "cbrt"), src.replace("(self, x)", "(self, x=1)"),
+                 src.replace('"""Only a docstring."""', '"""Only a docstring."""\n    return 1'),
+                 src.replace('        """Doc."""\n', '        "Doc."\n        "another string"\n')):
+        assert store.executable_source(edit) != store.executable_source(src)
+    assert store.executable_source("def (:") == "def (:"  # unparsable: kept whole

@@ -17,8 +17,8 @@ duplicating a row: the rerun skips every run that has a row.
 
 A row counts as done only if it was produced by the same code, the same
 scenario file and the same overrides: each row records ``code`` (a fingerprint
-of the installed ``dfcoa_opt`` and ``comparisons`` sources that a run uses;
-reports, figures and the harness are left out),
+of the installed ``dfcoa_opt`` and ``comparisons`` sources that a run uses,
+without docstrings and comments; reports, figures and the harness are left out),
 ``scenario_sha256`` and ``overrides``; other rows are run again. Controllers
 from other packages (entry points) are not part of the fingerprint; use
 ``--rerun`` after changing one.
@@ -26,6 +26,7 @@ from other packages (entry points) are not part of the fingerprint; use
 
 from __future__ import annotations
 
+import ast
 import csv
 import datetime as _dt
 import functools
@@ -65,11 +66,33 @@ def outside_fingerprint(relative: str) -> bool:
     return any(relative == p or (p.endswith("/") and relative.startswith(p)) for p in NOT_RUN)
 
 
+def executable_source(text: str) -> str:
+    """What of a Python source can change a run: its syntax tree without docstrings.
+
+    Comments, blank lines, formatting and the docstrings of modules, classes and
+    functions are dropped (no run reads ``__doc__``; only ``dfcoa list`` does), so
+    editing them keeps every cached result. A source that does not parse is kept
+    whole.
+    """
+    try:
+        tree = ast.parse(text)
+    except SyntaxError:
+        return text
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if (body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant)
+                    and isinstance(body[0].value.value, str)):
+                node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree, annotate_fields=False)
+
+
 @functools.lru_cache(maxsize=1)
 def code_fingerprint() -> str:
     """SHA-256 (16 hex digits) over the sources of ``dfcoa_opt`` and ``comparisons`` a run uses.
 
-    Every source file but the :data:`NOT_RUN` ones.
+    Every source file but the :data:`NOT_RUN` ones, each as its
+    :func:`executable_source` (a docstring or comment edit keeps the cache).
     """
     import comparisons
     import dfcoa_opt
@@ -82,7 +105,7 @@ def code_fingerprint() -> str:
             if outside_fingerprint(rel):
                 continue
             h.update(rel.encode())
-            h.update(path.read_bytes())
+            h.update(executable_source(path.read_text(encoding="utf-8")).encode())
     return h.hexdigest()[:16]
 
 
