@@ -37,14 +37,11 @@ def _one_numba_thread_per_xdist_worker():
 
 
 @pytest.fixture
-def all_numba_threads():
-    """Run this test's numba ``prange`` kernels on every thread numba has (restored after)."""
+def all_numba_threads() -> int:
+    """Every thread numba has (``NUMBA_NUM_THREADS``); skips the test when that is one."""
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("numba has one thread here: no thread count to compare")
-    before = numba.get_num_threads()
-    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-    yield numba.config.NUMBA_NUM_THREADS
-    numba.set_num_threads(before)
+    return numba.config.NUMBA_NUM_THREADS
 
 
 @pytest.fixture(scope="module")

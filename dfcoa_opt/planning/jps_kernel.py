@@ -41,8 +41,9 @@ numba does not remove in a loop. The A* kernel writes the same heap inline for
 the same reason. A shared heap compiled with ``inline="always"`` (pasted into
 the kernel by numba, no call) was measured too (2026-11-25, 5 interleaved
 repetitions, same paths): the A* kernel 2-9 % slower on the S1, S2 and
-1024 x 1024 searches, so the copy stays. Call :func:`dfcoa_opt.planning.astar.search` with
-``method="jps"``, not these functions.
+1024 x 1024 searches, so the copy stays. Call
+:func:`dfcoa_opt.planning.astar.search` with ``method="jps"``, not these
+functions.
 """
 
 from __future__ import annotations
