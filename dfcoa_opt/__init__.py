@@ -17,7 +17,26 @@ From Python (:mod:`dfcoa_opt.api`)::
 controller").
 """
 
-from dfcoa_opt.api import Results, Run, controllers, load, register, report, run, sweep
+import importlib.util as _util
+from pathlib import Path as _Path
+
+from dfcoa_opt.kernel_cache import refresh as _refresh_kernel_cache
+
+# before any kernel runs: numba's cache would keep code of edited modules a kernel imports
+_spec = _util.find_spec("comparisons")
+_refresh_kernel_cache([_Path(__file__).parent]
+                      + ([_Path(_spec.origin).parent] if _spec and _spec.origin else []))
+
+from dfcoa_opt.api import (  # noqa: E402 - after the kernel cache check
+    Results,
+    Run,
+    controllers,
+    load,
+    register,
+    report,
+    run,
+    sweep,
+)
 
 __version__ = "0.1.0"
 __all__ = ["Results", "Run", "__version__", "controllers", "load", "register", "report", "run",
