@@ -31,6 +31,7 @@ import ast
 import hashlib
 import json
 import os
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
@@ -67,7 +68,7 @@ def imported_modules(source: bytes, known: Mapping[str, Path] | Iterable[str]) -
     names = set(known)
     try:
         tree = ast.parse(source)
-    except SyntaxError:
+    except (SyntaxError, ValueError):  # ValueError: null bytes
         return []
     found: set[str] = set()
     for node in ast.walk(tree):
@@ -119,7 +120,13 @@ def refresh(roots: Sequence[Path]) -> list[str]:
     imports: dict[str, list[str]] = {}
     kernels = []
     for name, path in files.items():
-        data = path.read_bytes()
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            warnings.warn(f"{path}: cannot read it to check numba's kernel cache ({exc}); "
+                          "nothing was dropped: after editing a kernel's imports, delete "
+                          "the package's __pycache__ folders", RuntimeWarning, stacklevel=2)
+            return []
         digest = hashlib.sha256(data).hexdigest()
         digests[name] = digest
         old = old_files.get(name)

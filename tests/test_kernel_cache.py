@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 import dfcoa_opt
 from dfcoa_opt import kernel_cache
 
@@ -30,6 +32,8 @@ def g(x):
 """
 DRIVER = """import json, sys
 from pathlib import Path
+
+import pytest
 sys.path.insert(0, sys.argv[1])
 touched = None
 if sys.argv[2] == "refresh":
@@ -92,3 +96,15 @@ def test_a_read_only_install_is_left_alone(tmp_path, monkeypatch):
     monkeypatch.undo()
     assert kernel_cache.refresh([pkg]) == ["kcpkg.a"]  # writable: no state yet, dropped
     assert not cached.exists()
+
+
+def test_an_unreadable_source_warns_and_drops_nothing(tmp_path):
+    pkg = tmp_path / "kcpkg"
+    (pkg / "__pycache__").mkdir(parents=True)
+    (pkg / "a.py").write_text(KERNEL)
+    (pkg / "b.py").mkdir()  # a folder named like a source: reading it fails
+    cached = pkg / "__pycache__" / "a.f-5.py311.nbi"
+    cached.write_bytes(b"index")
+    with pytest.warns(RuntimeWarning, match="b.py: cannot read it"):
+        assert kernel_cache.refresh([pkg]) == []
+    assert cached.exists()
