@@ -8,13 +8,18 @@ group registers its recipes, in index order (:data:`RECIPE_MODULES`):
 
 - :mod:`~dfcoa_opt.bench.recipes.examples`: every controller on the example scenarios;
 - :mod:`~dfcoa_opt.bench.recipes.comparison`: the cross-method comparison;
+- :mod:`~dfcoa_opt.bench.recipes.beyond`: ``nmpc`` and ``cbf`` beside the papers' methods;
+- :mod:`~dfcoa_opt.bench.recipes.reshape`: the reshaping formation, with the corridor GIF;
 - :mod:`~dfcoa_opt.bench.recipes.ladders`: difficulty ladders (where each method breaks);
 - :mod:`~dfcoa_opt.bench.recipes.dfcoa`: paper 000 Table 5 and its figures;
 - :mod:`~dfcoa_opt.bench.recipes.astar`: traditional vs improved A* (paper 000 §4.1);
 - :mod:`~dfcoa_opt.bench.recipes.paper001`, :mod:`~dfcoa_opt.bench.recipes.paper002`,
-  :mod:`~dfcoa_opt.bench.recipes.paper004`: the companion papers' tables;
-- :mod:`~dfcoa_opt.bench.recipes.beyond`: ``nmpc`` and ``cbf`` beside the papers' methods;
-- :mod:`~dfcoa_opt.bench.recipes.reshape`: the reshaping formation, with the corridor GIF.
+  :mod:`~dfcoa_opt.bench.recipes.paper004`: the companion papers' tables.
+
+``make figures`` runs them in this order. ``beyond`` and ``reshape`` come right
+after the comparison, whose runs they reuse: their sweeps are short and their
+renderings long (about 20 s each, the corridor GIF), so those renderings
+overlap the ladders' sweep instead of running after the last sweep.
 
 Adding a recipe::
 
@@ -40,8 +45,8 @@ from typing import Any
 
 #: Modules whose import registers recipes, in index order.
 RECIPE_MODULES = tuple(f"dfcoa_opt.bench.recipes.{m}" for m in (
-    "examples", "comparison", "ladders", "dfcoa", "astar", "paper001", "paper002", "paper004",
-    "beyond", "reshape"))
+    "examples", "comparison", "beyond", "reshape", "ladders", "dfcoa", "astar", "paper001",
+    "paper002", "paper004"))
 
 
 @dataclass(frozen=True)
