@@ -55,15 +55,16 @@ def module_files(roots: Iterable[Path]) -> dict[str, Path]:
     return out
 
 
-def imported_modules(source: bytes, known: Mapping[str, Path] | Iterable[str]) -> list[str]:
+def imported_modules(source: bytes, known: Mapping[str, Path] | Iterable[str],
+                     package: str = "") -> list[str]:
     """The ``known`` modules whose names a source can reach by its imports, sorted.
 
     ``from a.b import c`` counts ``a.b`` and, when it is a module, ``a.b.c``;
     ``import a.b`` counts ``a.b``. The parent package ``a`` runs too, but a
     kernel can only freeze names it reads, and those come from the modules
     counted (a package re-exporting a name imports its module, which the
-    closure follows). Only absolute imports are read (the toolkit has no
-    relative ones). A source that does not parse imports nothing.
+    closure follows). Relative imports are resolved against ``package`` (the
+    importing module's package). A source that does not parse imports nothing.
     """
     names = set(known)
     try:
@@ -74,9 +75,15 @@ def imported_modules(source: bytes, known: Mapping[str, Path] | Iterable[str]) -
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             found.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            found.add(node.module)
-            found.update(f"{node.module}.{alias.name}" for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".") if package else []
+                parts = parts[:len(parts) - (node.level - 1)]
+                base = ".".join(parts + ([node.module] if node.module else []))
+            if base:
+                found.add(base)
+                found.update(f"{base}.{alias.name}" for alias in node.names)
     return sorted(found & names)
 
 
@@ -130,7 +137,11 @@ def refresh(roots: Sequence[Path]) -> list[str]:
         digest = hashlib.sha256(data).hexdigest()
         digests[name] = digest
         old = old_files.get(name)
-        imports[name] = old[1] if old and old[0] == digest else imported_modules(data, files)
+        if old and old[0] == digest:
+            imports[name] = old[1]
+        else:
+            package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+            imports[name] = imported_modules(data, files, package)
         if KERNEL_MARK in data:
             kernels.append(name)
     stamps = {}

@@ -75,6 +75,11 @@ def test_imports_are_read_from_every_statement_and_limited_to_known_modules():
     assert kernel_cache.imported_modules(src, known) == ["p.geo", "p.kern", "p.sub",
                                                          "p.sub.deep"]
     assert kernel_cache.imported_modules(b"def (:", known) == []
+    relative = b"from . import geo\nfrom .sub import deep\nfrom ..x import y\n"
+    assert kernel_cache.imported_modules(relative, known, package="p") == ["p", "p.geo",
+                                                                          "p.sub", "p.sub.deep"]
+    assert kernel_cache.imported_modules(b"from .. import kern\n", known,
+                                         package="p.sub") == ["p", "p.kern"]
 
 
 def test_importing_the_toolkit_records_the_stamps_of_its_kernel_modules():
