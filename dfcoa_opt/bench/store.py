@@ -76,7 +76,7 @@ def executable_source(text: str) -> str:
     """
     try:
         tree = ast.parse(text)
-    except SyntaxError:
+    except (SyntaxError, ValueError):  # ValueError: null bytes
         return text
     for node in ast.walk(tree):
         if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
@@ -189,9 +189,7 @@ class ResultsStore:
                        variant=run.variant_name, ladder=run.ladder,
                        ladder_value=run.ladder_value, log=f"logs/{run.key}.npz")
             row["provenance"] = {**(row.get("provenance") or {}), "reused_from": other.root.name}
-            atomic_write(self.root / row["log"], log)
-            atomic_write(self.row_path(run.key),
-                         json.dumps(row, indent=1, sort_keys=True, allow_nan=False) + "\n")
+            self.write(Outcome(row, log))
             return True
         return False
 
