@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import heapq
 import math
 from pathlib import Path
 
@@ -306,6 +307,71 @@ def test_improved_search_with_the_kept_field_is_the_same_search():
     np.testing.assert_array_equal(fresh.cells, kept.cells)
     with pytest.raises(ValueError, match="obstacle_field has shape"):
         search(occ, (0, 0), (49, 59), obstacle_field=np.zeros((3, 3)), **opts)
+
+
+def heapq_eq13(occ: np.ndarray, s: tuple[int, int], t: tuple[int, int], h_gain: float,
+               o_gain: float, window: float) -> tuple[float, int, list[tuple[int, int]]]:
+    """Independent plain-Python A* with eq 13's priority: a binary heapq, lazy deletion.
+
+    f = g + h - h_gain h (R - r) / R + o_gain sum 1 / d_i (cells; octile h, Euclidean r,
+    R = |start - goal|), popped by f - 1e-9 g, FIFO among equal keys. Returns
+    ``(cost, expanded, path cells)``.
+    """
+    n_rows, n_cols = occ.shape
+    obst = obstacle_term(occ, window)
+    big_r = math.hypot(s[0] - t[0], s[1] - t[1])
+
+    def priority(v: tuple[int, int], g: float) -> float:
+        dr, dc = abs(v[0] - t[0]), abs(v[1] - t[1])
+        h = max(dr, dc) + (SQRT2 - 1.0) * min(dr, dc)
+        return g + h - h_gain * h * (big_r - math.hypot(dr, dc)) / big_r + o_gain * obst[v]
+
+    g, parent, closed = {s: 0.0}, {s: s}, set()
+    heap, count, expanded = [(priority(s, 0.0), 0, s)], 1, 0
+    while heap:
+        u = heapq.heappop(heap)[2]
+        if u in closed:
+            continue
+        closed.add(u)
+        expanded += 1
+        if u == t:
+            path = [u]
+            while path[-1] != s:
+                path.append(parent[path[-1]])
+            return g[t], expanded, path[::-1]
+        for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)):
+            v = (u[0] + dr, u[1] + dc)
+            if not (0 <= v[0] < n_rows and 0 <= v[1] < n_cols) or occ[v] or v in closed:
+                continue
+            if dr and dc and (occ[u[0] + dr, u[1]] or occ[u[0], u[1] + dc]):
+                continue
+            ng = g[u] + (SQRT2 if dr and dc else 1.0)
+            if ng < g.get(v, math.inf):
+                g[v], parent[v] = ng, u
+                heapq.heappush(heap, (priority(v, ng) - 1e-9 * ng, count, v))
+                count += 1
+    return math.inf, expanded, []
+
+
+@pytest.mark.parametrize(("h_gain", "o_gain", "window"), [(0.5, 1.0, 2.5), (0.0, 2.0, 1.5),
+                                                          (1.0, 0.0, 0.0)])
+def test_improved_search_expands_like_a_plain_heapq_eq13_search(h_gain, o_gain, window):
+    """The kernel pops in eq 13's order: the same cost, nodes and path as an independent A*.
+
+    Catches a successor kept out of the heap (the kernel's shortcut for the best
+    new successor) when something in the heap has a smaller key. Without the
+    obstacle term, exactly equal keys (mirror cells) may be popped in another
+    order, so there only the cost and the node count are compared.
+    """
+    for seed in range(12):
+        occ = random_map(np.random.default_rng(seed), (40, 50), 0.2,
+                         "cells" if seed % 2 else "blocks")
+        occ[:2, :2] = occ[-2:, -2:] = False
+        cost, expanded, path = heapq_eq13(occ, (0, 0), (39, 49), h_gain, o_gain, window)
+        got = search(occ, (0, 0), (39, 49), h_gain=h_gain, o_gain=o_gain, window=window)
+        assert got.cost == pytest.approx(cost, abs=1e-9) and got.expanded == expanded, seed
+        if o_gain > 0.0:
+            np.testing.assert_array_equal(got.cells, np.array(path).reshape(-1, 2))
 
 
 # ------------------------------------------------------------------ registration, options

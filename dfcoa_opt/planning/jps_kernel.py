@@ -37,11 +37,12 @@ The heap and the jumps are closures inside the kernel rather than shared
 ``njit`` functions: a call to a compiled function that takes arrays costs
 atomic reference-count updates of each array argument (measured: 9 % of the
 1024 x 1024 benchmark for the heap alone, 13 % in the A* kernel), which
-numba does not remove in a loop. The A* kernel writes the same heap inline for
-the same reason. A shared heap compiled with ``inline="always"`` (pasted into
-the kernel by numba, no call) was measured too (2026-11-25, 5 interleaved
-repetitions, same paths): the A* kernel 2-9 % slower on the S1, S2 and
-1024 x 1024 searches, so the copy stays. Call
+numba does not remove in a loop. The A* kernel writes its pop inline for the
+same reason; its sift-up, needed at three places, is an ``inline="always"``
+function of its own module (measured no slower there). A heap shared by both
+kernels, compiled with ``inline="always"``, was measured too (2026-11-25, 5
+interleaved repetitions, same paths): the A* kernel 2-9 % slower on the S1,
+S2 and 1024 x 1024 searches, so the copy stays. Call
 :func:`dfcoa_opt.planning.astar.search` with ``method="jps"``, not these
 functions.
 """
