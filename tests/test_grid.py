@@ -56,6 +56,40 @@ def test_centre_inside_rule_matches_shapely():
     assert np.all(d < 1e-3)
 
 
+def test_rasterising_in_bounding_boxes_tests_every_cell_it_must():
+    """Each shape tests only the centres in its bounding box: the same cells as all of them.
+
+    Shapes whose edges fall on cell centres, smaller than a cell, partly or wholly
+    outside the grid, at a non-zero origin and a resolution that is not a power of two.
+    """
+    rng = np.random.default_rng(3)
+    # at 4 cells/m the first two have their extreme points exactly on cell centres
+    shapes = [Rectangle((0.375, 0.625), (1.125, 2.875)), Circle((2.125, 3.125), 0.5),
+              Rectangle((0.25, 0.25), (1.25, 2.75)), Circle((-0.4, 3.0), 0.9),
+              Circle((9.9, 5.9), 0.05), Rectangle((-3.0, -3.0), (-1.0, -1.0))]
+    for _ in range(60):
+        x, y = rng.uniform(-1.0, 9.0), rng.uniform(-1.0, 6.0)
+        kind = rng.integers(3)
+        if kind == 0:
+            shapes.append(Circle((x, y), float(rng.uniform(0.01, 1.5))))
+        elif kind == 1:
+            w, h = rng.uniform(0.01, 2.0, 2)
+            shapes.append(Rectangle((x, y), (x + w, y + h)))
+        else:
+            ang = np.arange(5) * 2 * np.pi / 5 + rng.uniform(0.0, 1.2, 5)  # star-shaped, CCW
+            r = rng.uniform(0.05, 1.5, 5)
+            shapes.append(Polygon(tuple((x + ri * np.cos(a), y + ri * np.sin(a))
+                                        for ri, a in zip(r, ang, strict=True))))
+    for resolution, origin in ((4.0, (0.0, 0.0)), (3.7, (0.13, -0.21))):
+        c = OccupancyGrid.empty((9.0, 6.0), resolution, origin).cell_centers().reshape(-1, 2)
+        for shape in shapes:  # one at a time: a cell missed by one is not hidden by another
+            g = OccupancyGrid.from_shapes((9.0, 6.0), resolution, [shape], origin=origin)
+            assert np.array_equal(g.occupied.ravel(), shape.contains(c)), shape
+        both = OccupancyGrid.from_shapes((9.0, 6.0), resolution, shapes, origin=origin)
+        assert np.array_equal(both.occupied.ravel(),
+                              np.any([shape.contains(c) for shape in shapes], axis=0))
+
+
 def _brute_centre_distance(g):
     c = g.cell_centers().reshape(-1, 2)
     occ = c[g.occupied.ravel()]

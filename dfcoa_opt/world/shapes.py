@@ -40,6 +40,12 @@ class Polygon:
         """Which of ``points`` ``(P, 2)`` (m) lie inside."""
         return points_in_polygon(points, self.vertices)
 
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` in m: no point outside is :meth:`contains`-inside."""
+        v = self.as_array()
+        return (float(v[:, 0].min()), float(v[:, 1].min()), float(v[:, 0].max()),
+                float(v[:, 1].max()))
+
     def to_polygon(self) -> Polygon:
         """This polygon."""
         return self
@@ -74,6 +80,10 @@ class Rectangle:
             & (p[:, 1] >= self.min[1]) & (p[:, 1] < self.max[1])
         )
 
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` in m: no point outside is :meth:`contains`-inside."""
+        return (*self.min, *self.max)
+
 
 @dataclass(frozen=True)
 class Circle:
@@ -96,6 +106,11 @@ class Circle:
         p = np.asarray(points, dtype=float).reshape(-1, 2)
         d = p - np.asarray(self.center)
         return np.hypot(d[:, 0], d[:, 1]) <= self.radius  # no overflow for huge radii
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` in m: no point outside is :meth:`contains`-inside."""
+        (x, y), r = self.center, self.radius
+        return (x - r, y - r, x + r, y + r)
 
     def to_polygon(self, n: int = 32) -> Polygon:
         """A circumscribed ``n``-gon (contains the disc), counter-clockwise."""
