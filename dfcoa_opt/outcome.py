@@ -144,6 +144,8 @@ class StallMonitor:
         if k < self._lag:
             return False
         lo = k - self._lag
+        if not self._progress[k] - self._progress[lo] < self._args[1]:
+            return False  # the centroid advanced: not stalled, whatever the robots did
         return bool(stalled(positions[lo:k + 1], slots[lo:k + 1], self._progress[lo:k + 1],
                             self._lag, *self._args)[-1])
 

@@ -27,3 +27,25 @@ def test_stop_loop_bounce_and_start_time():
 def test_empty():
     p, v = DynamicObstacles().state(1.0)
     assert p.shape == (0, 2) and v.shape == (0, 2)
+
+
+def test_states_at_many_times_are_the_states_at_each_time_bit_for_bit():
+    """The simulator asks once for every t_k = k dt; each row must equal state(k * dt)."""
+    d = DynamicObstacles((
+        MovingDisc(0.3, 0.7, ((0.0, 0.0), (2.0, 0.3), (2.1, 2.0), (0.4, 1.1)), end="loop"),
+        MovingDisc(0.3, 1.3, ((0.0, 0.0), (2.0, 0.0), (2.5, 1.5)), end="bounce"),
+        MovingDisc(0.5, 2.0, ((5.0, 5.0), (5.0, 9.0)), start_time=1.0),
+        MovingDisc(0.2, 0.0, ((1.0, 1.0),)),
+    ))
+    dt, steps = 0.05, 400
+    pos, vel = d.state(np.arange(steps) * dt)
+    assert pos.shape == vel.shape == (steps, 4, 2)
+    for k in range(steps):
+        p, v = d.state(k * dt)
+        np.testing.assert_array_equal(pos[k], p)
+        np.testing.assert_array_equal(vel[k], v)
+    still = DynamicObstacles((MovingDisc(0.2, 1.0, ((1.0, 2.0),)),))
+    p, v = still.state(np.arange(3) * dt)
+    assert np.array_equal(p, np.tile([1.0, 2.0], (3, 1, 1))) and not v.any()
+    p, v = DynamicObstacles().state(np.arange(3) * dt)
+    assert p.shape == v.shape == (3, 0, 2)

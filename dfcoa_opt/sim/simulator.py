@@ -121,9 +121,11 @@ class Simulator:
         prev_static = np.zeros(n, dtype=bool)
         prev_dyn = np.zeros((n, m), dtype=bool)
         no_dyn = np.zeros((n, 0))  # without moving obstacles: the same empty arrays every step
-        no_moving = self._moving_obstacles(no_dyn, np.zeros((0, 2)), np.zeros((0, 2)),
-                                           np.zeros(0))
+        no_dyn_state = np.zeros((0, 2))
+        no_moving = self._moving_obstacles(no_dyn, no_dyn_state, no_dyn_state, np.zeros(0))
         goal = np.asarray(spec.leader.goal, dtype=float)
+        # moving obstacles are a pure function of t: their states at every t_k in one call
+        dyn_traj = dyn.state(np.arange(steps) * dt) if m else None
         reached, t_goal = False, math.nan
         monitor = (StallMonitor(sc.leader_path, steps, dt, spec.leader.settle_tolerance,
                                 spec.metrics) if spec.stop_on_deadlock else None)
@@ -132,7 +134,10 @@ class Simulator:
         for k in range(steps):
             t = k * dt
             pos = state.pose[:, :2]
-            dyn_pos, dyn_vel = dyn.state(t)
+            if m:
+                dyn_pos, dyn_vel = dyn_traj[0][k].copy(), dyn_traj[1][k].copy()
+            else:
+                dyn_pos = dyn_vel = no_dyn_state
             # centre distances robot -> moving obstacle, (N, M); used by sensing and contacts
             dyn_dist = np.linalg.norm(pos[:, None, :] - dyn_pos[None, :, :], axis=2) if m \
                 else no_dyn

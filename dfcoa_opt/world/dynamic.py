@@ -69,8 +69,12 @@ class DynamicObstacles:
     def __len__(self) -> int:
         return len(self.discs)
 
-    def _arc(self, t: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Arc length along each polyline at time ``t`` and the direction sign."""
+    def _arc(self, t: float | NDArray[np.float64]
+             ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Arc length along each polyline at time ``t`` and the direction sign.
+
+        ``t`` a float gives ``(M,)`` arrays; ``(K, 1)`` gives ``(K, M)``.
+        """
         s = self._speed * np.maximum(t - self._t0, 0.0)
         total = np.where(self._total > 0, self._total, 1.0)
         sign = np.ones_like(s)
@@ -86,29 +90,34 @@ class DynamicObstacles:
         sign = np.where(still, 0.0, sign)
         return out, sign
 
-    def state(self, t: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Positions and velocities of all discs at time ``t``.
+    def state(self, t: float | NDArray[np.float64]
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Positions and velocities of all discs at time ``t``, or at each of several times.
+
+        The formulas are elementwise, so the state at one entry of an array of
+        times is bit for bit the state at that time alone.
 
         Args:
-            t: Time in s.
+            t: Time in s, a float or a ``(K,)`` array.
 
         Returns:
-            ``(positions (M, 2) m, velocities (M, 2) m/s)``.
+            ``(positions (M, 2) m, velocities (M, 2) m/s)``, or ``(K, M, 2)`` each.
         """
         m = len(self.discs)
+        lead = np.shape(t)
         if m == 0:
-            return np.zeros((0, 2)), np.zeros((0, 2))
-        s, sign = self._arc(t)
+            return np.zeros((*lead, 0, 2)), np.zeros((*lead, 0, 2))
+        s, sign = self._arc(np.asarray(t, dtype=float)[..., None])
         kmax = self._pts.shape[1]
-        seg = np.clip((self._cum <= s[:, None]).sum(axis=1) - 1, 0, max(kmax - 2, 0))
-        idx = np.arange(m)
         if kmax == 1:
-            return self._pts[:, 0].copy(), np.zeros((m, 2))
+            return np.broadcast_to(self._pts[:, 0], (*lead, m, 2)).copy(), np.zeros((*lead, m, 2))
+        seg = np.clip((self._cum <= s[..., None]).sum(axis=-1) - 1, 0, kmax - 2)
+        idx = np.arange(m)
         a, b = self._pts[idx, seg], self._pts[idx, seg + 1]
         length = self._cum[idx, seg + 1] - self._cum[idx, seg]
         length = np.where(np.isfinite(length) & (length > 0), length, 1.0)
         frac = np.clip((s - self._cum[idx, seg]) / length, 0.0, 1.0)
-        pos = a + frac[:, None] * (b - a)
-        direction = (b - a) / length[:, None]
-        vel = direction * (self._speed * sign)[:, None]
+        pos = a + frac[..., None] * (b - a)
+        direction = (b - a) / length[..., None]
+        vel = direction * (self._speed * sign)[..., None]
         return pos, vel
