@@ -249,17 +249,17 @@ def markdown(summary: Summary, controllers: Sequence[str], sizes: Sequence[int],
 
 def findings() -> list[str]:
     """All-pairs and per-obstacle work found by reading the code (file:function), as text."""
-    dense = sim_neighbours.DENSE_MAX
+    dense, kernel = sim_neighbours.DENSE_MAX, sim_neighbours.KERNEL_MAX
     pairs = lidar_module.CANDIDATES_MIN_PAIRS
     frac = lidar_module.CANDIDATES_MAX_FRACTION
     return [
-        f"`dfcoa_opt/sim/neighbours.py:neighbour_table` and `:proximity` -- a dense N x N "
-        f"distance matrix (`geometry.pairwise_distances`, numpy) for N <= DENSE_MAX = {dense}, "
-        "a `cKDTree` above. O(N^2) only up to that bound, so not an asymptotic problem. "
-        "Waste above it: `proximity` builds a second `cKDTree` on the same points (besides the "
-        "one in `neighbour_table`) and queries it twice (k = 2 for the closest pair, "
-        "`query_pairs` for contacts): two tree builds and three queries per step (the "
-        "'proximity / table' column of 'Sensing references').",
+        f"`dfcoa_opt/sim/neighbours.py:neighbour_table` -- a dense N x N distance matrix "
+        f"(`geometry.pairwise_distances`, numpy) for N <= DENSE_MAX = {dense}; `:proximity` "
+        f"-- one compiled all-pairs loop for N <= KERNEL_MAX = {kernel}; a `cKDTree` above. "
+        "O(N^2) only up to those bounds, so not an asymptotic problem. Above them "
+        "`proximity` queries its one tree up to three times (the K-nearest table, `k = 2` for "
+        "the closest pair when nobody has a neighbour in range, `query_pairs` for contacts; "
+        "the 'proximity / table' column of 'Sensing references').",
         "`dfcoa_opt/world/lidar.py:Lidar._discs` / `_scan_kernel` -- every robot tests every "
         f"other robot's disc (all pairs, in numba) unless N * (N + M) >= CANDIDATES_MIN_PAIRS = "
         f"{pairs:,} (N >= {math.ceil(math.sqrt(pairs))} with no moving obstacles) and one "

@@ -22,8 +22,9 @@ def test_dense_and_tree_paths_agree_with_brute_force(n, monkeypatch):
     rng = np.random.default_rng(n)
     pts = rng.uniform(0, 10, (n, 2))
     ref_idx, ref_min, ref_pairs = brute(pts, 2.5, 6, 0.8)
-    for dense_max in (0, 10_000):
+    for dense_max in (0, 10_000):  # the tree path, then the dense paths (numpy and compiled)
         monkeypatch.setattr(neighbours, "DENSE_MAX", dense_max)
+        monkeypatch.setattr(neighbours, "KERNEL_MAX", dense_max)
         p = proximity(pts, 2.5, 6, 0.8)
         assert np.array_equal(p.index, ref_idx)
         assert np.isclose(p.min_distance, ref_min)
@@ -42,7 +43,7 @@ def test_single_robot_has_no_neighbours():
 def test_proximity_closest_pair_matches_brute_force_on_the_tree_path(radius):
     """The closest pair comes from the table when it can, else from a full query."""
     rng = np.random.default_rng(9)
-    pts = rng.uniform(0.0, 60.0, (neighbours.DENSE_MAX + 40, 2))
+    pts = rng.uniform(0.0, 60.0, (neighbours.KERNEL_MAX + 40, 2))
     d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
     np.fill_diagonal(d, np.inf)
     prox = neighbours.proximity(pts, radius, 5, 0.5)
