@@ -203,3 +203,21 @@ def pairwise_distances(points: ArrayLike) -> FloatArray:
     d = np.sqrt(((p[:, None, :] - p[None, :, :]) ** 2).sum(-1))
     np.fill_diagonal(d, np.inf)
     return d
+
+
+def take_rows(values: NDArray, index: NDArray[np.intp]) -> NDArray:
+    """Per-row gather along axis 1: ``out[i, j, ...] = values[i, index[i, j], ...]``.
+
+    The entries numpy's ``take_along_axis`` picks on axis 1 (with ``index``
+    extended over the trailing axes), bit for bit since both only gather, without
+    its argument handling (~2 against ~6 us on the small tables of the per-step
+    constraint builders).
+
+    Args:
+        values: ``(P, K, ...)`` array.
+        index: ``(P, J)`` integer indices into axis 1.
+
+    Returns:
+        ``(P, J, ...)`` array.
+    """
+    return values[np.arange(len(index))[:, None], index]

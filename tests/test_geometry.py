@@ -10,6 +10,7 @@ from dfcoa_opt.geometry import (
     points_in_polygon,
     polygon_signed_area,
     rotate,
+    take_rows,
     wrap_angle,
 )
 
@@ -67,3 +68,14 @@ def test_point_in_unit_square_half_open(x, y):
     sq = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
     inside = bool(points_in_polygon([[x, y]], sq)[0])
     assert inside == (0.0 <= x < 1.0 and 0.0 <= y < 1.0) or x in (0.0, 1.0) or y in (0.0, 1.0)
+
+
+def test_take_rows_picks_what_take_along_axis_picks():
+    rng = np.random.default_rng(5)
+    values = rng.normal(size=(6, 9, 2))
+    index = np.argsort(rng.random((6, 9)), axis=1)[:, :4]
+    np.testing.assert_array_equal(take_rows(values, index),
+                                  np.take_along_axis(values, index[..., None], axis=1))
+    np.testing.assert_array_equal(take_rows(values[..., 0], index),
+                                  np.take_along_axis(values[..., 0], index, axis=1))
+    assert take_rows(values, index[:, :0]).shape == (6, 0, 2)

@@ -24,6 +24,7 @@ from scipy.optimize import linprog
 
 from comparisons.constraints.solvers import Solver
 from comparisons.orca import lp
+from dfcoa_opt.geometry import take_rows
 from dfcoa_opt.sim.log import (
     STATUS_FALLBACK,
     STATUS_MODIFIED,
@@ -181,8 +182,8 @@ def solve_distributed_exact(nominal: FloatArray, pairs: BarrierRows, obstacles: 
                            axis=1)
     used = np.concatenate([np.ones((n, 4), bool), pairs.mask, obstacles.mask], axis=1)
     order = np.argsort(~used, axis=1, kind="stable")  # used rows first, box leading
-    normal = np.take_along_axis(normal, order[..., None], axis=1)
-    bound = np.take_along_axis(np.where(used, bound, 0.0), order, axis=1)
+    normal = take_rows(normal, order)
+    bound = take_rows(np.where(used, bound, 0.0), order)
     # n . u >= b  <=>  left of the line through b n with direction (n_y, -n_x)
     points = bound[..., None] * normal
     directions = np.stack([normal[..., 1], -normal[..., 0]], axis=-1)

@@ -32,7 +32,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.geometry import closest_point_on_segment, points_in_polygons, polygon_edges
+from dfcoa_opt.geometry import (
+    closest_point_on_segment,
+    points_in_polygons,
+    polygon_edges,
+    take_rows,
+)
 from dfcoa_opt.world.shapes import Circle
 
 FloatArray = NDArray[np.float64]
@@ -121,15 +126,13 @@ class StaticObstacles:
         normal = np.concatenate([n_d, n_p], axis=1)
         k = max_count
         order = np.argsort(delta, axis=1, kind="stable")[:, :k]
-        delta = np.take_along_axis(delta, order, axis=1)
-        q = np.take_along_axis(q, order[..., None], axis=1)
-        normal = np.take_along_axis(normal, order[..., None], axis=1)
-        pad = k - delta.shape[1]
-        if pad > 0:
-            delta = np.pad(delta, ((0, 0), (0, pad)), constant_values=np.inf)
-            q = np.pad(q, ((0, 0), (0, pad), (0, 0)))
-            normal = np.pad(normal, ((0, 0), (0, pad), (0, 0)))
-            normal[:, -pad:, 0] = 1.0
+        delta, q, normal = take_rows(delta, order), take_rows(q, order), take_rows(normal, order)
+        found = delta.shape[1]
+        if found < k:  # unused slots: inf distance, the point (0, 0), the normal (1, 0)
+            full = np.full((len(p), k), np.inf), np.zeros((len(p), k, 2)), np.zeros((len(p), k, 2))
+            full[0][:, :found], full[1][:, :found], full[2][:, :found] = delta, q, normal
+            full[2][:, found:, 0] = 1.0
+            delta, q, normal = full
         mask = delta <= reach
         return Nearest(q, np.where(mask, delta, np.inf), normal, mask)
 
@@ -174,10 +177,10 @@ def polygon_nearest(points: FloatArray, edge_a: FloatArray, edge_b: FloatArray
     rel = points[:, None, None, :] - cand
     d2 = rel[..., 0] ** 2 + rel[..., 1] ** 2
     best = np.argmin(d2, axis=2)
-    q = np.take_along_axis(cand, best[..., None, None], axis=2)[:, :, 0]
+    poly = np.arange(n_poly)[None, :]
+    q = cand[np.arange(n_pts)[:, None], poly, best]
     inside = points_in_polygons(points, edge_a, edge_b)
-    edge = np.take_along_axis(np.broadcast_to(edge_b - edge_a, cand.shape),
-                              best[..., None, None], axis=2)[:, :, 0]
+    edge = (edge_b - edge_a)[poly, best]
     outward = np.stack([edge[..., 1], -edge[..., 0]], axis=-1)  # CCW polygon: right of edge
     outward, _ = _unit(outward, np.array([1.0, 0.0]))
     normal, dist = _unit(points[:, None, :] - q, outward)

@@ -38,6 +38,7 @@ from comparisons.orca.velocities import orca_velocities
 from dfcoa_opt.control.base import Filtered, FilterResult, Observation
 from dfcoa_opt.control.registry import register, register_filter
 from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.geometry import take_rows
 from dfcoa_opt.params import param
 from dfcoa_opt.sim.log import (
     STATUS_FALLBACK,
@@ -189,8 +190,7 @@ class OrcaFilter:
         blind = nb.mask.all(axis=1) & used.all(axis=1)
         order = np.argsort(np.where(used, dist, np.inf), axis=1, kind="stable")
         count = used.sum(axis=1)
-        dist = np.take_along_axis(dist, order, axis=1)
-        rel = np.take_along_axis(rel, order[..., None], axis=1)
+        dist, rel = take_rows(dist, order), take_rows(rel, order)
         ok = np.arange(dist.shape[1])[None, :] < count[:, None]
         normal = rel / np.where(ok & (dist > 0), dist, 1.0)[..., None]
         bound = np.where(ok, (2.0 * radius[:, None] - dist) / (2.0 * obs.dt), 0.0)

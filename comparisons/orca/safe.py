@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from comparisons.orca.neighbours import knn_within
-from dfcoa_opt.geometry import closest_point_on_segment
+from dfcoa_opt.geometry import closest_point_on_segment, take_rows
 
 FloatArray = NDArray[np.float64]
 #: Most robots within one step's reach of a robot; disc packing allows at most
@@ -115,8 +115,7 @@ def segment_safety_lines(pos: FloatArray, radius: FloatArray, max_speed: FloatAr
     count = near.sum(axis=1)
     width = max(int(count.max(initial=0)), 1)
     order = order[:, :width]
-    dist = np.take_along_axis(dist, order, axis=1)
-    rel = np.take_along_axis(rel, order[..., None], axis=1)
+    dist, rel = take_rows(dist, order), take_rows(rel, order)
     used = np.arange(width)[None, :] < count[:, None]
     normal = rel / np.where(dist > 0.0, dist, 1.0)[..., None]
     bound = np.where(used, (radius[:, None] - dist) / dt, 0.0)
