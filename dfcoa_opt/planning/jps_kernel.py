@@ -33,16 +33,16 @@ same deeper-first tie key. Edges have exact octile lengths, and the octile and
 Euclidean heuristics stay consistent on them, so closed nodes are never
 reopened and the first goal pop is optimal.
 
-The heap and the jumps are closures inside the kernel rather than shared
-``njit`` functions: a call to a compiled function that takes arrays costs
+The heap's pop and the jumps are closures inside the kernel rather than
+shared ``njit`` functions: a call to a compiled function that takes arrays costs
 atomic reference-count updates of each array argument (measured: 9 % of the
 1024 x 1024 benchmark for the heap alone, 13 % in the A* kernel), which
-numba does not remove in a loop. The A* kernel writes its pop inline for the
-same reason; its sift-up, needed at three places, is an ``inline="always"``
-function of its own module (measured no slower there). A heap shared by both
-kernels, compiled with ``inline="always"``, was measured too (2026-11-25, 5
-interleaved repetitions, same paths): the A* kernel 2-9 % slower on the S1,
-S2 and 1024 x 1024 searches, so the copy stays. Call
+numba does not remove in a loop. The sift-up is shared with the A* kernel as
+an ``inline="always"`` function (:func:`.astar_kernel._sift_up`; measured no
+slower in either kernel, 2026-11-25). The pop is not: moved into a shared
+``inline="always"`` function it made the A* kernel 6-11 % slower and this one
+8 % (S1, S2 and 1024 x 1024 searches, interleaved repetitions, same paths),
+so each kernel keeps its own copy. Call
 :func:`dfcoa_opt.planning.astar.search` with ``method="jps"``, not these
 functions.
 """
@@ -63,6 +63,7 @@ from dfcoa_opt.planning.astar_kernel import (
     _TIE,
     SQRT2,
     _heuristic,
+    _sift_up,
     workspace,
 )
 
@@ -166,22 +167,6 @@ def _jps(st, wp, s, t, kind, wf, wi):  # pragma: no cover - numba
             pos[ln] = i
         return size
 
-    def heap_sift_up(i, key, v):
-        # place v with key at slot i or above (push: i = size; decrease-key: pos[v])
-        while i > 0:
-            p = (i - 1) >> 2
-            if key < hk[p]:
-                hk[i] = hk[p]
-                m = hn[p]
-                hn[i] = m
-                pos[m] = i
-                i = p
-            else:
-                break
-        hk[i] = key
-        hn[i] = v
-        pos[v] = i
-
     gr = t // wp
     gc = t - gr * wp
     sr = s // wp
@@ -272,7 +257,7 @@ def _jps(st, wp, s, t, kind, wf, wi):  # pragma: no cover - numba
                 st[v] = _OPEN
                 i = size
                 size += 1
-            heap_sift_up(i, fv - _DEPTH * ng, v)
+            _sift_up(hk, hn, pos, i, fv - _DEPTH * ng, v)
     if not found:
         return np.zeros((0, 2), np.int64), np.inf, expanded
     count = 1
