@@ -83,6 +83,14 @@ def test_log_roundtrip(tmp_path):
     log = run_scenario(small(), "goto_slot")
     back = RunLog.load(log.save(tmp_path / "run.npz"))
     assert back.digest() == log.digest() and back.meta["controller"] == "goto_slot"
+    with np.load(tmp_path / "run.npz") as z:  # truth localisation: pose_est is pose, once
+        assert "pose_est" not in z.files and "pose" in z.files
+    assert back.pose_est is not back.pose
+    # an estimate that differs from the truth -- here only in the sign of a zero -- is kept
+    log.pose_est[0, 0, 2] = -0.0 if log.pose[0, 0, 2] == 0.0 else log.pose[0, 0, 2] + 1e-3
+    back = RunLog.load(log.save(tmp_path / "est.npz"))
+    np.testing.assert_array_equal(back.pose_est.view(np.uint64), log.pose_est.view(np.uint64))
+    assert back.digest() == log.digest()
 
 
 def test_observation_rows_and_goto_slot_is_distributed():
