@@ -96,8 +96,8 @@ def astar_kernel(st, wp, s, t, kind, corner_cutting, h_gain, big_r, o_gain, obst
     an indexed 4-ary min-heap (decrease-key), so each node is in it at most once.
     Without the stack, the new successor with the smallest key is held out of the
     heap and expanded next when its key is below the heap's minimum -- the node
-    the heap would have popped, without its push and pop (S1 eq 13 search
-    ~4 % faster, the same order: a tie with the heap's minimum goes through the heap).
+    the heap would have popped, without its push and pop (eq 13 searches 2.5-5 %
+    faster, the same order: a tie with the heap's minimum goes through the heap).
     ``wf``, ``wi``: the work arrays of :func:`workspace` (g, heap keys; parent,
     heap slot, heap nodes, stack), never read before written.
     """
