@@ -28,7 +28,7 @@ from dfcoa_opt.sim.schema import LidarSpec
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.lidar import Lidar
 from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle
-from tests.test_astar import assert_valid_moves, dijkstra_cost
+from tests.astar_oracles import assert_valid_moves, dijkstra_cost
 
 TWO_PI = 2.0 * math.pi
 HALF_DIAG = math.sqrt(0.5)  # half a cell diagonal, in cells
