@@ -129,10 +129,11 @@ class StaticObstacles:
         delta, q, normal = take_rows(delta, order), take_rows(q, order), take_rows(normal, order)
         found = delta.shape[1]
         if found < k:  # unused slots: inf distance, the point (0, 0), the normal (1, 0)
-            full = np.full((len(p), k), np.inf), np.zeros((len(p), k, 2)), np.zeros((len(p), k, 2))
-            full[0][:, :found], full[1][:, :found], full[2][:, :found] = delta, q, normal
-            full[2][:, found:, 0] = 1.0
-            delta, q, normal = full
+            delta_k, q_k, normal_k = (np.full((len(p), k), np.inf), np.zeros((len(p), k, 2)),
+                                      np.zeros((len(p), k, 2)))
+            delta_k[:, :found], q_k[:, :found], normal_k[:, :found] = delta, q, normal
+            normal_k[:, found:, 0] = 1.0
+            delta, q, normal = delta_k, q_k, normal_k
         mask = delta <= reach
         return Nearest(q, np.where(mask, delta, np.inf), normal, mask)
 

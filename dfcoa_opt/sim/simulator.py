@@ -121,11 +121,12 @@ class Simulator:
         prev_static = np.zeros(n, dtype=bool)
         prev_dyn = np.zeros((n, m), dtype=bool)
         no_dyn = np.zeros((n, 0))  # without moving obstacles: the same empty arrays every step
-        no_dyn_state = np.zeros((0, 2))
-        no_moving = self._moving_obstacles(no_dyn, no_dyn_state, no_dyn_state, np.zeros(0))
+        no_moving = self._moving_obstacles(no_dyn, np.zeros((0, 2)), np.zeros((0, 2)),
+                                           np.zeros(0))
         goal = np.asarray(spec.leader.goal, dtype=float)
         # moving obstacles are a pure function of t: their states at every t_k in one call
-        dyn_traj = dyn.state(np.arange(steps) * dt) if m else None
+        dyn_pos_all, dyn_vel_all = dyn.state(np.arange(steps) * dt)
+        dyn_pos_all.flags.writeable = dyn_vel_all.flags.writeable = False  # rows shared below
         reached, t_goal = False, math.nan
         monitor = (StallMonitor(sc.leader_path, steps, dt, spec.leader.settle_tolerance,
                                 spec.metrics) if spec.stop_on_deadlock else None)
@@ -134,10 +135,7 @@ class Simulator:
         for k in range(steps):
             t = k * dt
             pos = state.pose[:, :2]
-            if m:
-                dyn_pos, dyn_vel = dyn_traj[0][k].copy(), dyn_traj[1][k].copy()
-            else:
-                dyn_pos = dyn_vel = no_dyn_state
+            dyn_pos, dyn_vel = dyn_pos_all[k], dyn_vel_all[k]
             # centre distances robot -> moving obstacle, (N, M); used by sensing and contacts
             dyn_dist = np.linalg.norm(pos[:, None, :] - dyn_pos[None, :, :], axis=2) if m \
                 else no_dyn
