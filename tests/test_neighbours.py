@@ -70,3 +70,19 @@ def test_dense_kernel_matches_numpy_table_bit_for_bit(k_max, layout):
     i, j = np.nonzero(np.triu(d < 1.01, 1))
     np.testing.assert_array_equal(prox.contact_keys, i * len(pts) + j)
     assert layout == "random" or len(i) == 60  # the grid's 60 unit-distance pairs
+
+
+@pytest.mark.parametrize("k", [0, 1, 5])
+def test_gather_copies_the_neighbours_rows_and_zeroes_the_padding(k):
+    rng = np.random.default_rng(k)
+    n = 9
+    pose, vel = rng.normal(size=(n, 3)), rng.normal(size=(n, 2))
+    index = rng.integers(-1, n, size=(n, k))
+    pos, v, heading = neighbours.gather(index, pose, vel)
+    pad = index < 0
+    safe = np.where(pad, 0, index)
+    np.testing.assert_array_equal(pos, np.where(pad[..., None], 0.0, pose[safe, :2]))
+    np.testing.assert_array_equal(v, np.where(pad[..., None], 0.0, vel[safe]))
+    np.testing.assert_array_equal(heading, np.where(pad, 0.0, pose[safe, 2]))
+    assert pos.shape == (n, k, 2) and heading.shape == (n, k)
+    assert not np.signbit(pos[pad]).any()  # +0, not a copied -0

@@ -16,6 +16,11 @@ The run ends when the leader is within ``goal_radius`` of the goal and (unless
 ``settle_tolerance`` of its slot, or at ``t_max`` -- or earlier at the first
 collision with ``stop_on_collision``, or once the run is stalled
 (:class:`dfcoa_opt.outcome.StallMonitor`) with ``stop_on_deadlock``.
+
+The leader follows its path whatever the robots do, so its states and the slots
+of every step come from :func:`~dfcoa_opt.sim.leader.leader_track`, computed
+once per process for a scenario and shared by its runs (the same numbers as
+stepping it inside the loop).
 """
 
 from __future__ import annotations
@@ -30,14 +35,13 @@ from dfcoa_opt import __version__
 from dfcoa_opt.control.adapters import convert
 from dfcoa_opt.control.base import Controller, MovingObstacles, Neighbours, Observation
 from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.formation import slot_positions
 from dfcoa_opt.geometry import wrap_angle
 from dfcoa_opt.localization import make_estimator
 from dfcoa_opt.outcome import StallMonitor
 from dfcoa_opt.robots.models import RobotState, make_model
-from dfcoa_opt.sim.leader import VirtualLeader
+from dfcoa_opt.sim.leader import leader_track
 from dfcoa_opt.sim.log import RunLog
-from dfcoa_opt.sim.neighbours import proximity
+from dfcoa_opt.sim.neighbours import gather, proximity
 from dfcoa_opt.sim.scenario import Scenario
 from dfcoa_opt.world.lidar import Lidar
 
@@ -105,7 +109,7 @@ class Simulator:
         dyn = sc.world.dynamic
         m = len(dyn)
         buf: RunLog | None = None  # allocated once the command width is known
-        leader = VirtualLeader(sc)
+        track = leader_track(sc, dt, steps)  # the leader does not depend on the robots
         state = RobotState.at_rest(self._start_pose(rng))
         estimator = make_estimator(spec.localization.mode, sc)
         estimator.reset(rng)
@@ -128,6 +132,8 @@ class Simulator:
         dyn_pos_all, dyn_vel_all = dyn.state(np.arange(steps) * dt)
         dyn_pos_all.flags.writeable = dyn_vel_all.flags.writeable = False  # rows shared below
         reached, t_goal = False, math.nan
+        robot_ids = np.arange(n)
+        robot_ids.flags.writeable = False  # the same rows every step
         monitor = (StallMonitor(sc.leader_path, steps, dt, spec.leader.settle_tolerance,
                                 spec.metrics) if spec.stop_on_deadlock else None)
         wall0 = time.perf_counter()
@@ -139,24 +145,18 @@ class Simulator:
             # centre distances robot -> moving obstacle, (N, M); used by sensing and contacts
             dyn_dist = np.linalg.norm(pos[:, None, :] - dyn_pos[None, :, :], axis=2) if m \
                 else no_dyn
-            lead = leader.state()
+            lead, slots = track.state[k], track.slots[k]
             # -- sensing, all from the same snapshot
             scan = None
             if scanning:
                 scan = self.lidar.scan(state.pose, np.vstack((pos, dyn_pos)), disc_r, owners, rng)
             est = estimator.estimate(state.pose, state.twist, scan, dt)
             prox = proximity(pos, sensors.comm_radius, sensors.max_neighbors, 2.0 * self.radius)
-            idx = prox.index
-            safe = np.where(idx >= 0, idx, 0)
-            pad = (idx < 0)[..., None]
-            nb = Neighbours(idx, np.where(pad, 0.0, np.take(est[:, :2], safe, axis=0)),
-                            np.where(pad, 0.0, np.take(state.velocity, safe, axis=0)),
-                            prox.distance,  # np.take: pos[idx]'s values, faster
-                            np.where(pad[..., 0], 0.0, np.take(est[:, 2], safe)))
+            nb_pos, nb_vel, nb_heading = gather(prox.index, est, state.velocity)
+            nb = Neighbours(prox.index, nb_pos, nb_vel, prox.distance, nb_heading)
             moving = self._moving_obstacles(dyn_dist, dyn_pos, dyn_vel, dyn.radii) if m \
                 else no_moving
-            slots = slot_positions(lead[:3], sc.offsets)
-            obs = Observation(t, dt, np.arange(n), est, state.velocity, state.twist, scan, nb,
+            obs = Observation(t, dt, robot_ids, est, state.velocity, state.twist, scan, nb,
                               moving, lead, goal, sc.offsets, slots)
             # -- act
             cmd = self._checked(self.controller.act(obs), t)
@@ -192,9 +192,8 @@ class Simulator:
                 buf.filter_status[k], buf.filter_slack[k] = res.status, res.slack
                 buf.filter_time[k] = res.solve_time
             # -- stop conditions
-            settled = (not spec.leader.wait_for_formation
-                       or np.all(np.hypot(*(pos - slots).T) <= spec.leader.settle_tolerance))
-            if leader.at_goal and settled:
+            if track.at_goal[k] and (not spec.leader.wait_for_formation or np.all(
+                    np.hypot(*(pos - slots).T) <= spec.leader.settle_tolerance)):
                 reached, t_goal = True, t
                 break
             if spec.stop_on_collision and events:
@@ -202,7 +201,6 @@ class Simulator:
             if monitor is not None and monitor.update(k, buf.pose[..., :2], buf.slots):
                 break
             state = new_state
-            leader.advance(dt)
         wall = time.perf_counter() - wall0
         end = k + 1
         assert buf is not None  # at least one step always runs
