@@ -98,6 +98,10 @@ class Observation:
         goal: ``(2,)`` mission goal, m.
         slot_offset: ``(N, 2)`` own slot offset in the leader frame, m.
         slot: ``(N, 2)`` own slot in the world (from ``leader`` and ``slot_offset``), m.
+
+    The simulator shares some of these arrays between steps and runs
+    (``robot_ids``, ``leader``, ``slot``): they are read-only, and a controller
+    that wants to change one works on a copy.
     """
 
     t: float
