@@ -94,7 +94,8 @@ def leader_track(scenario: Scenario, dt: float, steps: int) -> LeaderTrack:
     """The :class:`LeaderTrack` of ``steps`` steps of ``dt`` s.
 
     Computed by stepping a :class:`VirtualLeader` exactly as a run does (the same
-    numbers, bit for bit), once per process for each distinct path, leader
+    numbers, bit for bit) until it has stopped at its goal (a step that leaves its
+    pose unchanged; the later steps repeat it), once per process for each distinct path, leader
     settings, offsets, ``dt`` and ``steps``: the runs of one scenario (every seed
     and controller) share it. Up to :data:`TRACKS_BYTES` of tracks are kept.
     """
@@ -116,7 +117,12 @@ def leader_track(scenario: Scenario, dt: float, steps: int) -> LeaderTrack:
         at_goal[k] = leader.at_goal
         state[k] = leader.state()
         slots[k] = slot_positions(state[k, :3], offsets)
+        before = leader.pose
         leader.advance(dt)
+        if at_goal[k] and leader.pose.tobytes() == before.tobytes():
+            # stopped for good: every later step is this one again, bit for bit
+            at_goal[k + 1:], state[k + 1:], slots[k + 1:] = True, state[k], slots[k]
+            break
     for a in (state, at_goal, slots):
         a.flags.writeable = False
     track = LeaderTrack(state, at_goal, slots)
