@@ -93,11 +93,12 @@ _TRACKS_LOCK = threading.Lock()
 def leader_track(scenario: Scenario, dt: float, steps: int) -> LeaderTrack:
     """The :class:`LeaderTrack` of ``steps`` steps of ``dt`` s.
 
-    Computed by stepping a :class:`VirtualLeader` exactly as a run does (the same
-    numbers, bit for bit) until it has stopped at its goal (a step that leaves its
-    pose unchanged; the later steps repeat it), once per process for each distinct path, leader
-    settings, offsets, ``dt`` and ``steps``: the runs of one scenario (every seed
-    and controller) share it. Up to :data:`TRACKS_BYTES` of tracks are kept.
+    Computed by stepping a :class:`VirtualLeader` exactly as a run does (the
+    same numbers, bit for bit) until it has stopped at its goal (a step that
+    leaves its pose unchanged; the later steps repeat it), once per process for
+    each distinct path, leader settings, offsets, ``dt`` and ``steps``: the runs
+    of one scenario (every seed and controller) share it. Up to
+    :data:`TRACKS_BYTES` of tracks are kept.
     """
     spec = scenario.spec.leader
     path, offsets = scenario.leader_path, scenario.offsets
