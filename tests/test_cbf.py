@@ -22,6 +22,7 @@ from comparisons.constraints.distance import (
 )
 from dfcoa_opt import metrics
 from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.geometry import points_in_polygons
 from dfcoa_opt.sim.loader import scenario_from_dict
 from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_SOLVER_FAIL
 from dfcoa_opt.sim.simulator import run_scenario
@@ -67,6 +68,49 @@ def test_reach_and_slot_count_leave_far_obstacles_out():
     near = StaticObstacles.from_shapes(SHAPES).nearest(np.array([[2.0, 3.5]]), 5, 1.0)
     assert near.mask.tolist() == [[True, False, False, False, False]]  # the circle, 0.5 m
     assert near.delta[0, 0] == pytest.approx(0.5) and np.isinf(near.delta[0, 1:]).all()
+
+
+def test_nearest_keeps_the_stable_order_of_every_shape():
+    """The kernel's selection equals a stable sort of the per-shape builders' signed
+    distances (discs first, then polygons; ties in that order), cut to K slots and reach.
+    Mirrored shapes give exact ties with different points and normals on x = 0."""
+    shapes = SHAPES + [Circle((-2.0, 2.0), 1.0), Rectangle((-7.0, 5.0), (-5.0, 6.0))]
+    static = StaticObstacles.from_shapes(shapes)
+    rng = np.random.default_rng(8)
+    pts = np.concatenate([rng.uniform(-8.0, 11.0, (300, 2)),
+                          np.column_stack((np.zeros(50), rng.uniform(-1.0, 11.0, 50)))])
+    parts = [disc_nearest(pts, static.discs), polygon_nearest(pts, static.edge_a, static.edge_b)]
+    q, delta, normal = (np.concatenate(x, axis=1) for x in zip(*parts, strict=True))
+    assert (delta[300:, 0] == delta[300:, 1]).all()  # the ties are there
+    order = np.argsort(delta, axis=1, kind="stable")
+    rows = np.arange(len(pts))[:, None]
+    for k, reach in ((2, np.inf), (5, 3.0), (7, 1.0)):
+        near = static.nearest(pts, k, reach)
+        top = order[:, :k]
+        want = np.full((len(pts), k), np.inf)
+        want[:, :top.shape[1]] = delta[rows, top]
+        np.testing.assert_array_equal(near.mask, want <= reach)
+        np.testing.assert_array_equal(near.delta, np.where(want <= reach, want, np.inf))
+        found = top.shape[1]
+        np.testing.assert_array_equal(near.point[:, :found], q[rows, top])
+        np.testing.assert_array_equal(near.normal[:, :found], normal[rows, top])
+        assert (near.normal[:, found:] == [1.0, 0.0]).all()
+
+
+def test_polygon_points_on_the_boundary_follow_the_even_odd_rule():
+    """On an edge, inside or outside is :func:`points_in_polygons`' decision (its strict
+    ``x < x_at``): the normal is the edge's outward normal outside, its opposite inside.
+    At a vertex, the first of its two edges gives the normal."""
+    a = np.array([[[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]]])
+    b = np.roll(a, -1, axis=1)
+    mids = np.concatenate([0.5 * (a[0] + b[0]), a[0]])  # bottom, right, top, left; vertices
+    outward = np.array([[0.0, -1.0], [1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]])[[0, 1, 2, 3,
+                                                                            0, 0, 1, 2]]
+    inside = points_in_polygons(mids, a, b)[:, 0]
+    _, delta, normal = polygon_nearest(mids, a, b)
+    assert inside.any() and not inside.all()  # the rule is one-sided on vertical edges
+    np.testing.assert_array_equal(normal[:, 0], np.where(inside[:, None], -outward, outward))
+    np.testing.assert_array_equal(np.signbit(delta[:, 0]), inside)
 
 
 def test_disc_builder_takes_shared_or_per_point_discs():

@@ -32,12 +32,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.geometry import (
-    closest_point_on_segment,
-    points_in_polygons,
-    polygon_edges,
-    take_rows,
+from comparisons.constraints.geometry_kernels import (
+    discs_kernel,
+    nearest_kernel,
+    pairs_kernel,
+    polygons_kernel,
 )
+from dfcoa_opt.geometry import polygon_edges
 from dfcoa_opt.world.shapes import Circle
 
 FloatArray = NDArray[np.float64]
@@ -60,13 +61,6 @@ class Nearest:
     mask: NDArray[np.bool_]
 
 
-def _unit(v: FloatArray, fallback: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """``(v / |v|, |v|)``, with ``fallback`` where ``|v| = 0``."""
-    norm = np.hypot(v[..., 0], v[..., 1])
-    safe = np.where(norm > 0.0, norm, 1.0)[..., None]
-    return np.where(norm[..., None] > 0.0, v / safe, fallback), norm
-
-
 def pair_geometry(position: FloatArray, other: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Distance and unit normal from other robots' centres to each robot's centre.
 
@@ -78,8 +72,9 @@ def pair_geometry(position: FloatArray, other: FloatArray) -> tuple[FloatArray, 
         ``(delta (N, K) m, normal (N, K, 2))``; coincident centres get the normal
         ``(1, 0)``.
     """
-    rel = np.asarray(position, float)[:, None, :] - np.asarray(other, float)
-    normal, delta = _unit(rel, np.array([1.0, 0.0]))
+    other = np.ascontiguousarray(other, dtype=float)
+    delta, normal = np.empty(other.shape[:2]), np.empty(other.shape)
+    pairs_kernel(np.ascontiguousarray(position, dtype=float), other, delta, normal)
     return delta, normal
 
 
@@ -118,24 +113,12 @@ class StaticObstacles:
         Returns:
             :class:`Nearest` with ``K = max_count`` slots, nearest first.
         """
-        p = np.asarray(points, float).reshape(-1, 2)
-        q_d, d_d, n_d = disc_nearest(p, self.discs)
-        q_p, d_p, n_p = polygon_nearest(p, self.edge_a, self.edge_b)
-        q = np.concatenate([q_d, q_p], axis=1)
-        delta = np.concatenate([d_d, d_p], axis=1)
-        normal = np.concatenate([n_d, n_p], axis=1)
-        k = max_count
-        order = np.argsort(delta, axis=1, kind="stable")[:, :k]
-        delta, q, normal = take_rows(delta, order), take_rows(q, order), take_rows(normal, order)
-        found = delta.shape[1]
-        if found < k:  # unused slots: inf distance, the point (0, 0), the normal (1, 0)
-            delta_k, q_k, normal_k = (np.full((len(p), k), np.inf), np.zeros((len(p), k, 2)),
-                                      np.zeros((len(p), k, 2)))
-            delta_k[:, :found], q_k[:, :found], normal_k[:, :found] = delta, q, normal
-            normal_k[:, found:, 0] = 1.0
-            delta, q, normal = delta_k, q_k, normal_k
-        mask = delta <= reach
-        return Nearest(q, np.where(mask, delta, np.inf), normal, mask)
+        p = np.ascontiguousarray(points, dtype=float).reshape(-1, 2)
+        q, normal = np.empty((len(p), max_count, 2)), np.empty((len(p), max_count, 2))
+        delta, mask = np.empty((len(p), max_count)), np.empty((len(p), max_count), dtype=bool)
+        nearest_kernel(p, self.discs, self.edge_a, self.edge_b, float(reach), q, delta, normal,
+                       mask)
+        return Nearest(q, delta, normal, mask)
 
 
 def disc_nearest(points: FloatArray, discs: FloatArray) -> tuple[FloatArray, FloatArray,
@@ -151,10 +134,13 @@ def disc_nearest(points: FloatArray, discs: FloatArray) -> tuple[FloatArray, Flo
         ``(q (P, C, 2), delta (P, C), normal (P, C, 2))``; a point at a centre gets the
         normal ``(1, 0)``.
     """
-    rel = np.asarray(points, float)[:, None, :] - discs[..., :2]
-    normal, dist = _unit(rel, np.array([1.0, 0.0]))
-    radius = discs[..., 2]
-    return discs[..., :2] + radius[..., None] * normal, dist - radius, normal
+    p = np.ascontiguousarray(points, dtype=float).reshape(-1, 2)
+    discs = np.asarray(discs, dtype=float)
+    per_point = np.ascontiguousarray(np.broadcast_to(discs, (len(p), *discs.shape[-2:])))
+    q, normal = np.empty((*per_point.shape[:2], 2)), np.empty((*per_point.shape[:2], 2))
+    delta = np.empty(per_point.shape[:2])
+    discs_kernel(p, per_point, q, delta, normal)
+    return q, delta, normal
 
 
 def polygon_nearest(points: FloatArray, edge_a: FloatArray, edge_b: FloatArray
@@ -171,22 +157,12 @@ def polygon_nearest(points: FloatArray, edge_a: FloatArray, edge_b: FloatArray
         normal then points from the point to ``q`` (out of the polygon). A point on the
         boundary gets the outward normal of its edge.
     """
-    n_pts, n_poly = len(points), len(edge_a)
-    if n_poly == 0:
-        return np.zeros((n_pts, 0, 2)), np.zeros((n_pts, 0)), np.zeros((n_pts, 0, 2))
-    cand = closest_point_on_segment(points[:, None, None, :], edge_a[None], edge_b[None])
-    rel = points[:, None, None, :] - cand
-    d2 = rel[..., 0] ** 2 + rel[..., 1] ** 2
-    best = np.argmin(d2, axis=2)
-    poly = np.arange(n_poly)[None, :]
-    q = cand[np.arange(n_pts)[:, None], poly, best]
-    inside = points_in_polygons(points, edge_a, edge_b)
-    edge = (edge_b - edge_a)[poly, best]
-    outward = np.stack([edge[..., 1], -edge[..., 0]], axis=-1)  # CCW polygon: right of edge
-    outward, _ = _unit(outward, np.array([1.0, 0.0]))
-    normal, dist = _unit(points[:, None, :] - q, outward)
-    normal = np.where(inside[..., None], -normal, normal)
-    return q, np.where(inside, -dist, dist), normal
+    p = np.ascontiguousarray(points, dtype=float).reshape(-1, 2)
+    shape = (len(p), len(edge_a))
+    q, delta, normal = np.empty((*shape, 2)), np.empty(shape), np.empty((*shape, 2))
+    polygons_kernel(p, np.ascontiguousarray(edge_a, dtype=float),
+                    np.ascontiguousarray(edge_b, dtype=float), q, delta, normal)
+    return q, delta, normal
 
 
 def barrier(delta: FloatArray, normal: FloatArray, margin: float | FloatArray

@@ -1,0 +1,163 @@
+"""Compiled scalar geometry of :mod:`comparisons.constraints.distance` (one implementation each).
+
+The distance builders of ``cbf`` and ``nmpc`` run at every step for every robot
+(``nmpc``: every stage of its horizon) against every shape of the map. As numpy
+expressions over ``(points, shapes, edges)`` tables they cost tens of small
+array operations per call; here each geometry is one scalar function, looped
+over by a compiled kernel. The arithmetic is the same sequence of IEEE
+operations as the numpy expressions they replaced (``hypot`` and the
+multiply-adds of the dot products, with no fused multiply-add), so the outputs
+are bit for bit those of the vectorised formulation (checked on the common
+scenarios' runs; ``docs/benchmarking.md``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from dfcoa_opt.scalar_kernels import clip1
+
+
+@numba.njit(cache=True, inline="always")
+def unit1(vx, vy, fx, fy):  # pragma: no cover - numba
+    """``(v / |v|, |v|)`` as ``(ux, uy, norm)``; ``(fx, fy)`` where ``|v|`` is not > 0."""
+    norm = np.hypot(vx, vy)
+    if norm > 0.0:
+        return vx / norm, vy / norm, norm
+    return fx, fy, norm
+
+
+@numba.njit(cache=True, inline="always")
+def disc1(px, py, cx, cy, r):  # pragma: no cover - numba
+    """Nearest boundary point, signed distance and outward normal of a disc.
+
+    Returns ``(qx, qy, delta, nx, ny)`` (m, m, m, -, -); a point at the centre
+    gets the normal ``(1, 0)``.
+    """
+    nx, ny, dist = unit1(px - cx, py - cy, 1.0, 0.0)
+    return cx + r * nx, cy + r * ny, dist - r, nx, ny
+
+
+@numba.njit(cache=True, inline="always")
+def polygon1(px, py, a, b):  # pragma: no cover - numba
+    """Nearest boundary point, signed distance and outward normal of one polygon.
+
+    ``a``, ``b``: ``(V, 2)`` edge starts and ends (padded edges have ``a = b``,
+    :func:`dfcoa_opt.geometry.polygon_edges`). The nearest point of each edge is
+    :func:`dfcoa_opt.geometry.closest_point_on_segment`'s; the first edge with
+    the smallest squared distance wins; inside by the even-odd rule of
+    :func:`dfcoa_opt.geometry.points_in_polygons` (``delta < 0``, the normal then
+    points from the point to ``q``, out of the polygon). A point on the boundary
+    gets the outward normal of its edge. Returns ``(qx, qy, delta, nx, ny)``.
+    """
+    best = -1
+    bd2 = 0.0
+    qx = qy = 0.0
+    inside = False
+    for e in range(a.shape[0]):
+        ax, ay, bx, by = a[e, 0], a[e, 1], b[e, 0], b[e, 1]
+        abx, aby = bx - ax, by - ay
+        denom = abx * abx + aby * aby
+        t = ((px - ax) * abx + (py - ay) * aby) / (denom if denom > 0.0 else 1.0)
+        t = clip1(t, 0.0, 1.0)
+        cx, cy = ax + t * abx, ay + t * aby
+        rx, ry = px - cx, py - cy
+        d2 = rx * rx + ry * ry
+        # np.argmin: the first minimum, a NaN counting as the minimum
+        if best < 0 or (not math.isnan(bd2) and (d2 < bd2 or math.isnan(d2))):
+            best, bd2, qx, qy = e, d2, cx, cy
+        if ay != by and (ay <= py) != (by <= py):
+            if px < ax + (py - ay) * (bx - ax) / (by - ay):
+                inside = not inside
+    ex, ey = b[best, 0] - a[best, 0], b[best, 1] - a[best, 1]
+    ox, oy, _ = unit1(ey, -ex, 1.0, 0.0)  # CCW polygon: outward is right of the edge
+    nx, ny, dist = unit1(px - qx, py - qy, ox, oy)
+    if inside:
+        return qx, qy, -dist, -nx, -ny
+    return qx, qy, dist, nx, ny
+
+
+@numba.njit(cache=True)
+def pairs_kernel(position, other, delta, normal):  # pragma: no cover - numba
+    """Fill ``delta`` ``(N, K)`` and ``normal`` ``(N, K, 2)`` of robot pairs (``unit1``)."""
+    for i in range(other.shape[0]):
+        for k in range(other.shape[1]):
+            nx, ny, d = unit1(position[i, 0] - other[i, k, 0], position[i, 1] - other[i, k, 1],
+                              1.0, 0.0)
+            delta[i, k], normal[i, k, 0], normal[i, k, 1] = d, nx, ny
+
+
+@numba.njit(cache=True)
+def discs_kernel(points, discs, q, delta, normal):  # pragma: no cover - numba
+    """Fill ``q``, ``delta``, ``normal`` ``(P, C, ...)`` of every disc; ``discs`` ``(P, C, 3)``."""
+    for i in range(points.shape[0]):
+        for c in range(discs.shape[1]):
+            qx, qy, d, nx, ny = disc1(points[i, 0], points[i, 1], discs[i, c, 0],
+                                      discs[i, c, 1], discs[i, c, 2])
+            q[i, c, 0], q[i, c, 1], delta[i, c], normal[i, c, 0], normal[i, c, 1] = (
+                qx, qy, d, nx, ny)
+
+
+@numba.njit(cache=True)
+def polygons_kernel(points, edge_a, edge_b, q, delta, normal):  # pragma: no cover - numba
+    """Fill ``q``, ``delta``, ``normal`` ``(P, Q, ...)`` of every polygon (:func:`polygon1`)."""
+    for i in range(points.shape[0]):
+        for j in range(edge_a.shape[0]):
+            qx, qy, d, nx, ny = polygon1(points[i, 0], points[i, 1], edge_a[j], edge_b[j])
+            q[i, j, 0], q[i, j, 1], delta[i, j], normal[i, j, 0], normal[i, j, 1] = (
+                qx, qy, d, nx, ny)
+
+
+@numba.njit(cache=True, inline="always")
+def _before(d, other):  # pragma: no cover - numba
+    """Whether ``d`` goes before ``other``: ascending, NaN last (``np.argsort`` order)."""
+    if math.isnan(other):
+        return not math.isnan(d)
+    return d < other
+
+
+@numba.njit(cache=True)
+def nearest_kernel(points, discs, edge_a, edge_b, reach, q, delta, normal,
+                   mask):  # pragma: no cover - numba
+    """The ``K`` nearest shapes of every point (discs, then polygons, stably by ``delta``).
+
+    Fills ``q`` ``(P, K, 2)``, ``delta`` ``(P, K)``, ``normal`` ``(P, K, 2)``
+    and ``mask`` ``(P, K)``: slot ``j`` holds the ``j``-th smallest signed
+    distance (ties: discs before polygons, each in their order); unused slots
+    (fewer shapes than ``K``) get ``delta = inf``, ``q = (0, 0)``, ``n = (1, 0)``;
+    a slot farther than ``reach`` is masked out and its ``delta`` set to ``inf``.
+    """
+    n_k = delta.shape[1]
+    n_disc = discs.shape[0]
+    for i in range(points.shape[0]):
+        px, py = points[i, 0], points[i, 1]
+        found = 0
+        for s in range(n_disc + edge_a.shape[0]):
+            if s < n_disc:
+                qx, qy, d, nx, ny = disc1(px, py, discs[s, 0], discs[s, 1], discs[s, 2])
+            else:
+                qx, qy, d, nx, ny = polygon1(px, py, edge_a[s - n_disc], edge_b[s - n_disc])
+            j = found
+            if found < n_k:
+                found += 1
+            elif not _before(d, delta[i, n_k - 1]):
+                continue
+            else:
+                j = n_k - 1
+            while j > 0 and _before(d, delta[i, j - 1]):
+                delta[i, j] = delta[i, j - 1]
+                q[i, j, 0], q[i, j, 1] = q[i, j - 1, 0], q[i, j - 1, 1]
+                normal[i, j, 0], normal[i, j, 1] = normal[i, j - 1, 0], normal[i, j - 1, 1]
+                j -= 1
+            delta[i, j], q[i, j, 0], q[i, j, 1], normal[i, j, 0], normal[i, j, 1] = (
+                d, qx, qy, nx, ny)
+        for j in range(found, n_k):
+            delta[i, j], q[i, j, 0], q[i, j, 1], normal[i, j, 0], normal[i, j, 1] = (
+                np.inf, 0.0, 0.0, 1.0, 0.0)
+        for j in range(n_k):
+            mask[i, j] = delta[i, j] <= reach
+            if not mask[i, j]:
+                delta[i, j] = np.inf
