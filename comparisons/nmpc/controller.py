@@ -62,6 +62,7 @@ from comparisons.nmpc.problem import (
 )
 from dfcoa_opt.control.base import FilterResult, Observation
 from dfcoa_opt.control.registry import register
+from dfcoa_opt.geometry import take_rows
 from dfcoa_opt.params import param
 from dfcoa_opt.sim.log import STATUS_OK, STATUS_SOLVER_FAIL
 
@@ -222,7 +223,7 @@ class Nmpc:
         if live.any():
             idx = np.minimum(np.floor(age[live][:, None] + 1e-6).astype(np.intp)
                              + np.arange(h), h - 1)
-            u[live] = np.take_along_axis(self._r["u"][ids[live]], idx[..., None], axis=1)
+            u[live] = take_rows(self._r["u"][ids[live]], idx)
         return u, age
 
     def _shifted_multipliers(self, ids: NDArray[np.intp], age: FloatArray
@@ -231,10 +232,10 @@ class Nmpc:
         h, n = self.p.horizon, len(ids)
         live = (age < h) & self._r["lam_ok"][ids]
         shift = np.floor(np.where(live, age, 0.0) + 1e-6).astype(np.intp)
-        idx = np.minimum(np.arange(h) + shift[:, None], h - 1)[..., None]
+        idx = np.minimum(np.arange(h) + shift[:, None], h - 1)
         out = []
         for key in ("lam_x", "lam_g"):
-            lam = np.take_along_axis(self._r[key][ids].reshape(n, h, -1), idx, axis=1)
+            lam = take_rows(self._r[key][ids].reshape(n, h, -1), idx)
             lam[~live] = 0.0
             out.append(lam.reshape(n, -1))
         return out[0], out[1]

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from comparisons.constraints.distance import StaticObstacles, disc_nearest, pair_geometry
 from dfcoa_opt.control.base import MovingObstacles, Neighbours
+from dfcoa_opt.geometry import take_rows
 
 FloatArray = NDArray[np.float64]
 #: Below this slot speed (m/s) the heading reference is the leader's heading.
@@ -75,8 +76,11 @@ def plan_positions(plans: FloatArray, age: FloatArray, horizon: int) -> FloatArr
     f = age[..., None] + np.arange(horizon + 1)
     i0 = np.clip(np.floor(f + 1e-9).astype(np.intp), 0, last)
     frac = (f - i0)[..., None]
-    a = np.take_along_axis(plans, i0[..., None], axis=-2)
-    b = np.take_along_axis(plans, i0[..., None] + 1, axis=-2)
+    lead = plans.shape[:-2]
+    flat = plans.reshape(-1, *plans.shape[-2:])
+    i0 = i0.reshape(len(flat), -1)
+    a = take_rows(flat, i0).reshape(*lead, -1, 2)
+    b = take_rows(flat, i0 + 1).reshape(*lead, -1, 2)
     return a + frac * (b - a)
 
 
