@@ -42,36 +42,55 @@ def disc1(px, py, cx, cy, r):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, inline="always")
+def segment_point1(px, py, ax, ay, abx, aby, den):  # pragma: no cover - numba
+    """The point of the segment ``a + t ab``, ``t`` in [0, 1], nearest to ``(px, py)``.
+
+    :func:`dfcoa_opt.geometry.closest_point_on_segment` in scalars: ``den`` is
+    ``|ab|^2``, or 1 for a zero-length segment. Returns ``(x, y)``, m.
+    """
+    t = clip1(((px - ax) * abx + (py - ay) * aby) / den, 0.0, 1.0)
+    return ax + t * abx, ay + t * aby
+
+
+@numba.njit(cache=True, inline="always")
+def crossing1(px, py, ax, ay, abx, by):  # pragma: no cover - numba
+    """Whether the edge from ``(ax, ay)`` to ``(ax + abx, by)`` flips the even-odd test.
+
+    :func:`dfcoa_opt.geometry.points_in_polygons`' rule: a non-horizontal edge
+    that straddles ``py`` and crosses it right of ``px``.
+    """
+    return (ay != by and (ay <= py) != (by <= py)
+            and px < ax + (py - ay) * abx / (by - ay))
+
+
+@numba.njit(cache=True, inline="always")
 def polygon1(px, py, a, b):  # pragma: no cover - numba
     """Nearest boundary point, signed distance and outward normal of one polygon.
 
     ``a``, ``b``: ``(V, 2)`` edge starts and ends (padded edges have ``a = b``,
     :func:`dfcoa_opt.geometry.polygon_edges`). The nearest point of each edge is
-    :func:`dfcoa_opt.geometry.closest_point_on_segment`'s; the first edge with
-    the smallest squared distance wins; inside by the even-odd rule of
-    :func:`dfcoa_opt.geometry.points_in_polygons` (``delta < 0``, the normal then
-    points from the point to ``q``, out of the polygon). A point on the boundary
-    gets the outward normal of its edge. Returns ``(qx, qy, delta, nx, ny)``.
+    :func:`segment_point1`'s; the first edge with the smallest squared distance
+    wins; inside by the even-odd rule (:func:`crossing1`; ``delta < 0``, the
+    normal then points from the point to ``q``, out of the polygon). A point on
+    the boundary gets the outward normal of its edge. Returns ``(qx, qy, delta,
+    nx, ny)``.
     """
     best = -1
     bd2 = 0.0
     qx = qy = 0.0
     inside = False
     for e in range(a.shape[0]):
-        ax, ay, bx, by = a[e, 0], a[e, 1], b[e, 0], b[e, 1]
-        abx, aby = bx - ax, by - ay
-        denom = abx * abx + aby * aby
-        t = ((px - ax) * abx + (py - ay) * aby) / (denom if denom > 0.0 else 1.0)
-        t = clip1(t, 0.0, 1.0)
-        cx, cy = ax + t * abx, ay + t * aby
+        ax, ay = a[e, 0], a[e, 1]
+        abx, aby = b[e, 0] - ax, b[e, 1] - ay
+        den = abx * abx + aby * aby
+        cx, cy = segment_point1(px, py, ax, ay, abx, aby, den if den > 0.0 else 1.0)
         rx, ry = px - cx, py - cy
         d2 = rx * rx + ry * ry
         # np.argmin: the first minimum, a NaN counting as the minimum
         if best < 0 or (not math.isnan(bd2) and (d2 < bd2 or math.isnan(d2))):
             best, bd2, qx, qy = e, d2, cx, cy
-        if ay != by and (ay <= py) != (by <= py):
-            if px < ax + (py - ay) * (bx - ax) / (by - ay):
-                inside = not inside
+        if crossing1(px, py, ax, ay, abx, b[e, 1]):
+            inside = not inside
     ex, ey = b[best, 0] - a[best, 0], b[best, 1] - a[best, 1]
     ox, oy, _ = unit1(ey, -ex, 1.0, 0.0)  # CCW polygon: outward is right of the edge
     nx, ny, dist = unit1(px - qx, py - qy, ox, oy)

@@ -84,14 +84,13 @@ from comparisons.virtual_spring.equations import (
     error_trend,
     fig1_adjacency,
     follower_avoidance_velocity,
+    inverse_cube,
     leader_avoidance_velocity,
     leader_velocity,
     norm2,
     polygon_edge_table,
-    polygon_normals,
-    spring_force,
-    unit_vectors,
 )
+from comparisons.virtual_spring.kernels import spring_sources, weighted_sum
 from dfcoa_opt.control.base import Observation, slot_velocity
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.geometry import body_to_world, rotate
@@ -241,22 +240,15 @@ class VirtualSpring:
         th = heading.reshape(heading.shape + (1,) * (index.ndim - 1))
         return rotate(rel, th)
 
-    def _constants(self, kind: str, n: int, k: int, m: int) -> tuple[np.ndarray, ...]:
-        """Arrays of ``kind`` (``"spring"``, ``"resolve"``) that depend only on the shapes.
+    def _constants(self, n: int, k: int, m: int) -> tuple[np.ndarray, ...]:
+        """Eq 15-17's robots' Minkowski radii and shares, built once per shape.
 
         ``n`` rows, ``k`` neighbour columns, ``m`` moving-obstacle columns.
         """
-        key = (kind, n, k, m)
+        key = (n, k, m)
         if key not in self._const:
-            c, q, r = len(self._circle_r), len(self._edges.a), self._radius
-            if kind == "spring":  # circle centres, radii of the circles and the robots
-                self._const[key] = (np.broadcast_to(self._circles, (n, c, 2)),
-                                    np.concatenate((np.broadcast_to(self._circle_r, (n, c)),
-                                                    np.full((n, k), r)), axis=1),
-                                    np.ones((n, c + q), dtype=bool))
-            else:  # robots' Minkowski radius, eq 17 shares
-                self._const[key] = (np.full((n, k), 2.0 * r), np.concatenate(
-                    (np.ones((n, k)), np.full((n, m), self.p.obstacle_share)), axis=1))
+            self._const[key] = (np.full((n, k), 2.0 * self._radius), np.concatenate(
+                (np.ones((n, k)), np.full((n, m), self.p.obstacle_share)), axis=1))
         return self._const[key]
 
     def spring(self, obs: Observation) -> np.ndarray:
@@ -264,24 +256,20 @@ class VirtualSpring:
 
         The sources are, in this order, the static circles, the polygons' nearest
         boundary points (edges built at reset), the neighbours and the moving
-        obstacles; the discs' normals (:func:`~comparisons.virtual_spring.equations.disc_normals`)
-        are computed all at once.
+        obstacles: one compiled pass (:func:`~comparisons.virtual_spring.kernels.spring_sources`,
+        the operations of ``disc_normals``, ``polygon_normals`` and ``spring_force``),
+        numpy's inverse cube, then eq 7's sum in numpy's order.
         """
-        pos, r, n = obs.pose[:, :2], self._radius, obs.n
-        nb, mo = obs.neighbours, obs.obstacles
-        circles, radii, always = self._constants("spring", n, nb.index.shape[1], mo.mask.shape[1])
-        unit, dist = unit_vectors(pos[:, None, :] - np.concatenate(
-            (circles, nb.position, mo.position), axis=1))
-        surface = dist - np.concatenate((radii, mo.radius), axis=1)
-        if len(self._edges.a):
-            c = circles.shape[1]
-            n_hat, s = polygon_normals(pos, self._edges)
-            unit = np.concatenate((unit[:, :c], n_hat, unit[:, c:]), axis=1)
-            surface = np.concatenate((surface[:, :c], s, surface[:, c:]), axis=1)
-        clear = surface - r
-        mask = np.concatenate((always, nb.mask, mo.mask), axis=1) & (clear <= self.p.spring_range)
-        delta = unit * np.maximum(clear, self.p.spring_min_distance)[..., None]
-        return spring_force(delta, mask, self.p.spring_gain)
+        nb, mo, e = obs.neighbours, obs.obstacles, self._edges
+        shape = (obs.n, len(self._circle_r) + len(e.a) + nb.index.shape[1] + mo.mask.shape[1])
+        delta, dist, use = np.empty((*shape, 2)), np.empty(shape), np.empty(shape, dtype=bool)
+        spring_sources(np.ascontiguousarray(obs.pose[:, :2]), self._circles, self._circle_r,
+                       e.a, e.ab, e.den, e.b, nb.position, nb.mask, mo.position, mo.radius,
+                       mo.mask, self._radius, self.p.spring_range, self.p.spring_min_distance,
+                       delta, dist, use)
+        f = np.empty((obs.n, 2))
+        weighted_sum(inverse_cube(dist, use), delta, self.p.spring_gain, f)
+        return f
 
     def _trend(self, t: float, ids: np.ndarray, err: np.ndarray) -> np.ndarray:
         """Eq 12's epsilon from each robot's own error history.
@@ -305,7 +293,7 @@ class VirtualSpring:
         p, r = self.p, self._radius
         pos = obs.pose[:, :2]
         nb, mo = obs.neighbours, obs.obstacles
-        rad_nb, share = self._constants("resolve", obs.n, nb.index.shape[1], mo.mask.shape[1])
+        rad_nb, share = self._constants(obs.n, nb.index.shape[1], mo.mask.shape[1])
         p_k = np.concatenate((nb.position, mo.position), axis=1)
         v_k = np.concatenate((nb.velocity, mo.velocity), axis=1)
         rad = np.concatenate((rad_nb, mo.radius + r), axis=1)

@@ -7,9 +7,10 @@ inputs only. Equation numbers are the paper's (``docs/methods/virtual_spring.md`
 * :func:`fig1_adjacency`, :func:`laplacian` -- eq 1-2 with Fig 1's topology.
 * :func:`consensus_input` -- eq 4.
 * :func:`leader_velocity` -- eq 6.
-* :func:`spring_force` -- eq 7; :func:`disc_normals` and :func:`polygon_normals`
-  turn discs and polygons into eq 7's source points (:func:`polygon_edge_table`:
-  the polygons' edges, built once per scenario).
+* :func:`spring_force` (weights: :func:`inverse_cube`) -- eq 7; :func:`disc_normals`
+  and :func:`polygon_normals` turn discs and polygons into eq 7's source points
+  (:func:`polygon_edge_table`: the polygons' edges, built once per scenario); the
+  controller's compiled twin is :mod:`comparisons.virtual_spring.kernels`.
 * :func:`leader_avoidance_velocity`, :func:`follower_avoidance_velocity` -- eq 8, eq 9.
 * :func:`consistency_velocity` -- eq 10-11.
 * :func:`error_trend` and :func:`dynamic_speed_limit` -- eq 12-13.
@@ -151,9 +152,13 @@ def spring_force(delta: ArrayLike, mask: ArrayLike, gain: float = 1.0) -> FloatA
     """
     delta = np.asarray(delta, dtype=float)
     d = norm2(delta)
-    use = np.asarray(mask, dtype=bool) & (d > TINY)
-    w = np.where(use, 1.0 / np.where(use, d, 1.0) ** 3, 0.0)
+    w = inverse_cube(d, np.asarray(mask, dtype=bool) & (d > TINY))
     return gain * (w[..., None] * delta).sum(axis=1)
+
+
+def inverse_cube(d: FloatArray, use: NDArray[np.bool_]) -> FloatArray:
+    """Eq 7's weights ``1 / d^3`` where ``use``, 0 elsewhere (``d`` in m, weights in m^-3)."""
+    return np.where(use, 1.0 / np.where(use, d, 1.0) ** 3, 0.0)
 
 
 def disc_normals(p: ArrayLike, centres: ArrayLike,
