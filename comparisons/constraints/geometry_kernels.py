@@ -64,19 +64,18 @@ def crossing1(px, py, ax, ay, abx, by):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, inline="always")
-def polygon1(px, py, a, b):  # pragma: no cover - numba
-    """Nearest boundary point, signed distance and outward normal of one polygon.
+def polygon_walk1(px, py, a, b, by_norm):  # pragma: no cover - numba
+    """Nearest boundary point of one polygon, its edge, and whether the point is inside.
 
     ``a``, ``b``: ``(V, 2)`` edge starts and ends (padded edges have ``a = b``,
-    :func:`dfcoa_opt.geometry.polygon_edges`). The nearest point of each edge is
+    :func:`dfcoa_opt.geometry.polygon_edges`). Each edge's nearest point is
     :func:`segment_point1`'s; the first edge with the smallest squared distance
-    wins; inside by the even-odd rule (:func:`crossing1`; ``delta < 0``, the
-    normal then points from the point to ``q``, out of the polygon). A point on
-    the boundary gets the outward normal of its edge. Returns ``(qx, qy, delta,
-    nx, ny)``.
+    (``by_norm``: distance) wins, as ``np.argmin`` picks (a NaN counting as the
+    minimum); inside by the even-odd rule of :func:`crossing1`. Returns
+    ``(qx, qy, edge, inside)``.
     """
     best = -1
-    bd2 = 0.0
+    bv = 0.0
     qx = qy = 0.0
     inside = False
     for e in range(a.shape[0]):
@@ -85,12 +84,26 @@ def polygon1(px, py, a, b):  # pragma: no cover - numba
         den = abx * abx + aby * aby
         cx, cy = segment_point1(px, py, ax, ay, abx, aby, den if den > 0.0 else 1.0)
         rx, ry = px - cx, py - cy
-        d2 = rx * rx + ry * ry
-        # np.argmin: the first minimum, a NaN counting as the minimum
-        if best < 0 or (not math.isnan(bd2) and (d2 < bd2 or math.isnan(d2))):
-            best, bd2, qx, qy = e, d2, cx, cy
+        v = rx * rx + ry * ry
+        if by_norm:
+            v = math.sqrt(v)
+        if best < 0 or (not math.isnan(bv) and (v < bv or math.isnan(v))):
+            best, bv, qx, qy = e, v, cx, cy
         if crossing1(px, py, ax, ay, abx, b[e, 1]):
             inside = not inside
+    return qx, qy, best, inside
+
+
+@numba.njit(cache=True, inline="always")
+def polygon1(px, py, a, b):  # pragma: no cover - numba
+    """Nearest boundary point, signed distance and outward normal of one polygon.
+
+    The nearest point and the inside test of :func:`polygon_walk1` (squared
+    distances); ``delta < 0`` inside, and the normal then points from the
+    point to ``q`` (out of the polygon). A point on the boundary gets the
+    outward normal of its edge. Returns ``(qx, qy, delta, nx, ny)``.
+    """
+    qx, qy, best, inside = polygon_walk1(px, py, a, b, False)
     ex, ey = b[best, 0] - a[best, 0], b[best, 1] - a[best, 1]
     ox, oy, _ = unit1(ey, -ex, 1.0, 0.0)  # CCW polygon: outward is right of the edge
     nx, ny, dist = unit1(px - qx, py - qy, ox, oy)

@@ -264,7 +264,7 @@ class VirtualSpring:
         shape = (obs.n, len(self._circle_r) + len(e.a) + nb.index.shape[1] + mo.mask.shape[1])
         delta, dist, use = np.empty((*shape, 2)), np.empty(shape), np.empty(shape, dtype=bool)
         spring_sources(np.ascontiguousarray(obs.pose[:, :2]), self._circles, self._circle_r,
-                       e.a, e.ab, e.den, e.b, nb.position, nb.mask, mo.position, mo.radius,
+                       e.a, e.b, nb.position, nb.mask, mo.position, mo.radius,
                        mo.mask, self._radius, self.p.spring_range, self.p.spring_min_distance,
                        delta, dist, use)
         f = np.empty((obs.n, 2))

@@ -20,7 +20,7 @@ import math
 
 import numba
 
-from comparisons.constraints.geometry_kernels import crossing1, segment_point1
+from comparisons.constraints.geometry_kernels import polygon_walk1
 
 #: Below this norm a vector has no direction (m), as in :mod:`.equations`.
 TINY = 1e-12
@@ -36,25 +36,13 @@ def _unit(vx, vy):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, inline="always")
-def _polygon(px, py, a, ab, den, b):  # pragma: no cover - numba
+def _polygon(px, py, a, b):  # pragma: no cover - numba
     """:func:`~comparisons.virtual_spring.equations.polygon_normals` for one polygon.
 
     The first edge with the smallest distance (not squared: ties as numpy's
     ``argmin`` of the norms) gives the nearest point. Returns ``(ux, uy, s)``.
     """
-    best = -1
-    bn = 0.0
-    qx = qy = 0.0
-    inside = False
-    for e in range(a.shape[0]):
-        ax, ay = a[e, 0], a[e, 1]
-        cx, cy = segment_point1(px, py, ax, ay, ab[e, 0], ab[e, 1], den[e])
-        rx, ry = px - cx, py - cy
-        nd = math.sqrt(rx * rx + ry * ry)
-        if best < 0 or (not math.isnan(bn) and (nd < bn or math.isnan(nd))):
-            best, bn, qx, qy = e, nd, cx, cy
-        if crossing1(px, py, ax, ay, ab[e, 0], b[e, 1]):
-            inside = not inside
+    qx, qy, _, inside = polygon_walk1(px, py, a, b, True)
     ux, uy, d = _unit(px - qx, py - qy)
     if inside:
         return -ux, -uy, -d
@@ -62,13 +50,13 @@ def _polygon(px, py, a, ab, den, b):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def spring_sources(pos, circles, circle_r, ea, eab, eden, eb, nb_pos, nb_mask, mo_pos,
+def spring_sources(pos, circles, circle_r, ea, eb, nb_pos, nb_mask, mo_pos,
                    mo_radius, mo_mask, radius, spring_range, min_distance, delta, dist,
                    use):  # pragma: no cover - numba
     """Fill eq 7's ``delta`` ``(N, S, 2)``, ``|delta|`` and the sources that count.
 
     Sources ``S = C + Q + K + M`` in this order: static circles ``(C, 2)`` with
-    radii ``(C,)``, polygons (edges ``ea``, ``eab``, ``eden``, ``eb`` of
+    radii ``(C,)``, polygons (edge starts ``ea`` and ends ``eb`` ``(Q, V, 2)``,
     :class:`~comparisons.virtual_spring.equations.PolygonEdges`), neighbours
     ``(N, K, 2)`` (robot radius) and moving obstacles ``(N, M, 2)`` with radii
     ``(N, M)``. ``delta`` is the unit vector from the source times
@@ -85,7 +73,7 @@ def spring_sources(pos, circles, circle_r, ea, eab, eden, eb, nb_pos, nb_mask, m
                 surface = d - circle_r[s]
             elif s < n_c + n_q:
                 q = s - n_c
-                ux, uy, surface = _polygon(px, py, ea[q], eab[q], eden[q], eb[q])
+                ux, uy, surface = _polygon(px, py, ea[q], eb[q])
             elif s < n_c + n_q + n_k:
                 k = s - n_c - n_q
                 ux, uy, d = _unit(px - nb_pos[i, k, 0], py - nb_pos[i, k, 1])
