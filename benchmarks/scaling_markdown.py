@@ -282,9 +282,9 @@ def findings() -> list[str]:
         " -- every robot rolls its samples out against every static circle "
         "(`scenario.world.circles`, not a local query): O(N C) per step, same caveat.",
         "`comparisons/virtual_spring/controller.py:VirtualSpring.spring` "
-        "(`virtual_spring.equations.disc_normals`, `polygon_normals`) -- every robot against "
+        "(numba `virtual_spring.kernels.spring_sources`) -- every robot against "
         "every static circle and "
-        "polygon edge (edges built once at reset, vectorised): O(N (C + E)) per step. "
+        "polygon edge (edges built once at reset): O(N (C + E)) per step. "
         "`comparisons/virtual_spring/equations.py:fig1_adjacency` (called by `reset`) builds a "
         "dense N x N adjacency matrix with a Python loop: O(N^2) memory (8 MB at N = 1000, "
         "800 MB at N = 10 000) for a graph with 3 entries per row.",
