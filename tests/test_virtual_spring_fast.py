@@ -184,3 +184,45 @@ def test_controller_spring_is_the_composition_of_the_pure_functions(circles, pol
                   for _ in range(rng.integers(0, 3))]
         obs = observation(pos, vel, nb, humans=humans)
         assert same_bits(c.spring(obs), reference_spring(c, obs))
+
+
+def reference_resolve(c, obs, v):
+    """Eq 15-17 composed from the pure functions (the numpy version of ``resolve``)."""
+    nb, mo, r, p = obs.neighbours, obs.obstacles, R, c.p
+    pos = obs.pose[:, :2]
+    p_k = np.concatenate((nb.position, mo.position), axis=1)
+    v_k = np.concatenate((nb.velocity, mo.velocity), axis=1)
+    rad = np.concatenate((np.full(nb.mask.shape, 2.0 * r), mo.radius + r), axis=1)
+    share = np.concatenate((np.ones(nb.mask.shape), np.full(mo.mask.shape, p.obstacle_share)),
+                           axis=1)
+    hit = np.concatenate((nb.mask, mo.mask), axis=1) & vo_conflict(
+        p_k - pos[:, None], v[:, None] - v_k, rad + p.vo_margin, p.vo_horizon)
+    if not hit.any() and not np.signbit(v[v == 0.0]).any():
+        return np.zeros_like(v), hit.sum(axis=1)
+    return conflict_resolution(pos, v, p_k, v_k, hit, share), hit.sum(axis=1)
+
+
+@pytest.mark.parametrize("horizon", [2.0, np.inf])
+def test_controller_resolve_is_the_composition_of_the_pure_functions(horizon):
+    """The compiled eq 15-17 of ``resolve`` equals vo_conflict + conflict_resolution bit for
+    bit: crowded and sparse teams, humans, a robot still (-0 and +0), opposite velocities,
+    no conflict at all."""
+    c = ctrl(scenario=course(), vo_horizon=horizon, obstacle_share=0.7)
+    rng = np.random.default_rng(11)
+    hits = 0
+    for trial in range(40):
+        spread = 1.0 if trial % 2 else 6.0
+        pos = rng.uniform(0.0, spread, (5, 2))
+        vel = rng.normal(0.0, 0.3, (5, 2))
+        nb = [[j for j in range(5) if j != i and rng.random() < 0.7] for i in range(5)]
+        humans = [(tuple(rng.uniform(0.0, spread, 2)), tuple(rng.normal(0.0, 0.3, 2)), 0.2)
+                  for _ in range(rng.integers(0, 3))]
+        obs = observation(pos, vel, nb, humans=humans)
+        v = rng.normal(0.0, 0.4, (5, 2))
+        v[0] = (-0.0, 0.0) if trial % 4 == 0 else (0.0, 0.0)
+        if nb[1]:  # v_1 + v_k = 0 for a neighbour: eq 17's direction falls back to v_1's
+            v[1] = -vel[nb[1][0]]
+        got, want = c.resolve(obs, v), reference_resolve(c, obs, v)
+        assert same_bits(got[0], want[0]) and np.array_equal(got[1], want[1])
+        hits += int(want[1].sum())
+    assert hits > 0

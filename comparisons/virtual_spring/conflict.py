@@ -1,7 +1,8 @@
 """Paper 004's velocity-obstacle conflict resolution (eq 15-17) for ``virtual_spring``.
 
 Pure, vectorised numpy, row by row like :mod:`comparisons.virtual_spring.equations`
-(split from it to keep modules small):
+(split from it to keep modules small); the controller runs their compiled twin,
+:func:`comparisons.virtual_spring.kernels.conflict_changes` (same bits):
 
 * :func:`vo_conflict` -- eq 15-16: is ``v_i`` in the velocity obstacle of robot ``c_k``;
 * :func:`conflict_resolution` -- eq 17.

@@ -75,7 +75,6 @@ from typing import Literal
 
 import numpy as np
 
-from comparisons.virtual_spring.conflict import conflict_resolution, vo_conflict
 from comparisons.virtual_spring.equations import (
     cap_speed,
     consensus_input,
@@ -90,7 +89,7 @@ from comparisons.virtual_spring.equations import (
     norm2,
     polygon_edge_table,
 )
-from comparisons.virtual_spring.kernels import spring_sources, weighted_sum
+from comparisons.virtual_spring.kernels import conflict_changes, spring_sources, weighted_sum
 from dfcoa_opt.control.base import Observation, slot_velocity
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.geometry import body_to_world, rotate
@@ -168,7 +167,6 @@ class VirtualSpring:
         self._circle_r = np.zeros(0)
         self._polygons: list[np.ndarray] = []
         self._edges = polygon_edge_table([])
-        self._const: dict[tuple, tuple[np.ndarray, ...]] = {}  # per-shape constants of a step
         self._t_seen = np.zeros(0)
         self._e_prev, self._e_last = np.zeros(0), np.zeros(0)
         self._lim_prev, self._lim_last = np.zeros(0), np.zeros(0)
@@ -200,7 +198,6 @@ class VirtualSpring:
         self._circle_r = np.array([c.radius for c in circles], dtype=float)
         self._polygons = [np.asarray(v, dtype=float) for v in scenario.world.polygons]
         self._edges = polygon_edge_table(self._polygons)  # static: built once
-        self._const = {}
         self._t_seen = np.full(n, -np.inf)
         self._e_prev, self._e_last = np.full(n, np.nan), np.full(n, np.nan)
         self._lim_prev, self._lim_last = np.full(n, self._v_max), np.full(n, self._v_max)
@@ -240,17 +237,6 @@ class VirtualSpring:
         th = heading.reshape(heading.shape + (1,) * (index.ndim - 1))
         return rotate(rel, th)
 
-    def _constants(self, n: int, k: int, m: int) -> tuple[np.ndarray, ...]:
-        """Eq 15-17's robots' Minkowski radii and shares, built once per shape.
-
-        ``n`` rows, ``k`` neighbour columns, ``m`` moving-obstacle columns.
-        """
-        key = (n, k, m)
-        if key not in self._const:
-            self._const[key] = (np.full((n, k), 2.0 * self._radius), np.concatenate(
-                (np.ones((n, k)), np.full((n, m), self.p.obstacle_share)), axis=1))
-        return self._const[key]
-
     def spring(self, obs: Observation) -> np.ndarray:
         """Eq 7 for every row: static discs and polygons, robots in range, moving obstacles.
 
@@ -289,21 +275,21 @@ class VirtualSpring:
                         0.0)
 
     def resolve(self, obs: Observation, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Eq 15-17 on planned velocities ``v`` (N, 2): the changes and the conflict counts."""
-        p, r = self.p, self._radius
-        pos = obs.pose[:, :2]
-        nb, mo = obs.neighbours, obs.obstacles
-        rad_nb, share = self._constants(obs.n, nb.index.shape[1], mo.mask.shape[1])
-        p_k = np.concatenate((nb.position, mo.position), axis=1)
-        v_k = np.concatenate((nb.velocity, mo.velocity), axis=1)
-        rad = np.concatenate((rad_nb, mo.radius + r), axis=1)
-        mask = np.concatenate((nb.mask, mo.mask), axis=1)
-        hit = mask & vo_conflict(p_k - pos[:, None], v[:, None] - v_k, rad + p.vo_margin,
-                                 p.vo_horizon)
-        if not hit.any() and not np.signbit(v[v == 0.0]).any():
-            # no conflict: eq 17's changes are zeros (+-0), and v + 0 is v unless v has a -0
-            return np.zeros_like(v), hit.sum(axis=1)
-        return conflict_resolution(pos, v, p_k, v_k, hit, share), hit.sum(axis=1)
+        """Eq 15-17 on planned velocities ``v`` (N, 2): the changes and the conflict counts.
+
+        The other robots (Minkowski radius ``2 r``) and the moving obstacles
+        (their radius ``+ r``, ``obstacle_share``) within range, through
+        :func:`~comparisons.virtual_spring.kernels.conflict_changes`: the operations
+        of :func:`~comparisons.virtual_spring.conflict.vo_conflict` and
+        :func:`~comparisons.virtual_spring.conflict.conflict_resolution`, compiled.
+        """
+        nb, mo, n = obs.neighbours, obs.obstacles, obs.n
+        dv, count = np.empty((n, 2)), np.empty(n, dtype=np.int64)
+        conflict_changes(np.ascontiguousarray(obs.pose[:, :2]), np.ascontiguousarray(v),
+                         nb.position, nb.velocity, nb.mask, mo.position, mo.velocity, mo.radius,
+                         mo.mask, self._radius, self.p.vo_margin, self.p.vo_horizon,
+                         self.p.obstacle_share, dv, count)
+        return dv, count
 
     # --------------------------------------------------------------------- act
     def act(self, obs: Observation) -> np.ndarray:

@@ -1,17 +1,22 @@
-"""Compiled eq 7 sources of ``virtual_spring``: the same numbers as the pure functions.
+"""Compiled steps of ``virtual_spring``: the same numbers as the pure functions.
 
-:meth:`~comparisons.virtual_spring.controller.VirtualSpring.spring` needs, for
-every robot and source (static circles, polygons, neighbours, moving
-obstacles), the unit vector from the source to the robot and the clearance;
-as numpy expressions that is about forty small array operations per step.
-:func:`spring_sources` does it in one compiled pass with the operations of
-:func:`~comparisons.virtual_spring.equations.disc_normals`,
-:func:`~comparisons.virtual_spring.equations.polygon_normals` and the first
-half of :func:`~comparisons.virtual_spring.equations.spring_force`, and
-:func:`weighted_sum` does eq 7's sum in numpy's order; the inverse cube
-between them stays numpy's (``inverse_cube``: numba's ``pow`` differs from
-numpy's in the last bit). ``tests/test_virtual_spring_fast.py`` checks the
-controller's force against the pure functions bit for bit.
+Two pieces of the controller's step, each about forty small numpy operations
+as array expressions, run as compiled loops with the operations of the pure
+functions of :mod:`comparisons.virtual_spring.equations` and
+:mod:`comparisons.virtual_spring.conflict`, in the same order:
+
+- eq 7's sources (:meth:`~comparisons.virtual_spring.controller.VirtualSpring.spring`):
+  :func:`spring_sources` gives, for every robot and source (static circles,
+  polygons, neighbours, moving obstacles), the vector ``delta`` of
+  ``disc_normals``, ``polygon_normals`` and ``spring_force``, and
+  :func:`weighted_sum` does eq 7's sum in numpy's order; the inverse cube
+  between them stays numpy's (``inverse_cube``: numba's ``pow`` differs from
+  numpy's in the last bit);
+- eq 15-17 (:meth:`~comparisons.virtual_spring.controller.VirtualSpring.resolve`):
+  :func:`conflict_changes` is ``vo_conflict`` followed by ``conflict_resolution``.
+
+``tests/test_virtual_spring_fast.py`` checks both against the pure functions
+bit for bit.
 """
 
 from __future__ import annotations
@@ -19,8 +24,10 @@ from __future__ import annotations
 import math
 
 import numba
+import numpy as np
 
 from comparisons.constraints.geometry_kernels import polygon_walk1
+from dfcoa_opt.scalar_kernels import clip1
 
 #: Below this norm a vector has no direction (m), as in :mod:`.equations`.
 TINY = 1e-12
@@ -109,3 +116,81 @@ def weighted_sum(w, delta, gain, out):  # pragma: no cover - numba
             fy += w[i, s] * delta[i, s, 1]
         out[i, 0] = gain * fx
         out[i, 1] = gain * fy
+
+
+@numba.njit(cache=True)
+def conflict_changes(pos, v, nb_pos, nb_vel, nb_mask, mo_pos, mo_vel, mo_radius, mo_mask,
+                     radius, margin, horizon, obstacle_share, dv, count):  # pragma: no cover
+    """Eq 15-17 for every robot: fill the velocity changes ``dv`` ``(N, 2)`` and ``count``.
+
+    The other robots ``(N, K, 2)`` (Minkowski radius ``2 radius``, share 1) and
+    the moving obstacles ``(N, M, 2)`` (``radii + radius``, share
+    ``obstacle_share``), with the operations of
+    :func:`~comparisons.virtual_spring.conflict.vo_conflict` and
+    :func:`~comparisons.virtual_spring.conflict.conflict_resolution` and eq
+    17's sum in numpy's order. Without any conflict and without a ``-0`` in
+    ``v``, every change is ``+0`` (what the controller's early return gives).
+    """
+    n, n_k, n_m = pos.shape[0], nb_pos.shape[1], mo_pos.shape[1]
+    hit = np.zeros((n, n_k + n_m), dtype=np.bool_)
+    any_hit = False
+    for i in range(n):
+        count[i] = 0
+        for s in range(n_k + n_m):
+            if s < n_k:
+                real, qx, qy = nb_mask[i, s], nb_pos[i, s, 0], nb_pos[i, s, 1]
+                wx, wy = v[i, 0] - nb_vel[i, s, 0], v[i, 1] - nb_vel[i, s, 1]
+                reach = 2.0 * radius + margin
+            else:
+                m = s - n_k
+                real, qx, qy = mo_mask[i, m], mo_pos[i, m, 0], mo_pos[i, m, 1]
+                wx, wy = v[i, 0] - mo_vel[i, m, 0], v[i, 1] - mo_vel[i, m, 1]
+                reach = (mo_radius[i, m] + radius) + margin
+            if not real:
+                continue
+            dx, dy = qx - pos[i, 0], qy - pos[i, 1]
+            ww = wx * wx + wy * wy
+            tau = 0.0
+            if ww > 0.0:  # eq 15: the closest approach along the ray, within the horizon
+                tau = clip1((dx * wx + (dy * wy + 0.0)) / ww, 0.0, horizon)
+            ex, ey = dx - tau * wx, dy - tau * wy
+            if math.sqrt(ex * ex + ey * ey) <= reach:  # eq 16
+                hit[i, s] = True
+                count[i] += 1
+                any_hit = True
+    signed_zero = False
+    for i in range(n):
+        for c in range(2):
+            if v[i, c] == 0.0 and math.copysign(1.0, v[i, c]) < 0.0:
+                signed_zero = True
+    for i in range(n):
+        dv[i, 0] = 0.0
+        dv[i, 1] = 0.0
+    if not any_hit and not signed_zero:
+        return
+    for i in range(n):
+        vx, vy = v[i, 0], v[i, 1]
+        ux0, uy0, _ = _unit(vx, vy)
+        fx = 0.0
+        fy = 0.0
+        for s in range(n_k + n_m):
+            if s < n_k:
+                qx, qy, kx, ky = nb_pos[i, s, 0], nb_pos[i, s, 1], nb_vel[i, s, 0], nb_vel[i, s, 1]
+                share = 1.0
+            else:
+                m = s - n_k
+                qx, qy, kx, ky = mo_pos[i, m, 0], mo_pos[i, m, 1], mo_vel[i, m, 0], mo_vel[i, m, 1]
+                share = obstacle_share
+            ax, ay, _ = _unit(vx + kx, vy + ky)  # eq 17's common direction, then fallbacks
+            if ax == 0.0 and ay == 0.0:
+                ax, ay = ux0, uy0
+            if ax == 0.0 and ay == 0.0:
+                ax, ay, _ = _unit(kx, ky)
+            rx, ry = pos[i, 0] - qx, pos[i, 1] - qy
+            wx, wy = vx - kx, vy - ky
+            half = 0.5 * math.sqrt(wx * wx + wy * wy) * share
+            step = (half if rx * ax + ry * ay > 0.0 else -half) * (1.0 if hit[i, s] else 0.0)
+            fx += step * ax
+            fy += step * ay
+        dv[i, 0] = fx
+        dv[i, 1] = fy
