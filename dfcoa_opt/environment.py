@@ -38,6 +38,26 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
+def numpy_simd() -> str:
+    """The widest SIMD level numpy dispatches its loops to on this machine, e.g. ``X86_V3``.
+
+    numpy picks, at import, the widest of its compiled targets that the CPU
+    supports (and ``NPY_DISABLE_CPU_FEATURES`` leaves on). Some float64 loops
+    (``sin``, ``cos``, ``arctan2``, ``exp``, ``log``, ``power``) have AVX-512
+    versions that round differently in the last bit, so two machines with
+    different levels can give runs whose digests differ (docs/benchmarking.md,
+    "Across machines"). Returns ``"unknown"`` when numpy does not say.
+    """
+    try:
+        from numpy._core import _multiarray_umath as umath
+    except ImportError:  # numpy < 2
+        return "unknown"
+    found = [f for f in getattr(umath, "__cpu_dispatch__", [])
+             if getattr(umath, "__cpu_features__", {}).get(f)]
+    levels = found or list(getattr(umath, "__cpu_baseline__", []))[-1:]
+    return levels[-1] if levels else "unknown"
+
+
 def machine() -> str:
-    """``<CPU model>, <n> cores``."""
-    return f"{cpu_model()}, {os.cpu_count() or '?'} cores"
+    """``<CPU model>, <n> cores, numpy SIMD <level>`` (:func:`numpy_simd`)."""
+    return f"{cpu_model()}, {os.cpu_count() or '?'} cores, numpy SIMD {numpy_simd()}"

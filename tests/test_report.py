@@ -159,13 +159,34 @@ def test_csv_has_the_four_outcome_rates_with_intervals():
 
 # ----------------------------------------------------------------------- environment
 def test_environment_header(tmp_path, monkeypatch):
-    folder = write_results(tmp_path / "res", synthetic_rows())
+    rows = synthetic_rows()
+    rows[0]["provenance"]["simd"] = "X86_V3"
+    rows[1]["provenance"]["simd"] = "AVX512_ICL"
+    folder = write_results(tmp_path / "res", rows)
     monkeypatch.setattr(environment, "PACKAGES", (*environment.PACKAGES, "no-such-package-xyz"))
     head = report.environment_header(folder)
     assert "Date (newest finished run): 2024-05-01T11:00:00-02:00" in head
     assert SHA in head and f"`{SHA[:12]}`" in head and "**demo**" in head
     assert f"numpy {np.__version__}" in head and "no-such-package-xyz not installed" in head
-    assert f"{os.cpu_count()} cores" in head and "hosts: h1" in head
+    assert f"{os.cpu_count()} cores, numpy SIMD {environment.numpy_simd()}" in head
+    assert "hosts: h1 (numpy SIMD AVX512_ICL, X86_V3)" in head
+
+
+def test_numpy_simd_follows_numpy_dispatch():
+    """The level is numpy's own choice: with every dispatch target disabled, the baseline."""
+    import subprocess
+    import sys
+
+    from numpy._core import _multiarray_umath as umath
+
+    here = environment.numpy_simd()
+    assert here in [*umath.__cpu_dispatch__, *umath.__cpu_baseline__]
+    assert umath.__cpu_features__[here]
+    env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": " ".join(umath.__cpu_dispatch__)}
+    out = subprocess.run([sys.executable, "-c", "from dfcoa_opt import environment; "
+                          "print(environment.numpy_simd())"],
+                         env=env, capture_output=True, text=True, check=True).stdout.strip()
+    assert out == umath.__cpu_baseline__[-1]
 
 
 # --------------------------------------------------------------------------- loading

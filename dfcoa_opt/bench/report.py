@@ -238,6 +238,8 @@ def environment_header(results_dir: str | Path) -> str:
     digest = str(manifest.get("sweep_sha256", "")) or "unknown"
     hosts = sorted({str((r.get("provenance") or {}).get("host")) for r in rows
                     if (r.get("provenance") or {}).get("host")})
+    simd = sorted({str((r.get("provenance") or {}).get("simd")) for r in rows
+                   if (r.get("provenance") or {}).get("simd")})
     keys = manifest.get("keys")
     planned = f" of {len(keys)} in the manifest" if isinstance(keys, list) else ""
     lines = [
@@ -246,7 +248,8 @@ def environment_header(results_dir: str | Path) -> str:
         f"- Sweep file sha256: `{digest}`",
         f"- Date (newest finished run): {newest_finished(rows) or 'unknown'}",
         f"- Runs: {len(rows)}{planned} ({sum(r['status'] == 'failed' for r in rows)} failed); "
-        f"hosts: {', '.join(hosts) or 'unknown'}",
+        f"hosts: {', '.join(hosts) or 'unknown'}"
+        + (f" (numpy SIMD {', '.join(simd)})" if simd else ""),
         f"- CPU: {environment.machine()}",
         f"- Packages: {environment.versions()}",
     ]

@@ -21,9 +21,10 @@ Row fields (JSON):
   contacts);
 - ``digest``: SHA-256 over the log arrays (bit-identical runs <=> equal);
 - ``log``: the ``.npz`` path relative to the results folder, or null;
-- ``provenance``: wall time, finish time, host, pid, and a traceback for
-  unexpected exceptions. Only this field may differ between two executions
-  of the same run.
+- ``provenance``: wall time, finish time, host, numpy's SIMD level, pid,
+  and a traceback for unexpected exceptions. Only this field may differ
+  between two executions of the same run (on another machine the digest can
+  differ too: docs/benchmarking.md, "Across machines").
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from dfcoa_opt import environment
 from dfcoa_opt.bench.sweep import RunSpec, load_run_scenario
 from dfcoa_opt.errors import DfcoaError
 
@@ -110,7 +112,8 @@ def execute(run: RunSpec) -> Outcome:
         row["error"] = _one_line(exc)
         if not isinstance(exc, DfcoaError):
             prov["traceback"] = traceback.format_exc()
-    prov.update(wall_time=time.perf_counter() - t0, host=socket.gethostname(), pid=os.getpid(),
+    prov.update(wall_time=time.perf_counter() - t0, host=socket.gethostname(),
+                simd=environment.numpy_simd(), pid=os.getpid(),
                 finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
     row["provenance"] = prov
     return Outcome(row, npz)
