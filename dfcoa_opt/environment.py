@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import platform
 from collections.abc import Sequence
@@ -38,6 +39,7 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
+@functools.cache
 def numpy_simd() -> str:
     """The widest SIMD level numpy dispatches its loops to on this machine, e.g. ``X86_V3``.
 
@@ -46,7 +48,8 @@ def numpy_simd() -> str:
     (``sin``, ``cos``, ``arctan2``, ``exp``, ``log``, ``power``) have AVX-512
     versions that round differently in the last bit, so two machines with
     different levels can give runs whose digests differ (docs/benchmarking.md,
-    "Across machines"). Returns ``"unknown"`` when numpy does not say.
+    "Across machines"). Returns ``"unknown"`` when numpy does not say. Fixed
+    once numpy is imported, so it is computed once per process.
     """
     try:
         from numpy._core import _multiarray_umath as umath

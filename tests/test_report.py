@@ -9,6 +9,8 @@ import json
 import math
 import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -174,9 +176,6 @@ def test_environment_header(tmp_path, monkeypatch):
 
 def test_numpy_simd_follows_numpy_dispatch():
     """The level is numpy's own choice: with every dispatch target disabled, the baseline."""
-    import subprocess
-    import sys
-
     from numpy._core import _multiarray_umath as umath
 
     here = environment.numpy_simd()

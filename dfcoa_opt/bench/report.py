@@ -236,10 +236,8 @@ def environment_header(results_dir: str | Path) -> str:
     manifest = _read_manifest(results_dir)
     rows = load_rows(results_dir)
     digest = str(manifest.get("sweep_sha256", "")) or "unknown"
-    hosts = sorted({str((r.get("provenance") or {}).get("host")) for r in rows
-                    if (r.get("provenance") or {}).get("host")})
-    simd = sorted({str((r.get("provenance") or {}).get("simd")) for r in rows
-                   if (r.get("provenance") or {}).get("simd")})
+    hosts, simd = (sorted({str(v) for r in rows if (v := (r.get("provenance") or {}).get(k))})
+                   for k in ("host", "simd"))
     keys = manifest.get("keys")
     planned = f" of {len(keys)} in the manifest" if isinstance(keys, list) else ""
     lines = [
