@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import os
 import subprocess
 import sys
@@ -12,6 +13,7 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 from matplotlib.colors import to_rgb
+from matplotlib.figure import Figure
 from PIL import Image
 
 from dfcoa_opt import plotting
@@ -93,6 +95,52 @@ def test_draw_world_orientation() -> None:
     assert np.allclose(pixel(14.0, 14.0), dark, atol=0.02)  # the block, upper right
     assert np.allclose(pixel(14.0, 6.0), 1.0, atol=0.02)  # mirrored in y: free
     assert np.allclose(pixel(6.0, 14.0), 1.0, atol=0.02)  # mirrored in x: free
+
+
+def test_draw_world_outlines_every_shape_in_one_collection_and_keeps_the_extent() -> None:
+    fig = plotting.new_figure((4.0, 4.0), 100.0, layout=None)
+    ax = fig.add_subplot()
+    shapes = (Rectangle((12.0, 12.0), (16.0, 16.0)), Circle((4.0, 15.0), 1.0),
+              Circle((30.0, 30.0), 2.0))  # outside the map: must not widen the view
+    plotting.draw_world(ax, make_grid(), shapes=shapes)
+    (outlines,) = ax.collections
+    assert len(outlines.get_paths()) == 3 and not ax.patches
+    assert outlines.get_facecolor().size == 0  # hollow
+    assert np.allclose(outlines.get_edgecolor(), [0.0, 0.0, 0.0, 1.0])
+    assert ax.get_xlim() == (0.0, 20.0) and ax.get_ylim() == (0.0, 20.0)
+    fig.canvas.draw()
+    img = np.asarray(fig.canvas.buffer_rgba())[..., :3] / 255.0
+    px, py = ax.transData.transform((4.0, 16.0))  # the circle's top edge is drawn dark
+    patch = img[int(round(img.shape[0] - py)) - 2:int(round(img.shape[0] - py)) + 3,
+                int(round(px)) - 2:int(round(px)) + 3]
+    assert patch.min() < 0.5
+
+
+def _boxplot_figure() -> Figure:
+    fig = plotting.new_figure((6.0, 3.0), 80.0)
+    axes = fig.subplots(1, 2)
+    for k, ax in enumerate(axes):
+        ax.boxplot([np.arange(5.0) + k, np.arange(7.0) * 2], widths=0.5)
+        ax.set_xticks([1, 2], ["a long\nlabel", "b"], rotation=60, ha="right")
+        ax.set_title(f"panel {k}")
+    axes[0].set_ylabel("value (m)")
+    fig.legend(["x"], loc="outside right upper")
+    return fig
+
+
+def test_png_bytes_draws_once_and_gives_savefigs_image(monkeypatch) -> None:
+    buf = io.BytesIO()
+    _boxplot_figure().savefig(buf, format="png")
+    draws: list[int] = []
+    real_draw = Figure.draw
+    monkeypatch.setattr(Figure, "draw", lambda self, r: draws.append(1) or real_draw(self, r))
+    fig = _boxplot_figure()
+    data = plotting.png_bytes(fig)
+    assert len(draws) == 1  # savefig alone draws a laid-out figure twice
+    assert fig.get_layout_engine() is None
+    ours = mpimg.imread(io.BytesIO(data))
+    theirs = mpimg.imread(io.BytesIO(buf.getvalue()))
+    assert ours.shape == theirs.shape and np.array_equal(ours, theirs)
 
 
 def test_plot_run_png(tmp_path: Path) -> None:

@@ -8,7 +8,6 @@ runs (trajectory panels, failure snapshots) are in :mod:`dfcoa_opt.bench.traject
 
 from __future__ import annotations
 
-import io
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -18,7 +17,7 @@ import numpy as np
 
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.plotting import new_figure, robot_colors
+from dfcoa_opt.plotting import new_figure, png_bytes, robot_colors
 from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.log import RunLog
 
@@ -81,10 +80,8 @@ def ok_runs(store: ResultsStore) -> list[tuple[Row, RunLog]]:
 
 
 def save_png(fig: Figure, path: str | Path) -> Path:
-    """Render ``fig`` to PNG and write it atomically to ``path``."""
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    return atomic_write(path, buf.getvalue())
+    """Render ``fig`` to PNG (:func:`dfcoa_opt.plotting.png_bytes`) and write it atomically."""
+    return atomic_write(path, png_bytes(fig))
 
 
 def variant_name(row: Row) -> str:
@@ -130,10 +127,11 @@ def metric_boxplots(rows: Sequence[Row], metric: str, path: str | Path,
         if filled:
             ax.boxplot([data[i] for i in filled], positions=pos[filled], widths=0.5,
                        showfliers=False, medianprops={"color": "black"})
-        for i, x in enumerate(data):  # every value, spread evenly (no randomness)
-            spread = np.linspace(-0.12, 0.12, x.size) if x.size > 1 else np.zeros(x.size)
-            ax.plot(pos[i] + spread, x, "o", color=robot_colors(1)[0], alpha=0.6,
-                    markersize=4, zorder=3)
+        # every value, spread evenly (no randomness); one line of dots per panel
+        spread = [pos[i] + (np.linspace(-0.12, 0.12, x.size) if x.size > 1 else 0.0 * x)
+                  for i, x in enumerate(data)]
+        ax.plot(np.concatenate(spread), np.concatenate(data), "o", color=robot_colors(1)[0],
+                alpha=0.6, markersize=4, zorder=3)
         ax.set_xticks(pos, [f"{v}\n(n={x.size})" for v, x in zip(variants, data, strict=True)],
                       fontsize="small", rotation=60, ha="right")
         ax.set_xlim(0.4, len(variants) + 0.6)

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from matplotlib.collections import LineCollection
 from matplotlib.patches import Circle as CirclePatch
 
 from dfcoa_opt.bench.plots import save_png, scenario_for_row, variant_name
@@ -77,9 +78,10 @@ def _view(logs: Sequence[RunLog], extent: tuple[float, float, float, float]
 def _draw_run(ax: Axes, log: RunLog, upto: int | None = None, alpha: float = 1.0) -> None:
     """Every robot's trajectory (own colour), its final dot, and the leader's track dashed."""
     pose = np.asarray(log.pose, dtype=float)[:upto]
-    for i, color in enumerate(robot_colors(pose.shape[1])):
-        ax.plot(pose[:, i, 0], pose[:, i, 1], "-", color=color, linewidth=1.0, alpha=alpha,
-                zorder=3)
+    # one collection, not a line per robot (a 100-robot panel drew 100 Line2D)
+    ax.add_collection(LineCollection(list(pose[:, :, :2].transpose(1, 0, 2)),
+                                     colors=robot_colors(pose.shape[1]), linewidths=1.0,
+                                     alpha=alpha, zorder=3), autolim=False)
     if len(pose) and upto is None:
         ax.plot(pose[-1, :, 0], pose[-1, :, 1], "o", color="black", markersize=2.5, zorder=4)
     lead = np.asarray(log.leader, dtype=float)[:upto, :2]
@@ -246,11 +248,13 @@ def snapshot_figure(row: Row, results_dir: str | Path, path: str | Path, t: floa
     hit = contacts_at(log, k)
     for i, (color, touching) in enumerate(zip(robot_colors(log.pose.shape[1]), hit,
                                               strict=True)):
-        ax.add_patch(CirclePatch(log.pose[k, i, :2], r, facecolor=color, alpha=0.8, zorder=6,
-                                 edgecolor="red" if touching else "black",
-                                 linewidth=2.0 if touching else 0.5))
+        # add_artist, not add_patch: the limits are set below, and add_patch's update
+        # of them from every disc's Bezier extrema took most of a 100-robot snapshot
+        ax.add_artist(CirclePatch(log.pose[k, i, :2], r, facecolor=color, alpha=0.8, zorder=6,
+                                  edgecolor="red" if touching else "black",
+                                  linewidth=2.0 if touching else 0.5))
     for c, rad in zip(np.asarray(log.dyn_pos[k]), np.asarray(log.dyn_radius), strict=True):
-        ax.add_patch(CirclePatch(c, rad, facecolor="grey", alpha=0.6, zorder=5))
+        ax.add_artist(CirclePatch(c, rad, facecolor="grey", alpha=0.6, zorder=5))
     ax.plot(log.slots[k, :, 0], log.slots[k, :, 1], "x", color="black", markersize=4, zorder=7)
     ax.plot([log.leader[k, 0]], [log.leader[k, 1]], "^", color="black", markersize=7, zorder=7)
     view = _view([log], sc.world.grid.extent)
