@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import matplotlib as mpl
 import numpy as np
-from matplotlib.animation import FuncAnimation, PillowWriter
+from matplotlib.animation import PillowWriter
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection, PatchCollection
 from matplotlib.colors import ListedColormap, to_rgb
@@ -282,12 +282,20 @@ def animate_run(log: RunLog, grid: OccupancyGrid, path: str | Path,
         return []
 
     draw(int(steps[0]))
-    fig.canvas.draw()  # settle the layout once, then freeze it so frames do not jitter
-    fig.set_layout_engine("none")
-    anim = FuncAnimation(fig, draw, frames=[int(k) for k in steps], blit=False,
-                         repeat=False, cache_frame_data=False)
+    # Lay the figure out once and freeze it, so frames do not jitter. With no layout
+    # engine left, grab_frame draws each frame once; FuncAnimation.save drew it three
+    # times (its own draw, then savefig's layout pass and real draw).
+    fig.canvas.draw()
+    fig.set_layout_engine(None)
     writer = PillowWriter(fps=fps)
-    out = _save_atomic(path, lambda tmp: anim.save(tmp, writer=writer, dpi=dpi), ".gif")
+
+    def write(tmp: str) -> None:
+        with writer.saving(fig, tmp, dpi):
+            for k in steps:
+                draw(int(k))
+                writer.grab_frame()
+
+    out = _save_atomic(path, write, ".gif")
     if figure is not None:
         figure.append(fig)
     return out

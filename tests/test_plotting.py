@@ -187,7 +187,10 @@ def _gif_frames(path: Path) -> list[np.ndarray]:
 
 
 @pytest.mark.parametrize("max_frames", [200, 10])
-def test_animate_run_gif(tmp_path: Path, max_frames: int) -> None:
+def test_animate_run_gif(tmp_path: Path, max_frames: int, monkeypatch) -> None:
+    draws: list[int] = []
+    real_draw = Figure.draw
+    monkeypatch.setattr(Figure, "draw", lambda self, r: draws.append(1) or real_draw(self, r))
     out = plotting.animate_run(make_log(), make_grid(), tmp_path / "run.gif", goal=(15.0, 5.0),
                                fps=12, max_frames=max_frames, figsize=(4.0, 3.0), dpi=50)
     assert out.is_file()
@@ -196,6 +199,7 @@ def test_animate_run_gif(tmp_path: Path, max_frames: int) -> None:
         assert im.format == "GIF"
         assert im.size == (200, 150)
         assert im.n_frames == min(T, max_frames)
+    assert len(draws) == min(T, max_frames) + 1  # one layout draw, then one per frame
     frames = _gif_frames(out)
     for a, b in zip(frames, frames[1:], strict=False):
         assert np.abs(a - b).sum() > 0
