@@ -84,19 +84,25 @@ def new_figure(figsize: tuple[float, float] = (7.0, 6.0), dpi: float = 100.0,
     return fig
 
 
-def png_bytes(fig: Figure) -> bytes:
-    """``fig`` rendered as PNG, its layout computed once.
+def freeze_layout(fig: Figure) -> None:
+    """Lay ``fig`` out once with its layout engine, then remove the engine.
 
-    ``savefig`` of a figure with a layout engine (ours: constrained) draws it
-    twice: once with output disabled, only to lay it out, then for real. Running
-    the engine once here and removing it leaves ``savefig`` one draw, the same
-    image (measured 2026-11-26: a 7-panel box plot figure 3.6 -> 2.0 s).
-    The figure keeps the computed positions.
+    The axes keep the computed positions. ``savefig`` of a figure that still
+    has a layout engine (ours: constrained) draws it twice: once with output
+    disabled, only to lay it out, then for real; a frozen figure is drawn once.
     """
     engine = fig.get_layout_engine()
     if engine is not None:
         engine.execute(fig)
         fig.set_layout_engine(None)  # (None unless matplotlibrc asks for autolayout)
+
+
+def png_bytes(fig: Figure) -> bytes:
+    """``fig`` rendered as PNG, laid out once (:func:`freeze_layout`), drawn once.
+
+    The same image as ``fig.savefig``, which draws a laid-out figure twice.
+    """
+    freeze_layout(fig)
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     return buf.getvalue()
@@ -282,11 +288,10 @@ def animate_run(log: RunLog, grid: OccupancyGrid, path: str | Path,
         return []
 
     draw(int(steps[0]))
-    # Lay the figure out once and freeze it, so frames do not jitter. With no layout
-    # engine left, grab_frame draws each frame once; FuncAnimation.save drew it three
-    # times (its own draw, then savefig's layout pass and real draw).
-    fig.canvas.draw()
-    fig.set_layout_engine(None)
+    # Lay the figure out once and freeze it, so frames do not jitter; grab_frame then
+    # draws each frame once (FuncAnimation.save drew it three times: its own draw,
+    # then savefig's layout pass and real draw).
+    freeze_layout(fig)
     writer = PillowWriter(fps=fps)
 
     def write(tmp: str) -> None:

@@ -199,7 +199,7 @@ def test_animate_run_gif(tmp_path: Path, max_frames: int, monkeypatch) -> None:
         assert im.format == "GIF"
         assert im.size == (200, 150)
         assert im.n_frames == min(T, max_frames)
-    assert len(draws) == min(T, max_frames) + 1  # one layout draw, then one per frame
+    assert len(draws) == min(T, max_frames)  # one draw per frame
     frames = _gif_frames(out)
     for a, b in zip(frames, frames[1:], strict=False):
         assert np.abs(a - b).sum() > 0
