@@ -116,6 +116,15 @@ def test_draw_world_outlines_every_shape_in_one_collection_and_keeps_the_extent(
     assert patch.min() < 0.5
 
 
+@pytest.fixture
+def draws(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Counts ``Figure.draw`` calls (one entry per draw) while the test runs."""
+    calls: list[int] = []
+    real_draw = Figure.draw
+    monkeypatch.setattr(Figure, "draw", lambda self, r: calls.append(1) or real_draw(self, r))
+    return calls
+
+
 def _boxplot_figure() -> Figure:
     fig = plotting.new_figure((6.0, 3.0), 80.0)
     axes = fig.subplots(1, 2)
@@ -128,15 +137,13 @@ def _boxplot_figure() -> Figure:
     return fig
 
 
-def test_png_bytes_draws_once_and_gives_savefigs_image(monkeypatch) -> None:
+def test_png_bytes_draws_once_and_gives_savefigs_image(draws: list[int]) -> None:
     buf = io.BytesIO()
     _boxplot_figure().savefig(buf, format="png")
-    draws: list[int] = []
-    real_draw = Figure.draw
-    monkeypatch.setattr(Figure, "draw", lambda self, r: draws.append(1) or real_draw(self, r))
+    assert len(draws) == 2  # savefig alone draws a laid-out figure twice
     fig = _boxplot_figure()
     data = plotting.png_bytes(fig)
-    assert len(draws) == 1  # savefig alone draws a laid-out figure twice
+    assert len(draws) == 3
     assert fig.get_layout_engine() is None
     ours = mpimg.imread(io.BytesIO(data))
     theirs = mpimg.imread(io.BytesIO(buf.getvalue()))
@@ -187,10 +194,7 @@ def _gif_frames(path: Path) -> list[np.ndarray]:
 
 
 @pytest.mark.parametrize("max_frames", [200, 10])
-def test_animate_run_gif(tmp_path: Path, max_frames: int, monkeypatch) -> None:
-    draws: list[int] = []
-    real_draw = Figure.draw
-    monkeypatch.setattr(Figure, "draw", lambda self, r: draws.append(1) or real_draw(self, r))
+def test_animate_run_gif(tmp_path: Path, max_frames: int, draws: list[int]) -> None:
     out = plotting.animate_run(make_log(), make_grid(), tmp_path / "run.gif", goal=(15.0, 5.0),
                                fps=12, max_frames=max_frames, figsize=(4.0, 3.0), dpi=50)
     assert out.is_file()
