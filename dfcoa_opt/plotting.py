@@ -32,6 +32,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle as CirclePatch
 from matplotlib.patches import Polygon as PolygonPatch
 
+from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.world.shapes import Circle
 
 if TYPE_CHECKING:
@@ -106,6 +107,11 @@ def png_bytes(fig: Figure) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     return buf.getvalue()
+
+
+def save_png(fig: Figure, path: str | Path) -> Path:
+    """Write :func:`png_bytes` of ``fig`` to ``path`` atomically (folders are created)."""
+    return atomic_write(path, png_bytes(fig))
 
 
 def draw_world(ax: Axes, grid: OccupancyGrid, goal: ArrayLike | None = None,
@@ -214,7 +220,7 @@ def plot_run(log: RunLog, grid: OccupancyGrid, path: str | Path, goal: ArrayLike
         ValueError: On an empty log.
     """
     fig = run_figure(log, grid, goal, start, title, shapes=shapes, figsize=figsize, dpi=dpi)
-    return _save_atomic(path, lambda tmp: Path(tmp).write_bytes(png_bytes(fig)), ".png")
+    return save_png(fig, path)
 
 
 def animate_run(log: RunLog, grid: OccupancyGrid, path: str | Path,
@@ -341,7 +347,7 @@ def plot_timeseries(log: RunLog, series: Mapping[str, ArrayLike], path: str | Pa
         ax.legend(fontsize="small")
     if title is not None:
         ax.set_title(title)
-    return _save_atomic(path, lambda tmp: Path(tmp).write_bytes(png_bytes(fig)), ".png")
+    return save_png(fig, path)
 
 
 def frame_indices(n_steps: int, max_frames: int) -> NDArray[np.intp]:

@@ -15,15 +15,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.plotting import new_figure, png_bytes, robot_colors
+from dfcoa_opt.plotting import new_figure, robot_colors, save_png
 from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.log import RunLog
 
 if TYPE_CHECKING:
-    from matplotlib.figure import Figure
-
     from dfcoa_opt.sim.scenario import Scenario
 
 Row = Mapping[str, Any]
@@ -77,11 +74,6 @@ def ok_runs(store: ResultsStore) -> list[tuple[Row, RunLog]]:
     rows = sorted((r for r in store.rows() if r["status"] == "ok"),
                   key=lambda r: (r["controller"], r.get("overrides_hash", ""), r["seed"]))
     return [(r, RunLog.load(store.root / r["log"])) for r in rows]
-
-
-def save_png(fig: Figure, path: str | Path) -> Path:
-    """Render ``fig`` to PNG (:func:`dfcoa_opt.plotting.png_bytes`) and write it atomically."""
-    return atomic_write(path, png_bytes(fig))
 
 
 def variant_name(row: Row) -> str:

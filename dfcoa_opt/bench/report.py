@@ -218,6 +218,12 @@ def newest_finished(rows: Iterable[Mapping[str, Any]]) -> str | None:
     return max(stamps)[1] if stamps else None
 
 
+def _provenance_values(rows: list[dict[str, Any]], key: str) -> list[str]:
+    """The distinct non-empty values of ``provenance[key]`` over ``rows``, sorted."""
+    return sorted({str(r["provenance"][key]) for r in rows
+                   if (r.get("provenance") or {}).get(key)})
+
+
 def environment_header(results_dir: str | Path) -> str:
     """Markdown lines describing the sweep and the software/hardware.
 
@@ -236,8 +242,7 @@ def environment_header(results_dir: str | Path) -> str:
     manifest = _read_manifest(results_dir)
     rows = load_rows(results_dir)
     digest = str(manifest.get("sweep_sha256", "")) or "unknown"
-    hosts, simd = (sorted({str(v) for r in rows if (v := (r.get("provenance") or {}).get(k))})
-                   for k in ("host", "simd"))
+    hosts, simd = _provenance_values(rows, "host"), _provenance_values(rows, "simd")
     keys = manifest.get("keys")
     planned = f" of {len(keys)} in the manifest" if isinstance(keys, list) else ""
     lines = [
