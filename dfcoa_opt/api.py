@@ -98,13 +98,17 @@ def run(scenario: Scenario | str | Path, controller: str | Any,
         controller: A registry id (see :func:`controllers`; ``"a+cbf"`` adds a
             filter), built with the scenario's ``[controllers.<id>]`` parameters;
             or a controller object (see README, "Add your own controller").
-        seed: The run's seed (default: the scenario's). One
-            ``numpy.random.Generator`` made from it is the run's only random
-            source: the same seed gives the same run, bit for bit.
+        seed: The run's seed (default: the scenario's). It means what
+            ``dfcoa run --seed`` and a sweep's seed mean: a path is loaded with
+            it, and a loaded scenario whose world is drawn from the seed (a
+            ``[world.clutter]`` field without its own seed) is drawn again for
+            it, with the same overrides. One ``numpy.random.Generator`` made
+            from it is the run's only random source: the same seed gives the
+            same run, bit for bit, from every entry point.
 
     Returns:
-        The :class:`Run`: ``.log`` (every array), ``.metrics``, ``.plot()``,
-        ``.animate(path)``.
+        The :class:`Run`: ``.scenario`` (the one that ran, drawn for ``seed``),
+        ``.log`` (every array), ``.metrics``, ``.plot()``, ``.animate(path)``.
 
     Raises:
         ScenarioError: A bad scenario file or controller parameter.
@@ -120,7 +124,7 @@ def run(scenario: Scenario | str | Path, controller: str | Any,
     from dfcoa_opt.control.registry import build_controller
     from dfcoa_opt.sim.simulator import Simulator
 
-    sc = scenario if not isinstance(scenario, str | Path) else load(scenario)
+    sc = scenario if not isinstance(scenario, str | Path) else load(scenario, seed=seed)
     if isinstance(controller, str):
         ctrl = build_controller(controller, sc.spec.controllers, sc.source)
     elif callable(getattr(controller, "act", None)):
@@ -128,7 +132,8 @@ def run(scenario: Scenario | str | Path, controller: str | Any,
     else:
         raise DfcoaError(f"run: controller must be a registry id or an object with act(obs), "
                          f"got {type(controller).__name__}")
-    return Run(sc, Simulator(sc, ctrl, seed).run())
+    sim = Simulator(sc, ctrl, seed)
+    return Run(sim.scenario, sim.run())
 
 
 @dataclass

@@ -62,5 +62,11 @@ def numpy_simd() -> str:
 
 
 def machine() -> str:
-    """``<CPU model>, <n> cores, numpy SIMD <level>`` (:func:`numpy_simd`)."""
-    return f"{cpu_model()}, {os.cpu_count() or '?'} cores, numpy SIMD {numpy_simd()}"
+    """``<CPU model>, <n> cores, numpy SIMD <level> (cap <cap>)``.
+
+    The level is :func:`numpy_simd`, the cap :func:`dfcoa_opt.dispatch.describe`.
+    """
+    from dfcoa_opt.dispatch import describe
+
+    return (f"{cpu_model()}, {os.cpu_count() or '?'} cores, numpy SIMD {numpy_simd()} "
+            f"(cap {describe()})")

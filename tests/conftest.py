@@ -9,6 +9,9 @@ fresh random inputs on every run and replays earlier failures from
 
 from __future__ import annotations
 
+import dfcoa_opt  # noqa: F401 - first: caps numpy's SIMD dispatch before numpy loads
+
+# isort: split
 import os
 
 import numba

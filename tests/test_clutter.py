@@ -61,7 +61,7 @@ def test_bad_clutter_keys():
 
 
 def test_start_noise_is_seeded_and_kept_free():
-    data = _data()
+    data = _data(seed=4)  # one field for every run seed: only the start noise follows it
     data["team"] = {"n": 3, "start_noise": 0.3, "heading_noise": 0.2}
     sc = scenario_from_dict(data)
     ctrl = make_controller("goto_slot")
@@ -72,5 +72,5 @@ def test_start_noise_is_seeded_and_kept_free():
     moved = np.hypot(*(p0[:, :2] - sc.initial_pose[:, :2]).T)
     assert moved.max() > 0.0
     assert not sc.world.grid.is_occupied_at(p0[:, :2]).any()
-    quiet = scenario_from_dict(_data())
+    quiet = scenario_from_dict(_data(seed=4))
     assert np.array_equal(Simulator(quiet, ctrl, seed=1).run().pose[0], quiet.initial_pose)

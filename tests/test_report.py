@@ -164,6 +164,7 @@ def test_environment_header(tmp_path, monkeypatch):
     rows = synthetic_rows()
     rows[0]["provenance"]["simd"] = "X86_V3"
     rows[1]["provenance"]["simd"] = "AVX512_ICL"
+    rows[0]["provenance"]["simd_cap"] = rows[1]["provenance"]["simd_cap"] = "X86_V3"
     folder = write_results(tmp_path / "res", rows)
     monkeypatch.setattr(environment, "PACKAGES", (*environment.PACKAGES, "no-such-package-xyz"))
     head = report.environment_header(folder)
@@ -171,7 +172,7 @@ def test_environment_header(tmp_path, monkeypatch):
     assert SHA in head and f"`{SHA[:12]}`" in head and "**demo**" in head
     assert f"numpy {np.__version__}" in head and "no-such-package-xyz not installed" in head
     assert f"{os.cpu_count()} cores, numpy SIMD {environment.numpy_simd()}" in head
-    assert "hosts: h1 (numpy SIMD AVX512_ICL, X86_V3)" in head
+    assert "hosts: h1 (numpy SIMD AVX512_ICL, X86_V3; cap X86_V3)" in head
 
 
 def test_numpy_simd_follows_numpy_dispatch():

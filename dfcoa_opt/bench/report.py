@@ -243,6 +243,7 @@ def environment_header(results_dir: str | Path) -> str:
     rows = load_rows(results_dir)
     digest = str(manifest.get("sweep_sha256", "")) or "unknown"
     hosts, simd = _provenance_values(rows, "host"), _provenance_values(rows, "simd")
+    caps = _provenance_values(rows, "simd_cap")
     keys = manifest.get("keys")
     planned = f" of {len(keys)} in the manifest" if isinstance(keys, list) else ""
     lines = [
@@ -252,7 +253,8 @@ def environment_header(results_dir: str | Path) -> str:
         f"- Date (newest finished run): {newest_finished(rows) or 'unknown'}",
         f"- Runs: {len(rows)}{planned} ({sum(r['status'] == 'failed' for r in rows)} failed); "
         f"hosts: {', '.join(hosts) or 'unknown'}"
-        + (f" (numpy SIMD {', '.join(simd)})" if simd else ""),
+        + (f" (numpy SIMD {', '.join(simd)}; cap {', '.join(caps) or 'unknown'})"
+           if simd else ""),
         f"- CPU: {environment.machine()}",
         f"- Packages: {environment.versions()}",
     ]

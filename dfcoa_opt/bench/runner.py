@@ -39,7 +39,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from dfcoa_opt import environment
+from dfcoa_opt import dispatch, environment
 from dfcoa_opt.bench.sweep import RunSpec, load_run_scenario
 from dfcoa_opt.errors import DfcoaError
 
@@ -113,7 +113,7 @@ def execute(run: RunSpec) -> Outcome:
         if not isinstance(exc, DfcoaError):
             prov["traceback"] = traceback.format_exc()
     prov.update(wall_time=time.perf_counter() - t0, host=socket.gethostname(),
-                simd=environment.numpy_simd(), pid=os.getpid(),
+                simd=environment.numpy_simd(), simd_cap=dispatch.describe(), pid=os.getpid(),
                 finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
     row["provenance"] = prov
     return Outcome(row, npz)

@@ -22,6 +22,7 @@ a map of at most :data:`MAX_CELLS` cells, and every position and length within
 
 from __future__ import annotations
 
+import copy
 import math
 import re
 from collections.abc import Mapping
@@ -185,7 +186,8 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
     _check_goal_clear(world, final_leader_poses(np.asarray(path, dtype=float), spec, heading),
                       offsets, spec, source)
     return Scenario(spec=spec, source=source, world=world, offsets=offsets, initial_pose=pose,
-                    leader_heading=float(heading), leader_path=np.asarray(path, dtype=float))
+                    leader_heading=float(heading), leader_path=np.asarray(path, dtype=float),
+                    data=copy.deepcopy(dict(data)), base_dir=Path(base_dir))
 
 
 def _check_names(spec: ScenarioSpec, source: str) -> None:

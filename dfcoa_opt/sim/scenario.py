@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from functools import cached_property
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.geometry import point_segment_distance, points_in_polygon
 from dfcoa_opt.sim.schema import ScenarioSpec
 from dfcoa_opt.world.dynamic import DynamicObstacles
@@ -132,6 +136,9 @@ class Scenario:
         initial_pose: ``(N, 3)`` initial robot poses (m, m, rad).
         leader_heading: Initial leader heading, rad.
         leader_path: ``(P, 2)`` the leader's planned path, m.
+        data: The file's contents with the overrides applied, from which
+            :meth:`for_seed` draws the world again (None: built another way).
+        base_dir: Folder against which ``world.map_image`` is resolved.
     """
 
     spec: ScenarioSpec
@@ -141,6 +148,48 @@ class Scenario:
     initial_pose: NDArray[np.float64]
     leader_heading: float
     leader_path: NDArray[np.float64]
+    data: Mapping[str, Any] | None = field(default=None, repr=False)
+    base_dir: Path = field(default=Path("."), repr=False)
+
+    @property
+    def seed_dependent(self) -> bool:
+        """Whether the world is drawn from the scenario's ``seed``.
+
+        True for a ``[world.clutter]`` field without a seed of its own: each
+        seed draws another field (and the leader's path around it).
+        """
+        clutter = self.spec.world.clutter
+        return clutter.density > 0.0 and clutter.seed is None
+
+    def for_seed(self, seed: int) -> Scenario:
+        """This scenario as loaded with ``seed``: what the seed draws is drawn again.
+
+        The one meaning of a run's seed, whatever the entry point: a run with
+        seed ``s`` gets the world of ``load_scenario(file, s)``, so a loaded
+        scenario can be run with any seed.
+
+        Args:
+            seed: The run's seed.
+
+        Returns:
+            ``self`` when ``seed`` is the scenario's or nothing in it depends on
+            the seed; else the scenario built again from :attr:`data` with
+            ``seed`` (the same overrides).
+
+        Raises:
+            DfcoaError: The world depends on the seed and the scenario was not
+                built from a file or a dict (no :attr:`data`).
+            ScenarioError: The scenario does not load with ``seed`` (e.g. a
+                clutter field that closes the way).
+        """
+        if int(seed) == self.spec.seed or not self.seed_dependent:
+            return self
+        if self.data is None:
+            raise DfcoaError(f"{self.source}: its clutter field follows the seed, so load it with "
+                             f"seed {seed} (dfcoa_opt.load(path, seed={seed})) to run that seed")
+        from dfcoa_opt.sim.loader import scenario_from_dict
+
+        return scenario_from_dict({**self.data, "seed": int(seed)}, self.source, self.base_dir)
 
     @property
     def name(self) -> str:

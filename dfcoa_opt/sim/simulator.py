@@ -31,7 +31,7 @@ import time
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt import __version__
+from dfcoa_opt import __version__, dispatch
 from dfcoa_opt.control.adapters import convert
 from dfcoa_opt.control.base import Controller, MovingObstacles, Neighbours, Observation
 from dfcoa_opt.errors import DfcoaError
@@ -59,12 +59,17 @@ class Simulator:
         scenario: The loaded scenario.
         controller: Any object implementing :class:`~dfcoa_opt.control.base.Controller`.
         seed: Seed of the run's only random generator (default ``scenario.spec.seed``).
+            A world drawn from the seed (a clutter field) is drawn again for it
+            (:meth:`~dfcoa_opt.sim.scenario.Scenario.for_seed`), so the run is
+            that of the file loaded with ``seed``; :attr:`scenario` is the
+            scenario that runs.
     """
 
     def __init__(self, scenario: Scenario, controller: Controller, seed: int | None = None) -> None:
-        self.scenario = scenario
-        self.controller = controller
         self.seed = scenario.spec.seed if seed is None else int(seed)
+        self.scenario = scenario.for_seed(self.seed)
+        scenario = self.scenario
+        self.controller = controller
         spec = scenario.spec
         self.model = make_model(spec.robots)
         self.lidar = Lidar(spec.sensors.lidar, scenario.world.grid) if spec.sensors.lidar.enabled \
@@ -102,6 +107,7 @@ class Simulator:
         Raises:
             ControllerError: The controller returned a wrong shape, NaN or inf.
         """
+        dispatch.check()  # numpy imported before dfcoa_opt runs uncapped: say so, once
         sc, spec = self.scenario, self.scenario.spec
         dt, n = spec.dt, self.n
         rng = np.random.default_rng(self.seed)
