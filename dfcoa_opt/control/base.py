@@ -11,7 +11,6 @@ observation only; :meth:`Observation.take` and the test helper
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
@@ -98,6 +97,12 @@ class Observation:
         goal: ``(2,)`` mission goal, m.
         slot_offset: ``(N, 2)`` own slot offset in the leader frame, m.
         slot: ``(N, 2)`` own slot in the world (from ``leader`` and ``slot_offset``), m.
+        env: None in the observation of one run. In the observation of a batch
+            (given to a controller with ``batched = True``): ``(R,)`` the run of
+            each row; rows are run after run, ``robot_ids`` are indices within
+            the run, ``leader`` is ``(E, 5)``, one state per run of the batch
+            (``leader[env]`` is row i's), and neighbour indices are rows of
+            this observation.
 
     The simulator shares some of these arrays between steps and runs
     (``robot_ids``, ``leader``, ``slot``): they are read-only, and a controller
@@ -117,11 +122,18 @@ class Observation:
     goal: FloatArray
     slot_offset: FloatArray
     slot: FloatArray
+    env: NDArray[np.intp] | None = None
 
     @property
     def n(self) -> int:
         """Number of rows (robots)."""
         return len(self.pose)
+
+    def row_leader(self) -> FloatArray:
+        """``(N, 5)`` the leader state each row received (``leader[env]`` in a batch)."""
+        if self.env is None:
+            return np.broadcast_to(self.leader, (self.n, 5))
+        return self.leader[self.env]
 
     def take(self, rows: NDArray[np.intp] | list[int]) -> Observation:
         """Sub-observation with only the given rows (for checking distributedness)."""
@@ -130,7 +142,8 @@ class Observation:
         return Observation(self.t, self.dt, self.robot_ids[rows], self.pose[rows],
                            self.velocity[rows], self.twist[rows], scan,
                            self.neighbours.take(rows), self.obstacles.take(rows), self.leader,
-                           self.goal, self.slot_offset[rows], self.slot[rows])
+                           self.goal, self.slot_offset[rows], self.slot[rows],
+                           None if self.env is None else self.env[rows])
 
 
 
@@ -142,17 +155,20 @@ def slot_velocity(leader: FloatArray, slot: FloatArray) -> FloatArray:
     broadcast (v, omega). With ``omega = 0`` it is the leader's velocity.
 
     Args:
-        leader: ``(5,)`` broadcast leader state (x m, y m, theta rad, v m/s, omega rad/s).
+        leader: ``(5,)`` broadcast leader state (x m, y m, theta rad, v m/s, omega rad/s),
+            or ``(..., 5)`` one per point (e.g. :meth:`Observation.row_leader`),
+            broadcast against ``slot``'s leading axes.
         slot: ``(..., 2)`` world positions of the slots (or any leader-fixed points), m.
 
     Returns:
         ``(..., 2)`` their world velocities, m/s.
     """
-    x, y, th, v, w = (float(c) for c in np.asarray(leader, dtype=float))
-    rel = np.asarray(slot, dtype=float) - np.array([x, y])
+    lead = np.asarray(leader, dtype=float)
+    rel = np.asarray(slot, dtype=float) - lead[..., :2]
+    th, v, w = lead[..., 2], lead[..., 3], lead[..., 4]
     out = np.empty(rel.shape)
-    out[..., 0] = v * math.cos(th) - w * rel[..., 1]
-    out[..., 1] = v * math.sin(th) + w * rel[..., 0]
+    out[..., 0] = v * np.cos(th) - w * rel[..., 1]
+    out[..., 1] = v * np.sin(th) + w * rel[..., 0]
     return out
 
 

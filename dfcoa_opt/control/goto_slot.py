@@ -26,6 +26,7 @@ class GotoSlot:
 
     command = "velocity"
     uses_scan = False
+    batched = True
 
     @dataclass(frozen=True)
     class Params:
@@ -40,9 +41,12 @@ class GotoSlot:
     def reset(self, scenario, rng: np.random.Generator) -> None:
         """Stateless: nothing to reset."""
 
+    def reset_batch(self, scenarios, rngs) -> None:
+        """Stateless: nothing to reset."""
+
     def act(self, obs: Observation) -> np.ndarray:
-        """Row i uses only robot i's pose and slot and the broadcast leader."""
+        """Row i uses only robot i's pose and slot and the leader state it received."""
         u = self.p.kp * (obs.slot - obs.pose[:, :2])
         if self.p.feedforward:
-            u = u + slot_velocity(obs.leader, obs.slot)
+            u = u + slot_velocity(obs.row_leader(), obs.slot)
         return u

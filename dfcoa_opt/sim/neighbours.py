@@ -131,17 +131,29 @@ def proximity(points: NDArray[np.float64], radius: float, k_max: int,
 
 @numba.njit(cache=True)
 def _dense_proximity(points, radius, k, contact):  # pragma: no cover - numba
-    """:func:`proximity` of a small team in one loop (same numbers as the dense numpy path).
-
-    Distances are ``sqrt(dx * dx + dy * dy)`` as in
-    :func:`~dfcoa_opt.geometry.pairwise_distances`; each row keeps its ``k``
-    nearest by insertion (ties by index, as a stable argsort).
-    """
+    """:func:`proximity` of a small team in one loop (same numbers as the dense numpy path)."""
     n = points.shape[0]
     idx = np.full((n, k), -1, dtype=np.intp)
     dist = np.full((n, k), np.inf)
     keys = np.empty(n * (n - 1) // 2, dtype=np.int64)
-    n_keys = 0
+    closest, n_keys = _proximity_block(points, 0, n, radius, k, contact, idx, dist, keys, 0)
+    return idx, dist, closest, keys[:n_keys]
+
+
+@numba.njit(cache=True)
+def _proximity_block(points, start, n, radius, k, contact, idx, dist, keys,
+                     n_keys):  # pragma: no cover - numba
+    """Rows ``start .. start + n`` of ``points`` as one team: :func:`proximity`'s loop.
+
+    Distances are ``sqrt(dx * dx + dy * dy)`` as in
+    :func:`~dfcoa_opt.geometry.pairwise_distances`; each row keeps its ``k``
+    nearest by insertion (ties by index, as a stable argsort). Indices and
+    contact keys ``i * n + j`` are within the team; ``idx``/``dist`` (filled
+    with -1 / inf) get the team's rows, ``keys`` its keys from ``n_keys`` on.
+
+    Returns:
+        ``(closest centre distance of the team, n_keys after its keys)``.
+    """
     closest = np.inf
     row = np.empty(n)
     for i in range(n):
@@ -149,33 +161,137 @@ def _dense_proximity(points, radius, k, contact):  # pragma: no cover - numba
             if j == i:
                 row[j] = np.inf
                 continue
-            dx = points[i, 0] - points[j, 0]
-            dy = points[i, 1] - points[j, 1]
+            dx = points[start + i, 0] - points[start + j, 0]
+            dy = points[start + i, 1] - points[start + j, 1]
             row[j] = math.sqrt(dx * dx + dy * dy)
             if j > i and row[j] < contact:
                 keys[n_keys] = i * n + j
                 n_keys += 1
         filled = 0
+        r = start + i
         for j in range(n):
             d = row[j]
             if d < closest:
                 closest = d
-            if k == 0 or (filled == k and not d < dist[i, k - 1]):
+            if k == 0 or (filled == k and not d < dist[r, k - 1]):
                 continue
             pos = filled if filled < k else k - 1
-            while pos > 0 and d < dist[i, pos - 1]:  # strict: equal distances keep index order
-                dist[i, pos] = dist[i, pos - 1]
-                idx[i, pos] = idx[i, pos - 1]
+            while pos > 0 and d < dist[r, pos - 1]:  # strict: equal distances keep index order
+                dist[r, pos] = dist[r, pos - 1]
+                idx[r, pos] = idx[r, pos - 1]
                 pos -= 1
-            dist[i, pos] = d
-            idx[i, pos] = j
+            dist[r, pos] = d
+            idx[r, pos] = j
             if filled < k:
                 filled += 1
         for m in range(k):
-            if not dist[i, m] <= radius:
-                idx[i, m] = -1
-                dist[i, m] = np.inf
-    return idx, dist, closest, keys[:n_keys]
+            if not dist[r, m] <= radius:
+                idx[r, m] = -1
+                dist[r, m] = np.inf
+    return closest, n_keys
+
+
+@dataclass(frozen=True)
+class BatchProximity:
+    """:class:`Proximity` of E teams of N robots at once (team e = rows ``e*N .. e*N+N-1``).
+
+    Attributes:
+        index: ``(E*N, K)`` neighbour indices within each team (-1 padded).
+        distance: ``(E*N, K)`` their distances, m (inf padded).
+        min_distance: ``(E,)`` each team's smallest centre distance, m.
+        contact_keys: Every team's contact keys (``i * N + j``, i < j), concatenated.
+        key_ptr: ``(E + 1,)`` team e's keys are ``contact_keys[key_ptr[e]:key_ptr[e + 1]]``.
+    """
+
+    index: NDArray[np.intp]
+    distance: NDArray[np.float64]
+    min_distance: NDArray[np.float64]
+    contact_keys: NDArray[np.int64]
+    key_ptr: NDArray[np.int64]
+
+    def team(self, e: int, n: int) -> Proximity:
+        """Team ``e``'s :class:`Proximity` (views)."""
+        rows = slice(e * n, (e + 1) * n)
+        return Proximity(self.index[rows], self.distance[rows], float(self.min_distance[e]),
+                         self.contact_keys[self.key_ptr[e]:self.key_ptr[e + 1]])
+
+
+def batch_proximity(points: NDArray[np.float64], n: int, radius: float, k_max: int,
+                    contact: float) -> BatchProximity:
+    """:func:`proximity` of every team of ``n`` consecutive rows, the same numbers team by team.
+
+    Teams up to :data:`KERNEL_MAX` go through one compiled call for the whole
+    batch; larger ones through :func:`proximity`, one team at a time.
+
+    Args:
+        points: ``(E*N, 2)`` robot positions, m, team after team (E >= 1).
+        n: Robots per team.
+        radius: Communication radius, m.
+        k_max: Most neighbours per robot.
+        contact: Pairs with centre distance below this (m) are in contact.
+    """
+    e = len(points) // n if n else 0
+    if n < 2 or n > KERNEL_MAX:
+        teams = [proximity(points[i * n:(i + 1) * n], radius, k_max, contact) for i in range(e)]
+        ptr = np.zeros(e + 1, dtype=np.int64)
+        np.cumsum([len(t.contact_keys) for t in teams], out=ptr[1:])
+        return BatchProximity(np.concatenate([t.index for t in teams]),
+                              np.concatenate([t.distance for t in teams]),
+                              np.array([t.min_distance for t in teams], dtype=float),
+                              np.concatenate([t.contact_keys for t in teams]).astype(np.int64),
+                              ptr)
+    idx, dist, closest, keys, ptr = _batch_proximity(
+        np.ascontiguousarray(points, dtype=float), n, float(radius), min(k_max, n - 1),
+        float(contact))
+    return BatchProximity(idx, dist, closest, keys, ptr)
+
+
+@numba.njit(cache=True)
+def _batch_proximity(points, n, radius, k, contact):  # pragma: no cover - numba
+    """:func:`batch_proximity`'s compiled path: :func:`_proximity_block` team by team."""
+    e = points.shape[0] // n
+    idx = np.full((e * n, k), -1, dtype=np.intp)
+    dist = np.full((e * n, k), np.inf)
+    keys = np.empty(e * (n * (n - 1) // 2), dtype=np.int64)
+    closest = np.empty(e)
+    ptr = np.zeros(e + 1, dtype=np.int64)
+    n_keys = 0
+    for t in range(e):
+        closest[t], n_keys = _proximity_block(points, t * n, n, radius, k, contact, idx, dist,
+                                              keys, n_keys)
+        ptr[t + 1] = n_keys
+    return idx, dist, closest, keys[:n_keys], ptr
+
+
+def new_contacts(prev_keys: NDArray[np.int64], prev_ptr: NDArray[np.int64],
+                 keys: NDArray[np.int64], ptr: NDArray[np.int64]) -> NDArray[np.int64]:
+    """How many of each team's contact keys are not among its previous ones.
+
+    Args:
+        prev_keys: The teams' sorted keys of the previous step, concatenated.
+        prev_ptr: ``(E + 1,)`` their offsets.
+        keys: The sorted keys of this step, concatenated.
+        ptr: ``(E + 1,)`` their offsets.
+
+    Returns:
+        ``(E,)`` counts: the robot pairs whose contact began at this step.
+    """
+    return _new_contacts(prev_keys, prev_ptr, keys, ptr)
+
+
+@numba.njit(cache=True)
+def _new_contacts(prev_keys, prev_ptr, keys, ptr):  # pragma: no cover - numba
+    """:func:`new_contacts` by merging each team's two sorted lists."""
+    e = ptr.shape[0] - 1
+    out = np.zeros(e, dtype=np.int64)
+    for t in range(e):
+        i, stop = prev_ptr[t], prev_ptr[t + 1]
+        for q in range(ptr[t], ptr[t + 1]):
+            while i < stop and prev_keys[i] < keys[q]:
+                i += 1
+            if not (i < stop and prev_keys[i] == keys[q]):
+                out[t] += 1
+    return out
 
 
 def gather(index: NDArray[np.intp], pose: NDArray[np.float64],

@@ -1,0 +1,95 @@
+"""Batched simulation: a batch of E runs gives the logs of its runs alone, bit for bit."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import dfcoa_opt as d
+from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.sim.batch import BatchSimulator
+from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.sim.simulator import Simulator, run_batch_logs, run_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+COMMON = [ROOT / "scenarios" / "dfcoa_s1.toml", ROOT / "scenarios" / "dfcoa_s2.toml",
+          *sorted((ROOT / "scenarios" / "bench").glob("*.toml"))]
+#: As the comparison runs them.
+SETTINGS = {"controllers.virtual_spring.offset_frame": "leader",
+            "controllers.virtual_spring_basic.offset_frame": "leader",
+            "controllers.cbf.solver": "exact"}
+SEEDS = (0, 1, 2)
+VARIANTS = [*d.controllers(), "goto_slot+cbf", "goto_slot+orca"]
+
+
+def singles(path: Path, controller: str, overrides: dict, seeds=SEEDS) -> list[str]:
+    return [run_scenario(load_scenario(path, s, overrides), controller).digest() for s in seeds]
+
+
+@pytest.mark.parametrize("controller", VARIANTS)
+def test_a_batch_of_three_is_three_single_runs_on_every_common_scenario(controller):
+    overrides = {**SETTINGS, "t_max": 3.0}
+    for path in COMMON:
+        sc = load_scenario(path, 7, overrides)  # drawn for another seed: each run redraws
+        batch = run_batch_logs(sc, controller, SEEDS)
+        assert [log.digest() for log in batch] == singles(path, controller, overrides), path.stem
+        assert [log.meta["seed"] for log in batch] == list(SEEDS)
+
+
+@pytest.mark.parametrize("controller", ["goto_slot", "virtual_spring", "goto_slot+cbf"])
+def test_runs_that_end_early_leave_the_batch_with_their_own_log(controller):
+    """Clutter with stops at the first contact and at a deadlock: the runs end apart."""
+    overrides = {**SETTINGS, "stop_on_collision": True, "stop_on_deadlock": True}
+    path = ROOT / "scenarios" / "bench" / "clutter.toml"
+    seeds = (0, 1, 2, 3, 4)
+    batch = run_batch_logs(load_scenario(path, 0, overrides), controller, seeds)
+    assert [log.digest() for log in batch] == singles(path, controller, overrides, seeds)
+    assert len({log.n_steps for log in batch}) > 1  # they did end at different steps
+
+
+def test_run_iter_yields_each_run_as_it_ends():
+    from dfcoa_opt.control.registry import make_controller
+
+    overrides = {"stop_on_collision": True, "stop_on_deadlock": True}
+    sc = load_scenario(ROOT / "scenarios" / "bench" / "clutter.toml", 0, overrides)
+    order = [(e, log.n_steps) for e, log in
+             BatchSimulator(sc, make_controller("goto_slot"), [0, 1, 2, 3]).run_iter()]
+    steps = [s for _, s in order]
+    assert sorted(e for e, _ in order) == [0, 1, 2, 3] and steps == sorted(steps)
+    assert len(set(steps)) > 1
+
+
+def test_an_unbatched_controller_needs_one_object_per_seed():
+    from dfcoa_opt.control.registry import make_controller
+
+    sc = load_scenario(ROOT / "scenarios" / "example_empty.toml")
+    with pytest.raises(DfcoaError, match="'lf_vo' is not batched: give one object per seed"):
+        BatchSimulator(sc, make_controller("lf_vo"), [0, 1])
+    with pytest.raises(DfcoaError, match="at least one seed"):
+        BatchSimulator(sc, make_controller("goto_slot"), [])
+    assert Simulator(sc, make_controller("lf_vo"), 3).run().meta["seed"] == 3
+
+
+def test_a_batched_controller_sees_every_run_in_one_observation():
+    """One act per step for the whole batch: rows run after run, one leader state per run."""
+    from dfcoa_opt.control.goto_slot import GotoSlot
+
+    seen = []
+
+    class Spy(GotoSlot):
+        def act(self, obs):
+            seen.append((obs.env.copy(), obs.leader.shape, obs.robot_ids.copy(),
+                         obs.neighbours.index.copy()))
+            return super().act(obs)
+
+    sc = load_scenario(ROOT / "scenarios" / "example_empty.toml", overrides={"t_max": 1.0})
+    logs = BatchSimulator(sc, Spy(GotoSlot.Params()), [0, 1, 2]).run_all()
+    n = sc.n
+    env, leader_shape, ids, index = seen[0]
+    assert len(seen) == logs[0].n_steps and leader_shape == (3, 5)
+    assert env.tolist() == [0] * n + [1] * n + [2] * n and ids.tolist() == list(range(n)) * 3
+    rows = np.arange(3 * n)[:, None]
+    real = index >= 0
+    assert real.any() and np.all((index // n == rows // n)[real])  # neighbours of the same run
