@@ -41,9 +41,10 @@ from dfcoa_opt.api import (  # noqa: E402 - after the kernel cache check
     register,
     report,
     run,
+    run_batch,
     sweep,
 )
 
 __version__ = "0.1.0"
 __all__ = ["Results", "Run", "__version__", "controllers", "load", "register", "report", "run",
-           "sweep"]
+           "run_batch", "sweep"]

@@ -35,7 +35,10 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("scenario", help="scenario .toml file")
     r.add_argument("--controller", default="goto_slot", help="controller id (dfcoa list "
                    "controllers); default goto_slot")
-    r.add_argument("--seed", type=int, default=None, help="run seed (default: the file's seed)")
+    seed = r.add_mutually_exclusive_group()
+    seed.add_argument("--seed", type=int, default=None, help="run seed (default: the file's seed)")
+    seed.add_argument("--seeds", metavar="LIST", help="several runs stepped as one batch, e.g. "
+                      "0-19 or 0,3,7 (one log per seed, the same as one run per --seed)")
     r.add_argument("--out", default="out", help="folder for the log .npz, metrics .json and "
                    "plots (default ./out)")
     r.add_argument("--json", action="store_true", help="print one JSON object to stdout")
@@ -146,46 +149,74 @@ def _cmd_report(a: argparse.Namespace) -> int:
     return 0
 
 
+def seed_list(text: str) -> list[int]:
+    """The seeds of ``--seeds``: ``0-19``, ``0,3,7`` or both (``0-4,10``), in that order.
+
+    Raises:
+        DfcoaError: Not such a list, a seed below 0, or a seed twice.
+    """
+    seeds: list[int] = []
+    for part in text.split(","):
+        lo, dash, hi = part.strip().partition("-")
+        try:
+            first, last = int(lo), int(hi if dash else lo)
+        except ValueError:
+            raise DfcoaError(f"--seeds: '{text}' is not a seed list (e.g. 0-19 or 0,3,7)") from None
+        if first < 0 or last < first:
+            raise DfcoaError(f"--seeds: '{part.strip()}' must be a seed >= 0 or a range lo-hi "
+                             f"with lo <= hi")
+        seeds += range(first, last + 1)
+    if len(set(seeds)) != len(seeds):
+        raise DfcoaError(f"--seeds: '{text}' names a seed twice")
+    return seeds
+
+
 def _cmd_run(a: argparse.Namespace) -> int:
     from dfcoa_opt import metrics
     from dfcoa_opt.bench.runner import jsonable
+    from dfcoa_opt.sim.batch import BatchSimulator
     from dfcoa_opt.sim.loader import load_scenario
-    from dfcoa_opt.sim.simulator import ControllerError, run_scenario
+    from dfcoa_opt.sim.simulator import ControllerError, batch_controllers
 
-    scenario = load_scenario(a.scenario, a.seed)
+    seeds = seed_list(a.seeds) if a.seeds is not None else [a.seed]
+    scenario = load_scenario(a.scenario, seeds[0])
     if a.animate and not a.animate.lower().endswith(".gif"):
         raise DfcoaError(f"--animate: '{a.animate}' must end in .gif")
+    if a.animate and len(seeds) > 1:
+        raise DfcoaError("--animate: one GIF needs one run; use --seed")
+    sim = BatchSimulator(scenario, batch_controllers(a.controller, scenario, len(seeds)), seeds)
     try:
-        log = run_scenario(scenario, a.controller)
+        logs = sim.run_all()
     except ControllerError as exc:
         print(f"dfcoa: run failed: {exc}", file=sys.stderr)
         return EXIT_RUN_FAILED
-    summary = metrics.summary(log, scenario.spec.metrics)
-    seed = log.meta["seed"]
-    out = Path(a.out)
-    stem = out / f"{scenario.name}-{a.controller}-s{seed}"
-    log.save(stem.with_suffix(".npz"))
-    result = {"scenario": scenario.name, "controller": a.controller, "seed": seed,
-              "metrics": jsonable(summary)}
-    stem.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
-    if a.plot or a.animate:
-        from dfcoa_opt import plotting
+    for sc, log in zip(sim.scenarios, logs, strict=True):
+        summary = metrics.summary(log, sc.spec.metrics)
+        seed = log.meta["seed"]
+        stem = Path(a.out) / f"{sc.name}-{a.controller}-s{seed}"
+        log.save(stem.with_suffix(".npz"))
+        result = {"scenario": sc.name, "controller": a.controller, "seed": seed,
+                  "metrics": jsonable(summary)}
+        stem.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
+        if a.plot or a.animate:
+            from dfcoa_opt import plotting
 
-        goal, start = scenario.spec.leader.goal, scenario.spec.leader.start
-        if a.plot:
-            plotting.plot_run(log, scenario.world.grid, stem.with_suffix(".png"), goal=goal,
-                              start=start, shapes=scenario.world.shapes)
-        if a.animate:
-            plotting.animate_run(log, scenario.world.grid, a.animate, goal=goal, start=start,
-                                 shapes=scenario.world.shapes)
-    if a.json:
-        print(json.dumps(result))
-    else:
-        print(f"{scenario.name} / {a.controller} / seed {seed}: {summary['outcome']} "
+            goal, start = sc.spec.leader.goal, sc.spec.leader.start
+            if a.plot:
+                plotting.plot_run(log, sc.world.grid, stem.with_suffix(".png"), goal=goal,
+                                  start=start, shapes=sc.world.shapes)
+            if a.animate:
+                plotting.animate_run(log, sc.world.grid, a.animate, goal=goal, start=start,
+                                     shapes=sc.world.shapes)
+        if a.json:
+            print(json.dumps(result))  # one object per line (JSON Lines) with --seeds
+            continue
+        print(f"{sc.name} / {a.controller} / seed {seed}: {summary['outcome']} "
               f"({'reached goal' if summary['reached'] else 'did not reach goal'}) "
               f"in {log.t[-1]:.1f} s simulated ({log.meta['wall_time']:.2f} s wall)")
-        for k, v in summary.items():
-            print(f"  {k:28s} {v}")
+        if len(seeds) == 1:
+            for k, v in summary.items():
+                print(f"  {k:28s} {v}")
         print(f"  log: {stem.with_suffix('.npz')}")
     return 0
 

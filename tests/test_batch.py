@@ -93,3 +93,38 @@ def test_a_batched_controller_sees_every_run_in_one_observation():
     rows = np.arange(3 * n)[:, None]
     real = index >= 0
     assert real.any() and np.all((index // n == rows // n)[real])  # neighbours of the same run
+
+
+def test_run_batch_gives_the_runs_of_run_and_of_the_command_line(tmp_path):
+    from dfcoa_opt.cli import main
+    from dfcoa_opt.sim.log import RunLog
+
+    path = ROOT / "scenarios" / "bench" / "clutter.toml"
+    runs = d.run_batch(path, "goto_slot", [2, 0, 1])
+    alone = [d.run(path, "goto_slot", seed=s) for s in (2, 0, 1)]
+    assert [r.log.digest() for r in runs] == [r.log.digest() for r in alone]
+    assert [r.scenario.spec.seed for r in runs] == [2, 0, 1]
+    assert runs[1].metrics["fce_rms"] == alone[1].metrics["fce_rms"]
+    assert main(["run", str(path), "--controller", "goto_slot", "--seeds", "0-1,2",
+                 "--out", str(tmp_path), "--json"]) == 0
+    cli = {s: RunLog.load(tmp_path / f"clutter-goto_slot-s{s}.npz").digest() for s in SEEDS}
+    assert cli == {r.log.meta["seed"]: r.log.digest() for r in runs}
+
+
+@pytest.mark.parametrize(("text", "seeds"), [("0-3", [0, 1, 2, 3]), ("5,1", [5, 1]),
+                                             ("0-1, 7", [0, 1, 7]), ("4", [4])])
+def test_seed_lists(text, seeds):
+    from dfcoa_opt.cli import seed_list
+
+    assert seed_list(text) == seeds
+
+
+@pytest.mark.parametrize(("text", "error"), [("0-x", "is not a seed list"),
+                                             ("3-1", "'3-1' must be a seed >= 0"),
+                                             ("1,0-2", "names a seed twice"), ("", "not a seed")])
+def test_bad_seed_lists_are_one_line_errors(text, error, capsys):
+    from dfcoa_opt.cli import main
+
+    assert main(["run", str(ROOT / "scenarios" / "example_empty.toml"), "--seeds", text]) == 2
+    err = capsys.readouterr().err
+    assert error in err and err.count("\n") == 1

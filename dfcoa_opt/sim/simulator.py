@@ -26,14 +26,15 @@ stepping it inside the loop).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 from dfcoa_opt.control.base import Controller
-from dfcoa_opt.sim.batch import BatchSimulator, ControllerError
+from dfcoa_opt.sim.batch import BatchSimulator, ControllerError, is_batched
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.sim.scenario import Scenario
 from dfcoa_opt.world.lidar import Lidar
 
-__all__ = ["ControllerError", "Simulator", "run_batch_logs", "run_scenario"]
+__all__ = ["ControllerError", "Simulator", "batch_controllers", "run_batch_logs", "run_scenario"]
 
 
 class Simulator(BatchSimulator):
@@ -91,11 +92,11 @@ def run_scenario(scenario: Scenario, controller_id: str, seed: int | None = None
     return Simulator(scenario, ctrl, seed).run()
 
 
-def run_batch_logs(scenario: Scenario, controller_id: str,
-                   seeds: Sequence[int | None]) -> list[RunLog]:
-    """:func:`run_scenario` for several seeds in one batch; the logs in the order of ``seeds``.
+def batch_controllers(controller_id: str, scenario: Scenario, runs: int) -> Any:
+    """What :class:`BatchSimulator` takes for ``runs`` runs of a registry id.
 
-    A batched controller is built once for the batch; any other one once per seed.
+    A batched controller is built once for the batch; any other one once per
+    run (each with the scenario's ``[controllers.<id>]`` parameters).
     """
     from dfcoa_opt.control.registry import build_controller
 
@@ -103,5 +104,11 @@ def run_batch_logs(scenario: Scenario, controller_id: str,
         return build_controller(controller_id, scenario.spec.controllers, scenario.source)
 
     first = build()
-    ctrl = first if getattr(first, "batched", False) else [first, *(build() for _ in seeds[1:])]
+    return first if is_batched(first) else [first, *(build() for _ in range(runs - 1))]
+
+
+def run_batch_logs(scenario: Scenario, controller_id: str,
+                   seeds: Sequence[int | None]) -> list[RunLog]:
+    """:func:`run_scenario` for several seeds in one batch; the logs in the order of ``seeds``."""
+    ctrl = batch_controllers(controller_id, scenario, len(seeds))
     return BatchSimulator(scenario, ctrl, seeds).run_all()
