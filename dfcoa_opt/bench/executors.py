@@ -1,12 +1,18 @@
-"""Executors: run :func:`~dfcoa_opt.bench.runner.execute` over many runs.
+"""Executors: run the runs of a sweep, batched, and yield their rows as the runs end.
 
-Three kinds, all yielding :class:`~dfcoa_opt.bench.runner.Outcome` objects as
-runs finish (in completion order; the store does not care about order):
+Runs that differ only in their seed (the same scenario file, overrides and
+controller) are grouped into batches (:func:`batches`) and each batch is
+simulated as one (:func:`~dfcoa_opt.bench.runner.execute_batch`), with the same
+rows as one run at a time. Three kinds, all yielding
+:class:`~dfcoa_opt.bench.runner.Outcome` objects as runs finish (in completion
+order; the store does not care about order):
 
-- ``serial``: in this process, in order;
-- ``process``: a local process pool (``concurrent.futures``), the default;
+- ``serial``: in this process, batch after batch;
+- ``process``: a local process pool (``concurrent.futures``), the default; each
+  worker sends a run's row back as soon as the run ends;
 - ``dask``: a Dask distributed cluster, given by its scheduler address or
-  started locally (``LocalCluster``) -- needs the ``dask`` extra.
+  started locally (``LocalCluster``) -- needs the ``dask`` extra; a batch's
+  rows come back when the batch ends.
 
 Workers only compute; the caller's process writes every file, so no two
 processes ever write the same file and a remote cluster needs no shared disk
@@ -15,15 +21,19 @@ processes ever write the same file and a remote cluster needs no shared disk
 
 from __future__ import annotations
 
+import contextlib
 import itertools
+import math
 import os
+import threading
 from collections.abc import Iterable, Iterator, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from queue import SimpleQueue
+from typing import Any
 
 from dfcoa_opt.bench.lifecycle import deferred, forkserver_context, init_worker, terminate
-from dfcoa_opt.bench.runner import Outcome, execute
+from dfcoa_opt.bench.runner import Outcome, execute_batch, execute_batch_list
 from dfcoa_opt.bench.sweep import RunSpec
 from dfcoa_opt.control.registry import BUILTIN_MODULES
 from dfcoa_opt.errors import DfcoaError
@@ -59,21 +69,64 @@ class ExecutorConfig:
             raise DfcoaError(f"--dask-local: must be >= 1, got {self.dask_local}")
 
 
+#: Most runs in one batch, and most robot rows (runs x robots): a batch's logs are
+#: held until its runs end (20 runs of 100 robots: about 250 MB).
+BATCH_RUNS = 20
+BATCH_ROWS = 2000
+
+
+def batches(runs: Sequence[RunSpec], jobs: int = 1) -> list[list[RunSpec]]:
+    """Group runs that differ only in their seed, in their order, into batches.
+
+    A group is cut into batches of at most :data:`BATCH_RUNS` runs and
+    :data:`BATCH_ROWS` robot rows, and smaller ones when there are too few runs
+    to give every worker two batches.
+
+    Args:
+        runs: The runs to execute.
+        jobs: Workers that will share the batches.
+    """
+    groups: dict[tuple[str, str, str], list[RunSpec]] = {}
+    for r in runs:
+        groups.setdefault((r.scenario_file, r.overrides, r.controller), []).append(r)
+    size = max(1, min(BATCH_RUNS, math.ceil(len(runs) / (2 * jobs))))
+    out = []
+    for group in groups.values():
+        n = _robots(group[0])
+        step = max(1, min(size, BATCH_ROWS // max(n, 1)))
+        out += [group[i:i + step] for i in range(0, len(group), step)]
+    return out
+
+
+def _robots(run: RunSpec) -> int:
+    """The team size of a run's scenario (read from the file and its overrides; 1 if unknown)."""
+    from dfcoa_opt.sim.loader import read_toml
+
+    over = run.overrides_dict
+    if "team.n" in over:
+        return int(over["team.n"])
+    try:
+        return int(read_toml(run.scenario_file).get("team", {}).get("n", 1))
+    except Exception:  # noqa: BLE001 - the run itself reports a bad file
+        return 1
+
+
 def run_all(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome]:
-    """Execute ``runs``; yields each outcome as it finishes."""
+    """Execute ``runs`` in batches; yields each outcome as its run ends."""
     if not runs:
         return
     if config.kind == "serial" or (config.kind == "process" and config.jobs == 1):
-        for run in runs:
-            yield execute(run)
+        for batch in batches(runs):
+            yield from execute_batch(batch)
     elif config.kind == "process":
-        yield from _processes(runs, config.jobs or os.cpu_count() or 1)
+        jobs = config.jobs or os.cpu_count() or 1
+        yield from _processes(batches(runs, jobs), jobs)
     else:
         yield from _dask(runs, config)
 
 
-def _processes(runs: Sequence[RunSpec], jobs: int) -> Iterator[Outcome]:
-    """At most ``2 * jobs`` runs in flight, so finished logs never pile up in memory.
+def _processes(work: Sequence[Sequence[RunSpec]], jobs: int) -> Iterator[Outcome]:
+    """At most ``2 * jobs`` batches in flight, so finished logs never pile up in memory.
 
     Workers start from a fork server, not by forking this process: once this
     process has run a parallel numba kernel, GNU OpenMP's threads are up and a
@@ -84,40 +137,90 @@ def _processes(runs: Sequence[RunSpec], jobs: int) -> Iterator[Outcome]:
     numba thread, SIGINT ignored, exit with the main process). An interrupt or
     an abandoned generator terminates the workers at once instead of waiting
     for their runs.
+
+    Each worker puts a run's outcome on a pipe as soon as the run ends; a
+    thread of this process moves them to ``finished``, where the futures of
+    the batches also arrive when a batch is done (its result: how many
+    outcomes it sent), so a batch counts as finished once both are in.
     """
-    queue = iter(runs)
+    queue = iter(enumerate(work))
     ctx = forkserver_context(WORKER_PRELOAD)
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(runs)), mp_context=ctx,
-                               initializer=init_worker)
-    finished: SimpleQueue[Future[Outcome]] = SimpleQueue()
+    results = ctx.SimpleQueue()
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(work)), mp_context=ctx,
+                               initializer=_init_batch_worker, initargs=(results,))
+    finished: SimpleQueue[Any] = SimpleQueue()
+    threading.Thread(target=_forward, args=(results, finished), name="outcomes",
+                     daemon=True).start()
+    sent: dict[int, int] = {}
+    got: dict[int, int] = {}
     try:
         with deferred():
             in_flight = _submit(pool, itertools.islice(queue, 2 * jobs), finished)
         while in_flight:
-            fut = finished.get()  # waits in C and holds no lock when interrupted
+            item = finished.get()  # waits in C and holds no lock when interrupted
             with deferred():
-                outcome = fut.result()
-                in_flight += _submit(pool, itertools.islice(queue, 1), finished) - 1
-            yield outcome
+                if isinstance(item, Future):
+                    b = item.batch  # type: ignore[attr-defined]
+                    sent[b] = item.result()
+                else:
+                    b, outcome = item
+                    got[b] = got.get(b, 0) + 1
+                if sent.get(b) == got.get(b, 0):
+                    in_flight += _submit(pool, itertools.islice(queue, 1), finished) - 1
+            if not isinstance(item, Future):
+                yield outcome
     except BaseException:  # an interrupt, or the consumer stopped: stop the workers now
         terminate(pool)
+        results._writer.close()  # type: ignore[attr-defined]  # the thread gets end of file
         raise
     pool.shutdown(wait=True)
+    results.put(None)  # ends the thread
 
 
-def _submit(pool: ProcessPoolExecutor, runs: Iterable[RunSpec],
-            finished: SimpleQueue[Future[Outcome]]) -> int:
-    """Submit ``runs``; each future goes into ``finished`` when done. Returns how many.
+_RESULTS: Any = None
+
+
+def _init_batch_worker(results: Any) -> None:
+    """Pool-worker initializer: :func:`~dfcoa_opt.bench.lifecycle.init_worker`, and the pipe."""
+    global _RESULTS
+    init_worker()
+    _RESULTS = results
+
+
+def _execute_streaming(batch: int, runs: Sequence[RunSpec]) -> int:
+    """In a worker: execute one batch, sending ``(batch, outcome)`` as each run ends."""
+    n = 0
+    for outcome in execute_batch(runs):
+        _RESULTS.put((batch, outcome))
+        n += 1
+    return n
+
+
+def _forward(results: Any, finished: SimpleQueue[Any]) -> None:
+    """Move the workers' outcomes to ``finished`` until ``None`` or end of file."""
+    with contextlib.suppress(EOFError, OSError):
+        while (item := results.get()) is not None:
+            finished.put(item)
+
+
+def _submit(pool: ProcessPoolExecutor, work: Iterable[tuple[int, Sequence[RunSpec]]],
+            finished: SimpleQueue[Any]) -> int:
+    """Submit batches; each future (tagged ``.batch``) goes into ``finished`` when done.
 
     Call it inside :func:`~dfcoa_opt.bench.lifecycle.deferred`, like every step
     of :func:`_processes` that takes a lock of the pool or of a future (and a
     submit may start a worker): SIGINT and SIGTERM raise an exception where
     they land. The only wait outside such a block is ``SimpleQueue.get``,
     which holds no lock when interrupted.
+
+    Returns:
+        How many were submitted.
     """
     n = 0
-    for run in runs:
-        pool.submit(execute, run).add_done_callback(finished.put)
+    for b, runs in work:
+        fut = pool.submit(_execute_streaming, b, runs)
+        fut.batch = b  # type: ignore[attr-defined]
+        fut.add_done_callback(finished.put)
         n += 1
     return n
 
@@ -148,12 +251,13 @@ def _dask(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome]:
             raise DfcoaError(f"--scheduler: cannot reach Dask scheduler "
                              f"'{config.scheduler}': {exc}") from None
         with client:
-            done = dask_completed([client.submit(execute, r, key=f"run-{r.key}", pure=False)
-                                   for r in runs])
+            workers = sum(client.nthreads().values()) or 1
+            done = dask_completed([client.submit(execute_batch_list, b, key=f"batch-{b[0].key}",
+                                                 pure=False) for b in batches(runs, workers)])
             for fut in done:
-                outcome = fut.result()
-                fut.release()  # the cluster may forget the finished log
-                yield outcome
+                outcomes = fut.result()
+                fut.release()  # the cluster may forget the finished logs
+                yield from outcomes
     finally:
         if cluster is not None:
             cluster.close()

@@ -35,13 +35,17 @@ import os
 import socket
 import time
 import traceback
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from dfcoa_opt import dispatch, environment
 from dfcoa_opt.bench.sweep import RunSpec, load_run_scenario
 from dfcoa_opt.errors import DfcoaError
+
+if TYPE_CHECKING:
+    from dfcoa_opt.sim.log import RunLog
+    from dfcoa_opt.sim.scenario import Scenario
 
 #: Keys of a row that must be identical whichever executor ran it.
 DETERMINISTIC_KEYS = ("key", "scenario", "scenario_file", "controller", "seed", "overrides",
@@ -78,6 +82,38 @@ def _one_line(exc: BaseException) -> str:
     return text if isinstance(exc, DfcoaError) else f"{type(exc).__name__}: {text}"
 
 
+def _row(run: RunSpec) -> dict[str, Any]:
+    """A row of ``run`` before it ran: its identity, ``status = "failed"``."""
+    return {
+        "key": run.key, "scenario": run.scenario, "scenario_file": run.scenario_file,
+        "controller": run.controller, "seed": run.seed, "overrides": run.overrides_dict,
+        "overrides_hash": run.overrides_hash, "variant": run.variant_name,
+        "ladder": run.ladder, "ladder_value": run.ladder_value, "status": "failed", "error": None,
+        "metrics": None, "digest": None, "log": None,
+    }
+
+
+def _outcome(run: RunSpec, log: RunLog, scenario: Scenario, wall: float) -> Outcome:
+    """The row of a run that ran to its end (metrics, digest, log bytes)."""
+    from dfcoa_opt import metrics
+
+    t0 = time.perf_counter()
+    row = _row(run)
+    row["metrics"] = jsonable(metrics.summary(log, scenario.spec.metrics))
+    row["digest"] = log.digest()
+    row["log"] = f"logs/{run.key}.npz"
+    row["status"] = "ok"
+    npz = log.to_bytes()
+    row["provenance"] = _provenance(wall + time.perf_counter() - t0)
+    return Outcome(row, npz)
+
+
+def _provenance(wall: float) -> dict[str, Any]:
+    return dict(wall_time=wall, host=socket.gethostname(), simd=environment.numpy_simd(),
+                simd_cap=dispatch.describe(), pid=os.getpid(),
+                finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
+
+
 def execute(run: RunSpec) -> Outcome:
     """Simulate one run and summarise it; never raises for a failing run.
 
@@ -87,33 +123,56 @@ def execute(run: RunSpec) -> Outcome:
     Returns:
         The row (see the module docstring) and the log's ``.npz`` bytes.
     """
-    from dfcoa_opt import metrics
     from dfcoa_opt.sim.simulator import run_scenario
 
     t0 = time.perf_counter()
-    row: dict[str, Any] = {
-        "key": run.key, "scenario": run.scenario, "scenario_file": run.scenario_file,
-        "controller": run.controller, "seed": run.seed, "overrides": run.overrides_dict,
-        "overrides_hash": run.overrides_hash, "variant": run.variant_name,
-        "ladder": run.ladder, "ladder_value": run.ladder_value, "status": "failed", "error": None,
-        "metrics": None, "digest": None, "log": None,
-    }
-    prov: dict[str, Any] = {}
-    npz = None
     try:
         scenario = load_run_scenario(run)
         log = run_scenario(scenario, run.controller)
-        row["metrics"] = jsonable(metrics.summary(log, scenario.spec.metrics))
-        row["digest"] = log.digest()
-        row["log"] = f"logs/{run.key}.npz"
-        row["status"] = "ok"
-        npz = log.to_bytes()
+        return _outcome(run, log, scenario, time.perf_counter() - t0)
     except Exception as exc:  # noqa: BLE001 - a failing run is data, the sweep goes on
+        row = _row(run)
         row["error"] = _one_line(exc)
-        if not isinstance(exc, DfcoaError):
-            prov["traceback"] = traceback.format_exc()
-    prov.update(wall_time=time.perf_counter() - t0, host=socket.gethostname(),
-                simd=environment.numpy_simd(), simd_cap=dispatch.describe(), pid=os.getpid(),
-                finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
-    row["provenance"] = prov
-    return Outcome(row, npz)
+        prov = {} if isinstance(exc, DfcoaError) else {"traceback": traceback.format_exc()}
+        row["provenance"] = {**prov, **_provenance(time.perf_counter() - t0)}
+        return Outcome(row, None)
+
+
+def execute_batch(runs: Sequence[RunSpec]) -> Iterator[Outcome]:
+    """Simulate runs that differ only in their seed as one batch; yields each row as its run ends.
+
+    Each row is the row :func:`execute` gives for that run (the batch keeps the
+    bits, :class:`~dfcoa_opt.sim.batch.BatchSimulator`), and its wall time is
+    the run's share of the batch. When the batch fails (a scenario that does
+    not load for one seed, a controller that raises), the runs it has not
+    finished are executed one by one, so each failure is the row of its own
+    run, as :func:`execute` writes it.
+
+    Args:
+        runs: Runs with the same scenario file, overrides and controller.
+    """
+    from dfcoa_opt.sim.batch import BatchSimulator
+    from dfcoa_opt.sim.simulator import batch_controllers
+
+    if len(runs) == 1:
+        yield execute(runs[0])
+        return
+    done: set[int] = set()
+    try:
+        t0 = time.perf_counter()
+        scenario = load_run_scenario(runs[0])
+        sim = BatchSimulator(scenario, batch_controllers(runs[0].controller, scenario, len(runs)),
+                             [r.seed for r in runs])
+        setup = (time.perf_counter() - t0) / len(runs)
+        for e, log in sim.run_iter():
+            done.add(e)
+            yield _outcome(runs[e], log, sim.scenarios[e], setup + log.meta["wall_time"])
+    except Exception:  # noqa: BLE001 - attributed run by run below
+        for e, run in enumerate(runs):
+            if e not in done:
+                yield execute(run)
+
+
+def execute_batch_list(runs: Sequence[RunSpec]) -> list[Outcome]:
+    """:func:`execute_batch` as a list (for executors that return a batch's rows at once)."""
+    return list(execute_batch(runs))
