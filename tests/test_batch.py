@@ -128,3 +128,21 @@ def test_bad_seed_lists_are_one_line_errors(text, error, capsys):
     assert main(["run", str(ROOT / "scenarios" / "example_empty.toml"), "--seeds", text]) == 2
     err = capsys.readouterr().err
     assert error in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("path", [COMMON[0], ROOT / "scenarios" / "bench" / "crossing.toml"],
+                         ids=lambda p: p.stem)
+def test_noisy_lidar_and_mcl_draw_from_each_runs_own_generator(path):
+    """Range noise and the particle filter in one batch: each run's draws, in its order."""
+    overrides = {"t_max": 2.0, "sensors.lidar.noise_std": 0.05, "localization": "mcl",
+                 "team.start_noise": 0.1}
+    batch = run_batch_logs(load_scenario(path, 0, overrides), "dfcoa", SEEDS)
+    assert [log.digest() for log in batch] == singles(path, "dfcoa", overrides)
+    assert len({log.digest() for log in batch}) == len(SEEDS)
+
+
+def test_a_batched_centralized_cbf_solves_each_run_apart():
+    path = ROOT / "scenarios" / "bench" / "large_20.toml"
+    overrides = {"t_max": 1.5, "controllers.cbf.mode": "centralized", "team.start_noise": 0.2}
+    batch = run_batch_logs(load_scenario(path, 0, overrides), "goto_slot+cbf", SEEDS)
+    assert [log.digest() for log in batch] == singles(path, "goto_slot+cbf", overrides)

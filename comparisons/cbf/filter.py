@@ -45,7 +45,7 @@ nominal one under ``pass_through``. Method notes: ``docs/methods/cbf.md``.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Literal
 
 import numpy as np
@@ -57,13 +57,14 @@ from comparisons.cbf.qp import (
     solve_distributed_exact,
 )
 from comparisons.constraints.distance import (
+    Nearest,
     StaticObstacles,
     barrier,
     disc_nearest,
     pair_geometry,
 )
 from comparisons.constraints.solvers import check_solver
-from dfcoa_opt.control.base import FilterResult, Observation
+from dfcoa_opt.control.base import BatchedController, FilterResult, Observation
 from dfcoa_opt.control.registry import register_filter
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.params import param
@@ -73,8 +74,8 @@ MIN_DELTA = 1e-9
 
 
 @register_filter("cbf")
-class CbfFilter:
-    """CBF-QP safety filter (see the module docstring)."""
+class CbfFilter(BatchedController):
+    """CBF-QP safety filter (see the module docstring); batched (one object for E runs)."""
 
     command = "velocity"
     uses_scan = False
@@ -117,14 +118,16 @@ class CbfFilter:
         self._offset = 0.0
         self._v_box = 1.0
         self._gamma = params.gamma
-        self._static = StaticObstacles.from_shapes(())
+        self._statics = [StaticObstacles.from_shapes(())]
+        self._static_of = np.zeros(1, dtype=np.intp)
 
-    def reset(self, scenario, rng: np.random.Generator) -> None:
-        """Read the robots' size, model and limits, and the map's shapes.
+    def reset_batch(self, scenarios, rngs) -> None:
+        """Read the robots' size, model and limits, and each run's map shapes.
 
         Raises:
             ScenarioError: The ``solver`` backend is not installed.
         """
+        scenario = scenarios[0]
         key = f"controllers.{self._owner}.solver"
         if self.p.solver == "exact":
             if self.p.mode != "distributed":
@@ -138,7 +141,27 @@ class CbfFilter:
         self._v_box = self.p.v_max if self.p.v_max is not None else rob.v_max / np.sqrt(2.0)
         dt = scenario.spec.dt
         self._gamma = min(self.p.gamma, 1.0 / dt) if self.p.discrete_time else self.p.gamma
-        self._static = StaticObstacles.from_shapes(scenario.world.shapes)
+        worlds: dict[int, int] = {}  # runs of one world (all but a seeded clutter field) share
+        for sc in scenarios:
+            worlds.setdefault(id(sc.world), len(worlds))
+        self._statics = [StaticObstacles.from_shapes(sc.world.shapes) for sc in
+                         {id(sc.world): sc for sc in scenarios}.values()]
+        self._static_of = np.array([worlds[id(sc.world)] for sc in scenarios], dtype=np.intp)
+
+    def _nearest(self, p: np.ndarray, env: np.ndarray | None) -> Nearest:
+        """Each row's nearest static obstacles, in the world of its own run."""
+        args = (self.p.max_obstacles, self.p.obstacle_range)
+        if len(self._statics) == 1:
+            return self._statics[0].nearest(p, *args)
+        world = self._static_of[env]
+        parts = [(world == w, self._statics[w].nearest(p[world == w], *args))
+                 for w in np.unique(world)]
+        out = {f.name: np.empty((len(p), *getattr(parts[0][1], f.name).shape[1:]),
+                                dtype=getattr(parts[0][1], f.name).dtype) for f in fields(Nearest)}
+        for rows, part in parts:
+            for name, arr in out.items():
+                arr[rows] = getattr(part, name)
+        return Nearest(**out)
 
     @property
     def pair_distance(self) -> float:
@@ -171,7 +194,7 @@ class CbfFilter:
         h, _ = barrier(delta, normal, self.pair_distance)
         pairs = BarrierRows(normal, -g * h / (2.0 * np.maximum(delta, MIN_DELTA)), nb.mask,
                             nb.index)
-        near = self._static.nearest(p, self.p.max_obstacles, self.p.obstacle_range)
+        near = self._nearest(p, obs.env)
         mv = obs.obstacles
         discs = np.concatenate([mv.position, mv.radius[..., None]], axis=-1)
         _, d_mv, n_mv = disc_nearest(p, discs)
@@ -190,9 +213,31 @@ class CbfFilter:
         t0 = time.perf_counter()
         nominal = np.asarray(nominal, dtype=float)[:, :2]
         pairs, obstacles = self.rows(obs)
-        solve = (solve_centralized if self.p.mode == "centralized" else
-                 solve_distributed_exact if self.p.solver == "exact" else solve_distributed)
-        vel, status, slack = solve(nominal, pairs, obstacles, self._v_box, self.p.solver,
-                                   self.p.infeasible)
+        if self.p.mode == "centralized":
+            vel, status, slack = self._centralized(obs, nominal, pairs, obstacles)
+        else:
+            solve = solve_distributed_exact if self.p.solver == "exact" else solve_distributed
+            vel, status, slack = solve(nominal, pairs, obstacles, self._v_box, self.p.solver,
+                                       self.p.infeasible)
         per_robot = (time.perf_counter() - t0) / max(obs.n, 1)
         return FilterResult(vel, status, slack, np.full(obs.n, per_robot))
+
+    def _centralized(self, obs: Observation, nominal: np.ndarray, pairs: BarrierRows,
+                     obstacles: BarrierRows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One centralized program per run (a batch's runs are solved apart)."""
+        args = (self._v_box, self.p.solver, self.p.infeasible)
+        if obs.env is None:
+            return solve_centralized(nominal, pairs, obstacles, *args)
+        out = []
+        for e in np.unique(obs.env):
+            rows = np.flatnonzero(obs.env == e)
+            index = np.where(pairs.mask[rows], pairs.index[rows] - rows[0], -1)  # in the run
+            out.append(solve_centralized(nominal[rows], _take(pairs, rows, index),
+                                         _take(obstacles, rows, None), *args))
+        vel, status, slack = (np.concatenate(part) for part in zip(*out, strict=True))
+        return vel, status, slack
+
+
+def _take(rows_of: BarrierRows, rows: np.ndarray, index: np.ndarray | None) -> BarrierRows:
+    """The barrier rows of some robots, with ``index`` as their pair partners."""
+    return BarrierRows(rows_of.normal[rows], rows_of.bound[rows], rows_of.mask[rows], index)

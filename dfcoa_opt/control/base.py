@@ -11,7 +11,7 @@ observation only; :meth:`Observation.take` and the test helper
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
@@ -185,6 +185,9 @@ class Controller(Protocol):
             nor the pose estimator reads it, the simulator does not run the
             LiDAR and ``obs.scan`` is None (a LiDAR scan of 4 robots costs
             about as much as the rest of a simulation step).
+        batched: Optional, see :class:`BatchedController`. Without it, the
+            simulator makes one object per run and calls it with that run's
+            observation.
     """
 
     name: str
@@ -195,6 +198,49 @@ class Controller(Protocol):
 
     def act(self, obs: Observation) -> FloatArray:
         """Return ``(N, k)`` commands, row i computed from row i of ``obs`` only."""
+
+
+class BatchedController:
+    """Base of controllers (and filters) that step every run of a batch in one call.
+
+    With ``batched = True`` the simulator builds one object for a batch of E
+    runs (:class:`~dfcoa_opt.sim.batch.BatchSimulator`), calls
+    :meth:`reset_batch` once, and :meth:`act` (a filter: ``filter``) once per
+    step with the observation of every active run: rows run after run
+    (``obs.env`` the run of each row, in increasing order), ``obs.robot_ids``
+    the robot within its run, ``obs.leader`` ``(E, 5)`` one state per run
+    (:meth:`Observation.row_leader` gives each row's), neighbour indices rows
+    of this observation. A run that ends leaves the observation; ``env`` stays
+    the run's index, so per-run state is kept by ``env`` (e.g. in rows
+    ``env * N + robot_ids``).
+
+    The rows of a batch must be the rows of its runs simulated alone, bit for
+    bit: elementwise arithmetic over all rows, any reduction per run along
+    the robot axis, and random draws from each run's own generator in the
+    run's own order. ``tests/test_batch.py`` checks every registered
+    controller so. ``last_steering`` and ``last_result`` hold one entry per
+    row; per-run counters come from ``run_counters(env)``.
+
+    :meth:`reset` (one run) and an observation without ``env`` (one run, e.g.
+    built by hand) work too: :func:`as_batch` turns it into a batch of one.
+    """
+
+    batched = True
+
+    def reset_batch(self, scenarios: list[Scenario], rngs: list[np.random.Generator]) -> None:
+        """Prepare for E runs: ``scenarios[e]`` and ``rngs[e]`` are run ``e``'s."""
+
+    def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
+        """Prepare for one run: :meth:`reset_batch` of a batch of one."""
+        self.reset_batch([scenario], [rng])
+
+
+def as_batch(obs: Observation) -> Observation:
+    """``obs`` as the observation of a batch: one without ``env`` becomes a batch of one run."""
+    if obs.env is not None:
+        return obs
+    return replace(obs, leader=np.asarray(obs.leader, dtype=float)[None, :],
+                   env=np.zeros(obs.n, dtype=np.intp))
 
 
 @dataclass
@@ -268,11 +314,24 @@ class Filtered:
         return (getattr(self.controller, "uses_scan", True)
                 or getattr(self.safety, "uses_scan", True))
 
+    @property
+    def batched(self) -> bool:
+        """Batched (:class:`BatchedController`) when both parts are."""
+        return bool(getattr(self.controller, "batched", False)
+                    and getattr(self.safety, "batched", False))
+
     def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
         """Reset both parts."""
         self._nid = scenario.spec.robots.nid_distance
         self.controller.reset(scenario, rng)
         self.safety.reset(scenario, rng)
+        self.last_result = None
+
+    def reset_batch(self, scenarios: list[Scenario], rngs: list[np.random.Generator]) -> None:
+        """Reset both (batched) parts for E runs."""
+        self._nid = scenarios[0].spec.robots.nid_distance
+        self.controller.reset_batch(scenarios, rngs)  # type: ignore[attr-defined]
+        self.safety.reset_batch(scenarios, rngs)  # type: ignore[attr-defined]
         self.last_result = None
 
     def act(self, obs: Observation) -> FloatArray:

@@ -10,13 +10,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dfcoa_opt.control.base import Observation, slot_velocity
+from dfcoa_opt.control.base import BatchedController, Observation, slot_velocity
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.params import param
 
 
 @register("goto_slot")
-class GotoSlot:
+class GotoSlot(BatchedController):
     """Velocity command ``u_i = kp (slot_i - p_i) + d/dt slot_i``.
 
     The feed-forward ``d/dt slot_i = v_l (cos th_l, sin th_l) + w_l J (slot_i - p_l)``
@@ -26,7 +26,6 @@ class GotoSlot:
 
     command = "velocity"
     uses_scan = False
-    batched = True
 
     @dataclass(frozen=True)
     class Params:
@@ -37,12 +36,6 @@ class GotoSlot:
 
     def __init__(self, params: Params) -> None:
         self.p = params
-
-    def reset(self, scenario, rng: np.random.Generator) -> None:
-        """Stateless: nothing to reset."""
-
-    def reset_batch(self, scenarios, rngs) -> None:
-        """Stateless: nothing to reset."""
 
     def act(self, obs: Observation) -> np.ndarray:
         """Row i uses only robot i's pose and slot and the leader state it received."""

@@ -240,7 +240,12 @@ class BatchSimulator:
             lead_a, slots_a, at_goal_a = self._leader(tracks, active, k, one_group)
             # -- sensing, all from the same snapshot
             scans: list[LaserScan | None] = [None] * a
-            if scanning:
+            scan_all: LaserScan | None = None  # every row's scan, when made in one call
+            if scanning and one_group and a > 1:
+                scan_all = self.lidars[0].scan_teams(state.pose, n, dyn_pos, dyn.radii,
+                                                     self.radius, [rngs[e] for e in active])
+                scans = [scan_all.take(slice(j * n, (j + 1) * n)) for j in range(a)]
+            elif scanning:
                 for j, e in enumerate(active):
                     rows = slice(j * n, (j + 1) * n)
                     scans[j] = self.lidars[self.group[e]].scan(
@@ -262,7 +267,7 @@ class BatchSimulator:
             if self.batched:
                 leaders[active] = lead_a
                 env = np.repeat(active, n)
-                scan = None if not scanning else LaserScan(
+                scan = scan_all if scan_all is not None or not scanning else LaserScan(
                     scans[0].angle_min, scans[0].angle_increment, scans[0].range_min,
                     scans[0].range_max, np.concatenate([s.ranges for s in scans]))
                 obs = Observation(t, dt, np.tile(robot_ids, a), est, state.velocity, state.twist,

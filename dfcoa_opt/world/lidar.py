@@ -170,6 +170,51 @@ class Lidar:
         return LaserScan(self.angle_min, self.angle_increment, spec.range_min, spec.range_max,
                          out)
 
+    def scan_teams(self, poses: NDArray[np.float64], n: int, extra_xy: NDArray[np.float64],
+                   extra_r: NDArray[np.float64], robot_r: float,
+                   rngs: list[np.random.Generator]) -> LaserScan:
+        """:meth:`scan` of several teams of ``n`` robots at once, each seeing only its own team.
+
+        Team ``j`` is rows ``j*n .. j*n+n-1`` of ``poses``; its robots see the
+        other robots of the team (discs of radius ``robot_r``) and the extra
+        discs (moving obstacles), and each team's range noise comes from its
+        own generator. Row for row, the ranges are those of :meth:`scan` of
+        that team alone (each row tests every disc of its team: a disc out of
+        reach is skipped either way).
+
+        Args:
+            poses: ``(T*n, 3)`` robot poses, team after team.
+            n: Robots per team.
+            extra_xy: ``(M, 2)`` discs every team sees, m.
+            extra_r: ``(M,)`` their radii, m.
+            robot_r: Robot radius, m.
+            rngs: One generator per team (used when ``spec.noise_std > 0``).
+        """
+        p = np.ascontiguousarray(poses, dtype=np.float64)
+        teams, m = len(p) // n, len(extra_xy)
+        per = n + m
+        xy = np.empty((teams, per, 2))
+        xy[:, :n] = p[:, :2].reshape(teams, n, 2)
+        xy[:, n:] = extra_xy
+        rad = np.tile(np.concatenate((np.full(n, robot_r), extra_r)), teams)
+        own = np.full((teams, per), -1, dtype=np.int64)
+        own[:, :n] = np.arange(teams * n).reshape(teams, n)
+        team = np.repeat(np.arange(teams), n)
+        ptr = np.arange(teams * n + 1, dtype=np.int64) * per
+        idx = (team[:, None] * per + np.arange(per)[None, :]).astype(np.int64).ravel()
+        out = np.empty((len(p), self.spec.beams))
+        _scan_kernel(p, self._cos, self._sin, self._dist, self._par, xy.reshape(-1, 2), rad,
+                     own.ravel(), ptr, idx, True, out)
+        spec = self.spec
+        if spec.noise_std > 0.0:
+            for j, rng in enumerate(rngs):
+                rows = out[j * n:(j + 1) * n]
+                noise = rng.normal(0.0, spec.noise_std, size=rows.shape)
+                fin = np.isfinite(rows)
+                rows[fin] = np.clip(rows[fin] + noise[fin], spec.range_min, spec.range_max)
+        return LaserScan(self.angle_min, self.angle_increment, spec.range_min, spec.range_max,
+                         out)
+
     def _discs(self, p: NDArray[np.float64], discs_xy: ArrayLike, discs_r: ArrayLike | None,
                owner: ArrayLike | None) -> tuple[NDArray, ...]:
         """Validate the discs and build CSR candidate lists (empty = test all discs)."""
