@@ -76,8 +76,9 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
                              f"available: {', '.join(names)}")
     start = time.perf_counter()
     config = config or ExecutorConfig()
-    overlap = config.kind == "process" and (config.jobs or os.cpu_count() or 1) > 1
-    with interruptible(), _Renderer(overlap) as renderer:
+    jobs = config.jobs or os.cpu_count() or 1
+    with interruptible(), _Renderer(jobs if config.kind == "process" and jobs > 1 else 0) \
+            as renderer:
         for r in todo:
             if only and r.name not in only:
                 continue
@@ -115,20 +116,21 @@ def _render(render: Renderer, source: Path, is_store: bool,
 
 
 class _Renderer:
-    """Renders recipes, in a separate process while the next sweep simulates.
+    """Renders recipes in worker processes, side by side and while the next sweep simulates.
 
     Rendering (matplotlib) runs in this process between sweeps otherwise, and
     the pool's workers wait: 35 s of the comparison figures' ``make figures``
-    left a core idle. With ``overlap``, renderers go to one render process in
-    submission order, and the artefact lists come back as they finish; a
-    renderer that cannot be pickled (a local function) renders inline.
+    left a core idle. With ``workers`` > 0, renderers go to that many render
+    processes, several recipes at once, and the artefact lists are written in
+    submission order as they finish; a renderer that cannot be pickled (a
+    local function) renders inline.
     """
 
-    def __init__(self, overlap: bool) -> None:
+    def __init__(self, workers: int) -> None:
         self.pool: ProcessPoolExecutor | None = None
-        if overlap:  # the sweeps' fork server: started here, so with their preload
+        if workers:  # the sweeps' fork server: started here, so with their preload
             ctx = forkserver_context(WORKER_PRELOAD)
-            self.pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx,
+            self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
                                             initializer=init_worker, initargs=(None,))
         self.pending: list[tuple[Recipe, Path, str, Future[tuple[list[Artefact], float]]]] = []
 

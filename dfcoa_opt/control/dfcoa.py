@@ -19,16 +19,24 @@ simulator (``leader.planner = "improved_astar"``).
 Each step runs the numba versions of 1-3 (``*_fast``, :class:`VFHStar` kernels);
 ``DFCOA(params, kernel=False)`` runs the NumPy reference functions instead, with
 bit-identical commands (``tests/test_dfcoa.py``).
+
+Batched (:class:`~dfcoa_opt.control.base.BatchedController`): one object steps
+every run of a batch in one ``act``, each part fed every row at once (each row
+with its own run's leader state). The VFH* state (hysteresis, previous
+direction) has one row per robot of every run, row ``env * N + robot``; every
+row is computed from its own inputs only, so a run's commands are, bit for bit,
+those of the run alone (``tests/test_batch.py``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from dfcoa_opt.control.base import Observation
+from dfcoa_opt.control.base import BatchedController, Observation, as_batch
 from dfcoa_opt.control.formation_law import formation_tracking_law, formation_tracking_law_fast
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.control.vfh import VFHParams, wrap_angles
@@ -36,10 +44,21 @@ from dfcoa_opt.control.vfh_star import VFHStar, blend, blend_fast
 from dfcoa_opt.geometry import wrap_angle
 from dfcoa_opt.params import param
 
+if TYPE_CHECKING:
+    from dfcoa_opt.sim.scenario import Scenario
+
 
 @register("dfcoa")
-class DFCOA:
-    """Formation tracking law (eq 26-28, re-derived) + improved VFH* safety layer."""
+class DFCOA(BatchedController):
+    """Formation tracking law (eq 26-28, re-derived) + improved VFH* safety layer.
+
+    Attributes:
+        p: Parameters.
+        kernel: Step with the numba kernels (False: the NumPy reference, same bits).
+        vfh: VFH* state of every robot of every run (None before a reset).
+        last_steering: ``(R,)`` VFH* steering direction of each row of the latest
+            observation, rad in the robot frame (NaN = none, or no avoidance).
+    """
 
     command = "unicycle"
 
@@ -64,27 +83,45 @@ class DFCOA:
         self.kernel = kernel
         self.vfh: VFHStar | None = None
         self.last_steering: np.ndarray | None = None
+        self._n = 0
 
-    def reset(self, scenario, rng: np.random.Generator) -> None:
-        """New VFH* state (hysteresis); its robot radius is the scenario's ``robots.radius``."""
-        vfh = dataclasses.replace(self.p.vfh, robot_radius=scenario.spec.robots.radius)
-        self.vfh = VFHStar(vfh, scenario.n, kernel=self.kernel)
-        self.last_steering = np.full(scenario.n, np.nan)
+    def reset_batch(self, scenarios: list[Scenario], rngs: list[np.random.Generator]) -> None:
+        """New VFH* state (hysteresis) for the N robots of each of the E runs.
+
+        Args:
+            scenarios: One scenario per run (one file: the same team and robots).
+            rngs: One generator per run (unused: DFCOA draws nothing).
+        """
+        sc = scenarios[0]
+        vfh = dataclasses.replace(self.p.vfh, robot_radius=sc.spec.robots.radius)
+        self._n = sc.n
+        self.vfh = VFHStar(vfh, len(scenarios) * sc.n, kernel=self.kernel)
+        self.last_steering = np.full(sc.n, np.nan)
 
     def act(self, obs: Observation) -> np.ndarray:
-        """Row i uses robot i's pose, scan, neighbours and the broadcast leader."""
+        """Row i uses robot i's pose, scan, neighbours and the leader state it received.
+
+        Args:
+            obs: The observation of one run, or of every active run of a batch.
+
+        Returns:
+            ``(R, 2)`` unicycle commands (v m/s, omega rad/s), one per row.
+        """
+        obs = as_batch(obs)
         fast = self.kernel
         offsets = obs.slot_offset
         if self.p.compensate_tracking_offset:
             offsets = offsets + np.array([self.p.d, 0.0])
         law = formation_tracking_law_fast if fast else formation_tracking_law
-        cmd = law(offsets, obs.pose, obs.leader, self.p.k1, self.p.k2, self.p.d)
+        cmd = law(offsets, obs.pose, obs.row_leader(), self.p.k1, self.p.k2, self.p.d)
         if not self.p.avoidance or obs.scan is None or self.vfh is None:
+            self.last_steering = np.full(obs.n, np.nan)
             return cmd
         # target direction: towards the slot's tracking target, in the robot frame
         target = obs.slot - obs.pose[:, :2]
         heading = np.arctan2(target[:, 1], target[:, 0])
         target_dir = (wrap_angles if fast else wrap_angle)(heading - obs.pose[:, 2])
-        res = self.vfh.step(obs.scan, obs.neighbours, obs.pose, target_dir, obs.robot_ids)
+        rows = obs.env * self._n + obs.robot_ids  # each robot's own VFH* state row
+        res = self.vfh.step(obs.scan, obs.neighbours, obs.pose, target_dir, rows)
         self.last_steering = res.direction
         return (blend_fast if fast else blend)(cmd, res.direction, res.danger, self.p.vfh)

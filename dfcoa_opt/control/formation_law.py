@@ -10,6 +10,11 @@ limits do not saturate. The printed eq 26-27 swap sin/cos and a sign; the
 derivation is in ``docs/methods/formation_law.md`` and the decay rates are
 checked by ``tests/test_formation_law.py``. :func:`formation_tracking_law_fast`
 is the same law in numba, bit-identical, for the per-step controller.
+
+Both take one leader state for every row, or one per row (``(N, 5)``, e.g.
+:meth:`~dfcoa_opt.control.base.Observation.row_leader` of a batch of runs):
+each row uses only its own leader, with the same float operations, so a row
+gets the same bits in a batch as in its run alone.
 """
 
 from __future__ import annotations
@@ -31,14 +36,16 @@ def tracking_point_coordinates(pose: ArrayLike, leader: ArrayLike, d: float) -> 
 
     Args:
         pose: ``(N, 3)`` follower poses (x, y, theta) in m, m, rad.
-        leader: Leader pose ``(x_l, y_l, theta_l, ...)``; extra entries ignored.
+        leader: Leader pose ``(x_l, y_l, theta_l, ...)`` (m, m, rad; extra entries
+            ignored), or ``(N, >= 3)`` one per row.
         d: Distance from the robot centre to its tracking point, m.
 
     Returns:
         ``(N, 2)`` coordinates ``(l_x, l_y)`` in m.
     """
     p = np.asarray(pose, dtype=float)
-    x_l, y_l, th_l = np.asarray(leader, dtype=float)[:3]
+    lead = np.asarray(leader, dtype=float)
+    x_l, y_l, th_l = lead[..., 0], lead[..., 1], lead[..., 2]
     dx = p[:, 0] + d * np.cos(p[:, 2]) - x_l
     dy = p[:, 1] + d * np.sin(p[:, 2]) - y_l
     c, s = np.cos(th_l), np.sin(th_l)
@@ -52,8 +59,8 @@ def formation_errors(offsets: ArrayLike, pose: ArrayLike, leader: ArrayLike,
     Args:
         offsets: ``(N, 2)`` target coordinates ``l*`` of the tracking points
             (the slot offsets of eq 3-5 / eq 14), m.
-        pose: ``(N, 3)`` follower poses.
-        leader: Leader pose.
+        pose: ``(N, 3)`` follower poses (x, y, theta), m, m, rad.
+        leader: Leader pose ``(x, y, theta, ...)``, or ``(N, >= 3)`` one per row.
         d: Tracking-point distance, m.
 
     Returns:
@@ -77,8 +84,9 @@ def formation_tracking_law(offsets: ArrayLike, pose: ArrayLike, leader: ArrayLik
 
     Args:
         offsets: ``(N, 2)`` targets ``l*`` in the leader frame, m.
-        pose: ``(N, 3)`` follower poses (x, y, theta).
-        leader: Broadcast leader state ``(x, y, theta, v, w)`` (m, m, rad, m/s, rad/s).
+        pose: ``(N, 3)`` follower poses (x, y, theta), m, m, rad.
+        leader: Broadcast leader state ``(x, y, theta, v, w)`` (m, m, rad, m/s, rad/s),
+            or ``(N, 5)`` the state each row received.
         k1: Longitudinal gain, 1/s (> 0).
         k2: Lateral gain, 1/s (> 0).
         d: Tracking-point distance, m (> 0).
@@ -87,13 +95,13 @@ def formation_tracking_law(offsets: ArrayLike, pose: ArrayLike, leader: ArrayLik
         ``(N, 2)`` commands ``(v_f, w_f)`` in m/s and rad/s (unsaturated).
     """
     lead = np.asarray(leader, dtype=float)
-    v_l, w_l = lead[3], lead[4]
+    v_l, w_l = lead[..., 3], lead[..., 4]
     pose = np.asarray(pose, dtype=float)
     lxy = tracking_point_coordinates(pose, lead, d)
     e = np.asarray(offsets, dtype=float) - lxy
     a = k1 * e[:, 0] + v_l - w_l * lxy[:, 1]
     b = k2 * e[:, 1] + w_l * lxy[:, 0]
-    delta = wrap_angle(pose[:, 2] - lead[2])
+    delta = wrap_angle(pose[:, 2] - lead[..., 2])
     c, s = np.cos(delta), np.sin(delta)
     return np.column_stack((a * c + b * s, (b * c - a * s) / d))
 
@@ -101,12 +109,16 @@ def formation_tracking_law(offsets: ArrayLike, pose: ArrayLike, leader: ArrayLik
 @numba.njit(cache=True)
 def _tracking_law_kernel(offsets: FloatArray, pose: FloatArray, leader: FloatArray, k1: float,
                          k2: float, d: float) -> FloatArray:  # pragma: no cover - numba
-    """:func:`formation_tracking_law` row by row, same float operations in the same order."""
+    """:func:`formation_tracking_law` row by row, same float operations in the same order.
+
+    ``leader`` is ``(N, >= 5)``: row i's leader state in row i.
+    """
     n = pose.shape[0]
     out = np.empty((n, 2))
-    x_l, y_l, th_l, v_l, w_l = leader[0], leader[1], leader[2], leader[3], leader[4]
-    c, s = math.cos(th_l), math.sin(th_l)
     for i in range(n):
+        x_l, y_l, th_l = leader[i, 0], leader[i, 1], leader[i, 2]
+        v_l, w_l = leader[i, 3], leader[i, 4]
+        c, s = math.cos(th_l), math.sin(th_l)
         th = pose[i, 2]
         dx = pose[i, 0] + d * math.cos(th) - x_l
         dy = pose[i, 1] + d * math.sin(th) - y_l
@@ -130,7 +142,8 @@ def formation_tracking_law_fast(offsets: ArrayLike, pose: ArrayLike, leader: Arr
     Args:
         offsets: ``(N, 2)`` targets ``l*`` in the leader frame, m.
         pose: ``(N, 3)`` follower poses (x, y, theta), m, m, rad.
-        leader: Broadcast leader state ``(x, y, theta, v, w)`` (m, m, rad, m/s, rad/s).
+        leader: Broadcast leader state ``(x, y, theta, v, w)`` (m, m, rad, m/s, rad/s),
+            or ``(N, 5)`` the state each row received.
         k1: Longitudinal gain, 1/s.
         k2: Lateral gain, 1/s.
         d: Tracking-point distance, m.
@@ -140,9 +153,12 @@ def formation_tracking_law_fast(offsets: ArrayLike, pose: ArrayLike, leader: Arr
     """
     p = np.asarray(pose, dtype=float).reshape(-1, 3)
     off = np.asarray(offsets, dtype=float).reshape(len(p), 2)
-    lead = np.asarray(leader, dtype=float).reshape(-1)
-    if lead.shape[0] < 5:
-        raise ValueError("leader must be (x, y, theta, v, w)")
+    lead = np.asarray(leader, dtype=float)
+    lead = lead.reshape(1, -1) if lead.ndim < 2 else lead
+    if lead.ndim != 2 or lead.shape[1] < 5 or len(lead) not in (1, len(p)):
+        raise ValueError("leader must be (x, y, theta, v, w), or one such row per pose")
+    if len(lead) != len(p):
+        lead = np.broadcast_to(lead, (len(p), lead.shape[1]))  # one state for every row
     return _tracking_law_kernel(off, p, lead, float(k1), float(k2), float(d))
 
 

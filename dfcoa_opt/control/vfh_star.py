@@ -283,9 +283,13 @@ class VFHStar:
     bias the ``previous_weight`` term; the binary histogram is kept in the robot
     frame (as MATLAB ``controllerVFH`` does).
 
+    Every row is computed from its own inputs and state row only, so one object
+    can hold the robots of every run of a batch (state row ``env * N + robot``,
+    :class:`~dfcoa_opt.control.dfcoa.DFCOA`) and step them all in one call.
+
     Attributes:
         params: Parameters.
-        n_robots: Number of rows.
+        n_robots: Number of state rows (the robots of one run, or of every run of a batch).
         kernel: Step with the numba kernels (same bits as :func:`vfh_step`, faster);
             False runs the NumPy reference :func:`vfh_step`.
     """
@@ -323,8 +327,9 @@ class VFHStar:
             neighbours: Neighbour table, or None.
             pose: ``(R, 3)`` own poses, m, m, rad.
             target_dir: ``(R,)`` target direction in the robot frame, rad.
-            rows: ``(R,)`` state rows (robot indices, ``Observation.robot_ids``) of the
-                inputs; default all ``n_robots`` rows in order.
+            rows: ``(R,)`` state rows of the inputs (robot indices,
+                ``Observation.robot_ids``; in a batch ``env * N + robot_ids``);
+                default all ``n_robots`` rows in order.
         """
         idx = np.arange(self.n_robots) if rows is None else np.asarray(rows, dtype=np.intp)
         p = np.asarray(pose, dtype=float).reshape(len(idx), 3)
