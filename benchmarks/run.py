@@ -14,6 +14,7 @@ from pathlib import Path
 
 from benchmarks import (
     bench_astar,
+    bench_batch,
     bench_figures,
     bench_lidar,
     bench_mcl,
@@ -48,6 +49,8 @@ RATIO_TARGETS = {
     # issue 21: JPS vs pyastar2d; matched by prefix, it applies to the JPS row against
     # our A* too (JPS must beat A* to be worth having)
     "JPS search 1024x1024": 1.0,
+    # batched simulation: a run-step in a batch of 20 against one run alone
+    **{bench_batch.title(c, s): ratio for c, s, ratio in bench_batch.CASES},
 }
 
 
@@ -64,7 +67,7 @@ def _target(what: str) -> str:
 def main() -> None:
     """Run every benchmark module, print the table, write results.md."""
     rows = (bench_lidar.run() + bench_sim.run() + bench_mcl.run() + bench_astar.run()
-            + bench_orca.run() + bench_reshape.run() + bench_figures.run())
+            + bench_orca.run() + bench_reshape.run() + bench_batch.run() + bench_figures.run())
     head = [f"# Benchmarks ({datetime.date.today().isoformat()})", "",
             f"CPU: {machine()}; {versions()}.", "",
             "Ratio = reference median / our median, both measured in this run: the median "

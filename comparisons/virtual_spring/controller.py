@@ -62,6 +62,10 @@ Decisions (the paper's words, the choice and the reason:
 10. Eq 14's ideal position is ``p_l + E_i`` (leader robot, not the virtual
     leader): :func:`comparisons.virtual_spring.equations.ideal_position_error`.
 
+Batched (:class:`~dfcoa_opt.control.base.BatchedController`): one object
+steps every run of a batch in one pass, per-run values in rows ``env * N +
+robot``; each run gets the bits of the run simulated alone.
+
 Measured (details in the doc): eq 12-13 lowers a follower's limit whenever its
 error shrinks, so followers of a leader at v_max keep their gaps; on the test
 courses both improvements raised the formation error relative to
@@ -87,10 +91,14 @@ from comparisons.virtual_spring.equations import (
     leader_avoidance_velocity,
     leader_velocity,
     norm2,
-    polygon_edge_table,
 )
-from comparisons.virtual_spring.kernels import conflict_changes, spring_sources, weighted_sum
-from dfcoa_opt.control.base import Observation, slot_velocity
+from comparisons.virtual_spring.kernels import (
+    conflict_changes,
+    spring_sources,
+    static_sources,
+    weighted_sum,
+)
+from dfcoa_opt.control.base import BatchedController, Observation, as_batch, slot_velocity
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.geometry import body_to_world, rotate
 from dfcoa_opt.params import param
@@ -100,13 +108,15 @@ _STILL = 1e-3
 
 
 @register("virtual_spring")
-class VirtualSpring:
+class VirtualSpring(BatchedController):
     """Paper 004: virtual-spring consensus formation with speed limit and VO conflict resolution.
 
+    Batched: one object for the E runs of a batch (or one run).
+
     Attributes:
-        last_conflicts: ``(N,)`` number of eq 15-16 conflicts each robot resolved
+        last_conflicts: ``(R,)`` number of eq 15-16 conflicts each row resolved
             at the latest step.
-        last_limit: ``(N,)`` eq 13 speed limits of the latest step, m/s (``v_max``
+        last_limit: ``(R,)`` eq 13 speed limits of the latest step, m/s (``v_max``
             for the leader and when ``speed_limit`` is off).
     """
 
@@ -158,51 +168,67 @@ class VirtualSpring:
 
     def __init__(self, params: Params) -> None:
         self.p = params
+        self._n = 1
         self._rel = np.zeros((1, 2))
         self._adj = np.zeros((1, 1))
-        self._lead_offset = np.zeros(2)
+        self._lead_offset = np.zeros((1, 2))
         self._v_max = 0.5
         self._radius = 0.2
-        self._circles = np.zeros((0, 2))
-        self._circle_r = np.zeros(0)
+        self._static = static_sources([((), (), [])])
+        self._world_of = np.zeros(1, dtype=np.intp)
+        self._circles, self._circle_r = self._static.circles, self._static.circle_r
         self._polygons: list[np.ndarray] = []
-        self._edges = polygon_edge_table([])
         self._t_seen = np.zeros(0)
         self._e_prev, self._e_last = np.zeros(0), np.zeros(0)
         self._lim_prev, self._lim_last = np.zeros(0), np.zeros(0)
         self.last_conflicts = np.zeros(0, dtype=int)
         self.last_limit = np.zeros(0)
 
-    def reset(self, scenario, rng: np.random.Generator) -> None:
-        """Keep the offsets, Fig 1's adjacency, limits, static obstacles; clear eq 12's memory.
+    def reset_batch(self, scenarios, rngs) -> None:
+        """Keep each run's offsets and static obstacles, Fig 1's adjacency, limits; clear eq 12.
+
+        Run ``e``'s values are in rows ``e * N .. e * N + N - 1`` of the per-robot
+        tables (offsets ``E_i``, eq 12-13's memory), its static obstacles those
+        of its world (:func:`~comparisons.virtual_spring.kernels.static_sources`).
+        The runs share the robots and the team size (one scenario file).
+        ``rngs`` are not used (nothing is drawn).
 
         Raises:
             ValueError: ``leader_index`` is not a robot of the scenario.
         """
-        p, spec, n = self.p, scenario.spec, scenario.n
+        p, spec, n = self.p, scenarios[0].spec, scenarios[0].n
         if p.leader_index >= n:
             raise ValueError(f"{self.name}: leader_index = {p.leader_index} but the scenario "
                              f"has {n} robot(s) (0..{n - 1})")
-        offsets = np.asarray(scenario.offsets, dtype=float)
-        self._lead_offset = offsets[p.leader_index].copy()
-        self._rel = offsets - self._lead_offset
+        self._n, runs = n, len(scenarios)
+        offsets = np.stack([np.asarray(sc.offsets, dtype=float) for sc in scenarios])
+        self._lead_offset = offsets[:, p.leader_index].copy()  # (E, 2)
+        rel = offsets - self._lead_offset[:, None]
         if p.offset_frame == "world":
-            self._rel = rotate(self._rel, scenario.leader_heading)
+            rel = rotate(rel, np.array([sc.leader_heading for sc in scenarios])[:, None])
+        self._rel = rel.reshape(runs * n, 2)
         adj = fig1_adjacency(n, p.leader_index)
         adj[:, p.leader_index] = 0.0  # the leader term is added from the leader state
         self._adj = adj
         self._v_max = spec.robots.v_max if p.v_max is None else min(p.v_max, spec.robots.v_max)
         self._radius = spec.robots.radius
-        circles = scenario.world.circles
-        self._circles = np.array([c.center for c in circles], dtype=float).reshape(-1, 2)
-        self._circle_r = np.array([c.radius for c in circles], dtype=float)
-        self._polygons = [np.asarray(v, dtype=float) for v in scenario.world.polygons]
-        self._edges = polygon_edge_table(self._polygons)  # static: built once
-        self._t_seen = np.full(n, -np.inf)
-        self._e_prev, self._e_last = np.full(n, np.nan), np.full(n, np.nan)
-        self._lim_prev, self._lim_last = np.full(n, self._v_max), np.full(n, self._v_max)
-        self.last_conflicts = np.zeros(n, dtype=int)
-        self.last_limit = np.full(n, self._v_max)
+        worlds: dict[int, int] = {}  # runs of one world (all but a seeded clutter field) share it
+        for sc in scenarios:
+            worlds.setdefault(id(sc.world), len(worlds))
+        self._world_of = np.array([worlds[id(sc.world)] for sc in scenarios], dtype=np.intp)
+        shapes = {id(sc.world): sc.world for sc in scenarios}.values()
+        self._static = static_sources([([c.center for c in w.circles],
+                                        [c.radius for c in w.circles], list(w.polygons))
+                                       for w in shapes])  # static: built once
+        # every world's circles and polygons, one after the other (one run: its world's)
+        self._circles, self._circle_r = self._static.circles, self._static.circle_r
+        self._polygons = [np.asarray(v, dtype=float) for w in shapes for v in w.polygons]
+        rows = runs * n
+        self._t_seen = np.full(rows, -np.inf)
+        self._e_prev, self._e_last = np.full(rows, np.nan), np.full(rows, np.nan)
+        self._lim_prev, self._lim_last = np.full(rows, self._v_max), np.full(rows, self._v_max)
+        self.last_conflicts = np.zeros(rows, dtype=int)
+        self.last_limit = np.full(rows, self._v_max)
 
     # ------------------------------------------------------------------ pieces
     def leader_state(self, obs: Observation) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -211,26 +237,40 @@ class VirtualSpring:
         The leader's own row uses its own state; a follower uses the
         ``obs.neighbours`` entry of ``leader_index``, or, when the leader robot is
         out of range, the virtual leader's point of that robot's slot and its
-        velocity.
+        velocity (the virtual leader of the row's run).
         """
+        obs = as_batch(obs)
         nb = obs.neighbours
         rows = np.arange(obs.n)
-        hit = nb.index == self.p.leader_index
+        hit = self._neighbour_robots(obs, -1) == self.p.leader_index
         seen = hit.any(axis=1)
         k = np.argmax(hit, axis=1)
         own = (obs.robot_ids == self.p.leader_index)[:, None]
+        lead = obs.row_leader()
         virt = v_virt = np.zeros(2)  # only used by the rows that neither are nor see the leader
         if not (seen | own[:, 0]).all():
-            virt = body_to_world(np.asarray(obs.leader[:3], dtype=float), self._lead_offset)
-            v_virt = slot_velocity(obs.leader, virt)
+            virt = body_to_world(lead[:, :3], self._lead_offset[obs.env])
+            v_virt = slot_velocity(lead, virt)
         p_l = np.where(own, obs.pose[:, :2], np.where(seen[:, None], nb.position[rows, k], virt))
         v_l = np.where(own, obs.velocity, np.where(seen[:, None], nb.velocity[rows, k], v_virt))
         moving = np.hypot(v_l[:, 0], v_l[:, 1]) > _STILL
-        heading = np.where(moving, np.arctan2(v_l[:, 1], v_l[:, 0]), obs.leader[2])
+        heading = np.where(moving, np.arctan2(v_l[:, 1], v_l[:, 0]), lead[:, 2])
         return p_l, v_l, heading
 
+    def _neighbour_robots(self, obs: Observation, pad: int) -> np.ndarray:
+        """``(R, K)`` robot index (within its run) of each neighbour, ``pad`` where there is none.
+
+        A batch's neighbour indices are rows (blocks of N per run), a single
+        run's are robots: either way the robot is the index modulo N.
+        """
+        nb = obs.neighbours
+        return np.where(nb.mask, nb.index % self._n, pad)
+
     def desired_offsets(self, index: np.ndarray, heading: np.ndarray) -> np.ndarray:
-        """World ``E`` of the robots ``index`` (``(N,)`` or ``(N, K)``) for each row, m."""
+        """World ``E`` of the robots ``index`` (``(R,)`` or ``(R, K)``) for each row, m.
+
+        ``index`` are rows of the per-robot tables: ``env * N + robot``.
+        """
         rel = self._rel[index]
         if self.p.offset_frame == "world":
             return rel
@@ -241,24 +281,30 @@ class VirtualSpring:
         """Eq 7 for every row: static discs and polygons, robots in range, moving obstacles.
 
         The sources are, in this order, the static circles, the polygons' nearest
-        boundary points (edges built at reset), the neighbours and the moving
-        obstacles: one compiled pass (:func:`~comparisons.virtual_spring.kernels.spring_sources`,
-        the operations of ``disc_normals``, ``polygon_normals`` and ``spring_force``),
-        numpy's inverse cube, then eq 7's sum in numpy's order.
+        boundary points (edges built at reset) of the row's own world, the
+        neighbours and the moving obstacles: one compiled pass
+        (:func:`~comparisons.virtual_spring.kernels.spring_sources`, the operations
+        of ``disc_normals``, ``polygon_normals`` and ``spring_force``), numpy's
+        inverse cube, then eq 7's sum in numpy's order.
         """
-        nb, mo, e = obs.neighbours, obs.obstacles, self._edges
-        shape = (obs.n, len(self._circle_r) + len(e.a) + nb.index.shape[1] + mo.mask.shape[1])
+        obs = as_batch(obs)
+        nb, mo, st = obs.neighbours, obs.obstacles, self._static
+        world = self._world_of[obs.env]
+        static = np.diff(st.circle_ptr) + np.diff(st.polygon_ptr)
+        shape = (obs.n, int(static[world].max(initial=0)) + nb.index.shape[1]
+                 + mo.mask.shape[1])
         delta, dist, use = np.empty((*shape, 2)), np.empty(shape), np.empty(shape, dtype=bool)
-        spring_sources(np.ascontiguousarray(obs.pose[:, :2]), self._circles, self._circle_r,
-                       e.a, e.b, nb.position, nb.mask, mo.position, mo.radius,
-                       mo.mask, self._radius, self.p.spring_range, self.p.spring_min_distance,
-                       delta, dist, use)
+        count = np.empty(obs.n, dtype=np.int64)
+        spring_sources(np.ascontiguousarray(obs.pose[:, :2]), world, st.circles, st.circle_r,
+                       st.circle_ptr, st.edges.a, st.edges.b, st.edge_count, st.polygon_ptr,
+                       nb.position, nb.mask, mo.position, mo.radius, mo.mask, self._radius,
+                       self.p.spring_range, self.p.spring_min_distance, delta, dist, use, count)
         f = np.empty((obs.n, 2))
-        weighted_sum(inverse_cube(dist, use), delta, self.p.spring_gain, f)
+        weighted_sum(inverse_cube(dist, use), delta, count, self.p.spring_gain, f)
         return f
 
     def _trend(self, t: float, ids: np.ndarray, err: np.ndarray) -> np.ndarray:
-        """Eq 12's epsilon from each robot's own error history.
+        """Eq 12's epsilon from each robot's own error history (``ids``: ``env * N + robot``).
 
         The memory moves on only when ``t`` is later than the robot's last call,
         so calling ``act`` again within a step (``assert_distributed``) gives the
@@ -275,38 +321,46 @@ class VirtualSpring:
                         0.0)
 
     def resolve(self, obs: Observation, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Eq 15-17 on planned velocities ``v`` (N, 2): the changes and the conflict counts.
+        """Eq 15-17 on planned velocities ``v`` (R, 2): the changes and the conflict counts.
 
         The other robots (Minkowski radius ``2 r``) and the moving obstacles
         (their radius ``+ r``, ``obstacle_share``) within range, through
         :func:`~comparisons.virtual_spring.kernels.conflict_changes`: the operations
         of :func:`~comparisons.virtual_spring.conflict.vo_conflict` and
-        :func:`~comparisons.virtual_spring.conflict.conflict_resolution`, compiled.
+        :func:`~comparisons.virtual_spring.conflict.conflict_resolution`, compiled,
+        run by run.
         """
+        obs = as_batch(obs)
         nb, mo, n = obs.neighbours, obs.obstacles, obs.n
         dv, count = np.empty((n, 2)), np.empty(n, dtype=np.int64)
         conflict_changes(np.ascontiguousarray(obs.pose[:, :2]), np.ascontiguousarray(v),
-                         nb.position, nb.velocity, nb.mask, mo.position, mo.velocity, mo.radius,
-                         mo.mask, self._radius, self.p.vo_margin, self.p.vo_horizon,
-                         self.p.obstacle_share, dv, count)
+                         np.ascontiguousarray(obs.env), nb.position, nb.velocity, nb.mask,
+                         mo.position, mo.velocity, mo.radius, mo.mask, self._radius,
+                         self.p.vo_margin, self.p.vo_horizon, self.p.obstacle_share, dv, count)
         return dv, count
 
     # --------------------------------------------------------------------- act
     def act(self, obs: Observation) -> np.ndarray:
-        """``(N, 2)`` world velocities ``v_i(t+1)``, row i from row i of ``obs``."""
+        """``(R, 2)`` world velocities ``v_i(t+1)``, row i from row i of ``obs``.
+
+        ``obs`` is a batch's (every row of every active run) or one run's.
+        """
+        obs = as_batch(obs)
         p = self.p
         pos, vel, ids = obs.pose[:, :2], obs.velocity, obs.robot_ids
+        base_row = obs.env * self._n
+        key = base_row + ids  # the row's robot in the per-robot tables
         lead = ids == p.leader_index
         p_l, v_l, heading = self.leader_state(obs)
         nb = obs.neighbours
-        nb_idx = np.where(nb.mask, nb.index, 0)
-        e_own = self.desired_offsets(ids, heading)
+        nb_idx = self._neighbour_robots(obs, 0)
+        e_own = self.desired_offsets(key, heading)
         # eq 4 over Fig 1's neighbours: the adjacent followers in range, plus the leader
         a = np.column_stack((self._adj[ids[:, None], nb_idx] * nb.mask, (~lead).astype(float)))
         p_j = np.concatenate((nb.position, p_l[:, None]), axis=1)
         v_j = np.concatenate((nb.velocity, v_l[:, None]), axis=1)
-        e_j = np.concatenate((self.desired_offsets(nb_idx, heading), np.zeros((obs.n, 1, 2))),
-                             axis=1)
+        e_j = np.concatenate((self.desired_offsets(base_row[:, None] + nb_idx, heading),
+                              np.zeros((obs.n, 1, 2))), axis=1)
         u = consensus_input(pos, vel, e_own, p_j, v_j, e_j, a, p.velocity_weight)
         f = self.spring(obs)
         v_lead = leader_avoidance_velocity(leader_velocity(pos, obs.goal, p.alpha, self._v_max),
@@ -315,12 +369,12 @@ class VirtualSpring:
         v = np.where(lead[:, None], v_lead, v_fol)
         # eq 12-13, followers
         err = norm2(pos - p_l - e_own)
-        eps = self._trend(obs.t, ids, err)
-        base = (self._lim_prev[ids] if p.limit_memory == "limit"
+        eps = self._trend(obs.t, key, err)
+        base = (self._lim_prev[key] if p.limit_memory == "limit"
                 else np.hypot(vel[:, 0], vel[:, 1]))
         limit = np.where(lead, self._v_max,
                          dynamic_speed_limit(base, eps, self._v_max, p.min_speed_limit))
-        self._lim_last[ids] = limit
+        self._lim_last[key] = limit
         if p.speed_limit:
             v = cap_speed(v, limit)
         else:

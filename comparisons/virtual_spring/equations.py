@@ -157,8 +157,14 @@ def spring_force(delta: ArrayLike, mask: ArrayLike, gain: float = 1.0) -> FloatA
 
 
 def inverse_cube(d: FloatArray, use: NDArray[np.bool_]) -> FloatArray:
-    """Eq 7's weights ``1 / d^3`` where ``use``, 0 elsewhere (``d`` in m, weights in m^-3)."""
-    return np.where(use, 1.0 / np.where(use, d, 1.0) ** 3, 0.0)
+    """Eq 7's weights ``1 / d^3`` where ``use``, 0 elsewhere (``d`` in m, weights in m^-3).
+
+    Only the entries used are computed (numpy's array ``power``, the same bits
+    wherever an entry sits; ``d`` and ``use`` have one shape).
+    """
+    out = np.zeros(np.shape(d))
+    out[use] = 1.0 / d[use] ** 3
+    return out
 
 
 def disc_normals(p: ArrayLike, centres: ArrayLike,
