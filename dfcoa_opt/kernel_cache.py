@@ -55,7 +55,7 @@ def module_files(roots: Iterable[Path]) -> dict[str, Path]:
     return out
 
 
-def imported_modules(source: bytes, known: Mapping[str, Path] | Iterable[str],
+def imported_modules(source: bytes | str | ast.AST, known: Mapping[str, Path] | Iterable[str],
                      package: str = "") -> list[str]:
     """The ``known`` modules whose names a source can reach by its imports, sorted.
 
@@ -65,12 +65,16 @@ def imported_modules(source: bytes, known: Mapping[str, Path] | Iterable[str],
     counted (a package re-exporting a name imports its module, which the
     closure follows). Relative imports are resolved against ``package`` (the
     importing module's package). A source that does not parse imports nothing.
+    ``source`` may also be the source's syntax tree, already parsed.
     """
     names = set(known)
-    try:
-        tree = ast.parse(source)
-    except (SyntaxError, ValueError):  # ValueError: null bytes
-        return []
+    if isinstance(source, ast.AST):
+        tree = source
+    else:
+        try:
+            tree = ast.parse(source)
+        except (SyntaxError, ValueError):  # ValueError: null bytes
+            return []
     found: set[str] = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
@@ -87,10 +91,27 @@ def imported_modules(source: bytes, known: Mapping[str, Path] | Iterable[str],
     return sorted(found & names)
 
 
-def _closure(start: str, imports: Mapping[str, Sequence[str]]) -> set[str]:
-    """``start`` and every module it imports, transitively."""
-    seen = {start}
-    todo = [start]
+def module_imports(name: str, path: Path, source: bytes | str | ast.AST,
+                   known: Mapping[str, Path] | Iterable[str]) -> list[str]:
+    """:func:`imported_modules` of the module ``name`` whose source file is ``path``.
+
+    Relative imports are resolved against the package itself in a package's
+    ``__init__.py``, against the parent package in any other module.
+    """
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    return imported_modules(source, known, package)
+
+
+def import_closure(starts: Iterable[str], imports: Mapping[str, Sequence[str]]) -> set[str]:
+    """The ``starts`` and every module they import, transitively.
+
+    Args:
+        starts: Module names.
+        imports: Module name -> the modules it imports (a module missing here
+            imports nothing).
+    """
+    seen = set(starts)
+    todo = list(seen)
     while todo:
         for dep in imports.get(todo.pop(), ()):
             if dep not in seen:
@@ -140,14 +161,13 @@ def refresh(roots: Sequence[Path]) -> list[str]:
         if old and old[0] == digest:
             imports[name] = old[1]
         else:
-            package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-            imports[name] = imported_modules(data, files, package)
+            imports[name] = module_imports(name, path, data, files)
         if KERNEL_MARK in data:
             kernels.append(name)
     stamps = {}
     for name in kernels:
         h = hashlib.sha256()
-        for dep in sorted(_closure(name, imports)):
+        for dep in sorted(import_closure([name], imports)):
             h.update(f"{dep}\0{digests[dep]}\0".encode())
         stamps[name] = h.hexdigest()
     stale = sorted(n for n in kernels if old_stamps.get(n) != stamps[n])

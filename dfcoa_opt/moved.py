@@ -47,6 +47,15 @@ class _MovedFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         sys.modules[old] = importlib.import_module(new)
 
 
+def moved_names() -> dict[str, str]:
+    """Every old dotted module name registered by :func:`keep_old_paths` -> its new name."""
+    out: dict[str, str] = {}
+    for finder in sys.meta_path:
+        if isinstance(finder, _MovedFinder):
+            out.update(finder.moves)
+    return out
+
+
 def keep_old_paths(moves: Mapping[str, str], removal: str) -> None:
     """Make each old dotted module name in ``moves`` import its new module.
 

@@ -148,6 +148,19 @@ def controller_class(controller_id: str) -> type:
             f"available: {', '.join(sorted(_REGISTRY))}") from None
 
 
+def component_classes(controller_id: str) -> list[type]:
+    """The classes behind an id: the controller's, and the filter's of ``"a+filter"``.
+
+    Raises:
+        UnknownNameError: Unknown controller or filter (:func:`controller_class`).
+    """
+    classes = [controller_class(controller_id)]
+    filt = _parts(controller_id)[1]
+    if filt is not None:
+        classes.append(_FILTERS[filt])
+    return classes
+
+
 def make_controller(controller_id: str, overrides: Mapping[str, Any] | None = None,
                     source: str = "<overrides>") -> Any:
     """Build a controller with its parameters validated.
