@@ -61,15 +61,32 @@ def test_run_iter_yields_each_run_as_it_ends():
     assert len(set(steps)) > 1
 
 
+class Hold:
+    """An unbatched controller (no ``batched`` attribute): every robot stands still."""
+
+    name = "hold"
+    command = "velocity"
+    uses_scan = False
+
+    def reset(self, scenario, rng):
+        self.scenario = scenario
+
+    def act(self, obs):
+        return np.zeros((obs.n, 2))
+
+
 def test_an_unbatched_controller_needs_one_object_per_seed():
     from dfcoa_opt.control.registry import make_controller
 
-    sc = load_scenario(ROOT / "scenarios" / "example_empty.toml")
-    with pytest.raises(DfcoaError, match="'lf_vo' is not batched: give one object per seed"):
-        BatchSimulator(sc, make_controller("lf_vo"), [0, 1])
+    sc = load_scenario(ROOT / "scenarios" / "example_empty.toml", overrides={"t_max": 1.0})
+    with pytest.raises(DfcoaError, match="'hold' is not batched: give one object per seed"):
+        BatchSimulator(sc, Hold(), [0, 1])
     with pytest.raises(DfcoaError, match="at least one seed"):
         BatchSimulator(sc, make_controller("goto_slot"), [])
-    assert Simulator(sc, make_controller("lf_vo"), 3).run().meta["seed"] == 3
+    assert Simulator(sc, Hold(), 3).run().meta["seed"] == 3
+    holds = [Hold(), Hold()]
+    logs = BatchSimulator(sc, holds, [4, 5]).run_all()
+    assert [log.meta["seed"] for log in logs] == [4, 5]
 
 
 def test_a_batched_controller_sees_every_run_in_one_observation():

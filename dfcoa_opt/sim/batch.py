@@ -42,7 +42,7 @@ from dfcoa_opt.localization import TruthEstimator, make_estimator
 from dfcoa_opt.outcome import StallMonitor
 from dfcoa_opt.robots.models import RobotState, make_model
 from dfcoa_opt.sim.leader import LeaderTrack, leader_track
-from dfcoa_opt.sim.log import RunLog
+from dfcoa_opt.sim.log import BatchLog, RunLog
 from dfcoa_opt.sim.neighbours import batch_proximity, gather, new_contacts
 from dfcoa_opt.sim.scenario import Scenario
 from dfcoa_opt.world.lidar import LaserScan, Lidar
@@ -422,30 +422,3 @@ class BatchSimulator:
             "controller_counters": {str(k): int(v) for k, v in (counters or {}).items()},
         }
         return out
-
-
-class BatchLog:
-    """The logs of E runs as ``(E, T, ...)`` arrays: one write per field and step for all runs.
-
-    The fields are those of :class:`RunLog` with a leading run axis (``t`` is
-    shared); :meth:`run` copies one run out.
-    """
-
-    def __init__(self, arrays: dict[str, np.ndarray]) -> None:
-        self.__dict__.update(arrays)
-        self._names = list(arrays)
-
-    @classmethod
-    def allocate(cls, runs: int, steps: int, n: int, m: int, k: int) -> BatchLog:
-        """Zero-filled logs of ``runs`` runs (``steering`` NaN), as :meth:`RunLog.allocate`."""
-        one = RunLog.allocate(steps, n, m, k)
-        arrays = {name: (arr if name == "t" else np.repeat(arr[None], runs, axis=0))
-                  for name, arr in one.arrays().items() if name not in ("offsets", "dyn_radius")}
-        return cls(arrays)
-
-    def run(self, e: int, end: int, offsets: FloatArray, dyn_radius: FloatArray) -> RunLog:
-        """Run ``e``'s first ``end`` instants as a :class:`RunLog` (copies)."""
-        arrays = {name: (getattr(self, name)[:end] if name == "t" else
-                         getattr(self, name)[e, :end]).copy() for name in self._names}
-        return RunLog(offsets=np.array(offsets, dtype=float),
-                      dyn_radius=np.array(dyn_radius, dtype=float), **arrays)

@@ -210,6 +210,32 @@ class RunLog:
         return cls(meta=meta, **data)
 
 
+class BatchLog:
+    """The logs of E runs as ``(E, T, ...)`` arrays: one write per field and step for all runs.
+
+    The fields are those of :class:`RunLog` with a leading run axis (``t`` is
+    shared); :meth:`run` copies one run out.
+    """
+
+    def __init__(self, arrays: dict[str, np.ndarray]) -> None:
+        self.__dict__.update(arrays)
+        self._names = list(arrays)
+
+    @classmethod
+    def allocate(cls, runs: int, steps: int, n: int, m: int, k: int) -> BatchLog:
+        """Zero-filled logs of ``runs`` runs (``steering`` NaN), as :meth:`RunLog.allocate`."""
+        one = RunLog.allocate(steps, n, m, k)
+        arrays = {name: (arr if name == "t" else np.repeat(arr[None], runs, axis=0))
+                  for name, arr in one.arrays().items() if name not in ("offsets", "dyn_radius")}
+        return cls(arrays)
+
+    def run(self, e: int, end: int, offsets: FloatArray, dyn_radius: FloatArray) -> RunLog:
+        """Run ``e``'s first ``end`` instants as a :class:`RunLog` (copies)."""
+        arrays = {name: (getattr(self, name)[:end] if name == "t" else
+                         getattr(self, name)[e, :end]).copy() for name in self._names}
+        return RunLog(offsets=np.array(offsets, dtype=float),
+                      dyn_radius=np.array(dyn_radius, dtype=float), **arrays)
+
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
     """Whether two arrays hold the same bytes (unlike ``==``, tells -0.0 from 0.0)."""
     return a.dtype == b.dtype and a.shape == b.shape and \
