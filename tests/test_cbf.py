@@ -7,6 +7,8 @@ and the qpsolvers path against the exact 2D solver.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import qpsolvers
@@ -23,7 +25,7 @@ from comparisons.constraints.distance import (
 from dfcoa_opt import metrics
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.geometry import points_in_polygons
-from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.sim.loader import load_scenario, scenario_from_dict
 from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_SOLVER_FAIL
 from dfcoa_opt.sim.simulator import run_scenario
 from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle
@@ -68,6 +70,15 @@ def test_reach_and_slot_count_leave_far_obstacles_out():
     near = StaticObstacles.from_shapes(SHAPES).nearest(np.array([[2.0, 3.5]]), 5, 1.0)
     assert near.mask.tolist() == [[True, False, False, False, False]]  # the circle, 0.5 m
     assert near.delta[0, 0] == pytest.approx(0.5) and np.isinf(near.delta[0, 1:]).all()
+
+
+def test_no_obstacle_slots_fill_nothing_and_the_filter_runs():
+    """max_obstacles = 0 is allowed: the kernel must not touch the empty slot arrays."""
+    near = StaticObstacles.from_shapes(SHAPES).nearest(np.array([[2.0, 3.5], [0.0, 0.0]]), 0, 1.0)
+    assert near.delta.shape == (2, 0) and near.mask.shape == (2, 0)
+    sc = load_scenario(Path(__file__).resolve().parents[1] / "scenarios" / "example_obstacles.toml",
+                       overrides={"t_max": 2.0, "controllers.cbf.max_obstacles": 0})
+    assert run_scenario(sc, "goto_slot+cbf").n_steps == 21
 
 
 def test_nearest_keeps_the_stable_order_of_every_shape():

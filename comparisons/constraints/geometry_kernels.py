@@ -163,6 +163,8 @@ def nearest_kernel(points, discs, edge_a, edge_b, reach, q, delta, normal,
     a slot farther than ``reach`` is masked out and its ``delta`` set to ``inf``.
     """
     n_k = delta.shape[1]
+    if n_k == 0:  # no slot to fill (max_obstacles = 0): nothing to read or write
+        return
     n_disc = discs.shape[0]
     for i in range(points.shape[0]):
         px, py = points[i, 0], points[i, 1]

@@ -4,7 +4,11 @@
   ``nmpc``), its fallback ``goto_command`` and ``solve_time_stats`` of a log;
 - :mod:`~comparisons.nmpc.problem`: the casadi program of one robot;
 - :mod:`~comparisons.nmpc.geometry`: slot references, neighbour predictions and
-  the distance half-planes.
+  the distance half-planes;
+- :mod:`~comparisons.nmpc.plans`: every robot's last plan, by global id
+  (``env * N + robot`` in a batch of runs);
+- :mod:`~comparisons.nmpc.statics`: the static shapes of each run's map, all rows
+  in one compiled call.
 
 Notes: ``docs/methods/nmpc.md``.
 """

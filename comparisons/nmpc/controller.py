@@ -1,8 +1,8 @@
 """Distributed nonlinear MPC formation controller: ``nmpc`` (not from the papers).
 
-Every robot solves its own small NLP each step (casadi, built once per run in
-:meth:`Nmpc.reset`, :mod:`comparisons.nmpc.problem`) and applies the first
-control ``(v, omega)`` (``command = "unicycle"``):
+Every robot solves its own small NLP each step (casadi, built once per parameter
+set, :mod:`comparisons.nmpc.problem`) and applies the first control ``(v, omega)``
+(``command = "unicycle"``):
 
 * **Model.** The unicycle over ``H`` stages of ``tau`` s (default the scenario's
   ``dt``), integrated exactly along the arc like the simulator's model; bounds
@@ -22,6 +22,10 @@ control ``(v, omega)`` (``command = "unicycle"``):
 * **Distributed.** The controller keeps every robot's last plan by global id;
   robot ``i`` reads only the plans of its neighbours in ``obs.neighbours`` (plans
   written at time ``t`` are visible from the next step on).
+* **Batched.** One object steps every run of a batch (``batched = True``): the
+  problems of every robot of every run are set up elementwise over the rows and
+  solved in one compiled call; each run's rows give its numbers alone, bit for bit
+  (plans by global id ``env * N + robot``, static shapes of each run's own world).
 * **Solver.** ``"sqp"`` (default: casadi ``sqpmethod`` + ``daqp`` with a
   Gauss-Newton Hessian, at most 20 iterations, on the condensed problem (the states
   eliminated by the dynamics), compiled to C once per machine; re-solved by IPOPT on
@@ -52,6 +56,7 @@ from comparisons.nmpc.geometry import (
     robot_halfplanes,
     slot_reference,
 )
+from comparisons.nmpc.plans import PlanBuffers
 from comparisons.nmpc.problem import (
     NmpcProblem,
     ProblemSpec,
@@ -60,9 +65,9 @@ from comparisons.nmpc.problem import (
     map_multipliers,
     rollout,
 )
-from dfcoa_opt.control.base import FilterResult, Observation
+from comparisons.nmpc.statics import WorldShapes
+from dfcoa_opt.control.base import BatchedController, FilterResult, Observation
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.geometry import take_rows
 from dfcoa_opt.params import param
 from dfcoa_opt.sim.log import STATUS_OK, STATUS_SOLVER_FAIL
 
@@ -85,15 +90,22 @@ SQP_MAX_ITER, IPOPT_MAX_ITER = 20, 100
 
 
 @register("nmpc")
-class Nmpc:
-    """Distributed NMPC tracking the formation slot (module docstring).
+class Nmpc(PlanBuffers, BatchedController):
+    """Distributed NMPC tracking the formation slot (module docstring); batched.
+
+    One object steps every run of a batch (:class:`BatchedController`): the
+    set-up of every row's problem (references, shifted plans and multipliers,
+    neighbour predictions, half-planes) is elementwise over all rows of all
+    runs, and one compiled call solves them all; plans are kept by global id
+    ``env * N + robot`` (:class:`~comparisons.nmpc.plans.PlanBuffers`).
 
     Attributes:
         last_result: The latest step's commands, status (``STATUS_OK`` or
-            ``STATUS_SOLVER_FAIL``), largest slack (m) and solve time per robot (s).
-        last_iterations: ``(N,)`` iterations of the latest SQP solves, not of the IPOPT
+            ``STATUS_SOLVER_FAIL``), largest slack (m) and solve time (s), one per row.
+        last_iterations: ``(R,)`` iterations of the latest SQP solves, not of the IPOPT
             rescues (-1 when unknown: compiled solver, or an exception).
-        last_rescued: ``(N,)`` which robots' SQP failed and IPOPT then succeeded.
+        last_rescued: ``(R,)`` which rows' SQP failed and IPOPT then succeeded.
+        statics: The static shapes of the maps of the batch (``static``: the first map).
     """
 
     command = "unicycle"
@@ -163,8 +175,15 @@ class Nmpc:
         self.rescuer: NmpcProblem | None = None
 
     # ------------------------------------------------------------------ set-up
-    def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
-        """Build the casadi solver(s) (once per parameter set) and clear every plan."""
+    def reset_batch(self, scenarios: list[Scenario], rngs: list[np.random.Generator]) -> None:
+        """Build the casadi solver(s) (once per parameter set) and clear every plan.
+
+        Args:
+            scenarios: One per run of the batch (the same file and parameters; a
+                seeded clutter field gives each run its own world).
+            rngs: One per run (unused: ``nmpc`` draws nothing).
+        """
+        scenario = scenarios[0]
         p, rob = self.p, scenario.spec.robots
         self.tau = p.step if p.step is not None else scenario.spec.dt
         wheel = None
@@ -185,97 +204,45 @@ class Nmpc:
                                             qp_solver="qrqp", max_iter=IPOPT_MAX_ITER,
                                             formulation="multiple-shooting", compiled=False))
         self.radius = rob.radius
-        self.static = StaticObstacles.from_shapes(scenario.world.shapes)
-        self._t: float | None = None
-        self._alloc(scenario.spec.team.n)
+        worlds: dict[int, int] = {}  # runs of one world (all but a seeded clutter field) share
+        for sc in scenarios:
+            worlds.setdefault(id(sc.world), len(worlds))
+        self.statics = WorldShapes([StaticObstacles.from_shapes(sc.world.shapes)
+                                    for sc in {id(sc.world): sc for sc in scenarios}.values()])
+        self._static_of = np.array([worlds[id(sc.world)] for sc in scenarios], dtype=np.intp)
+        self.static = self.statics.maps[0]
+        self._n = scenario.spec.team.n
+        self._alloc(len(scenarios) * self._n)
         self.last_result = None
-
-    def _alloc(self, n: int) -> None:
-        """Plan buffers for ``n`` robots (by global id): written (``_w``) and read (``_r``)."""
-        h, rows = self.p.horizon, self.spec.rows
-        self._w = {"t": np.full(n, np.nan), "u": np.zeros((n, h, 2)),
-                   "x": np.zeros((n, h + 1, 3)), "lam_x": np.zeros((n, self.spec.nw * h)),
-                   "lam_g": np.zeros((n, rows * h)), "lam_ok": np.zeros(n, dtype=bool)}
-        self._r = {k: v.copy() for k, v in self._w.items()}
-
-    def _grow(self, n: int) -> None:
-        """Make room for global ids below ``n`` (hand-made observations)."""
-        have = len(self._w["t"])
-        if n <= have:
-            return
-        for buf in (self._w, self._r):
-            for k, v in buf.items():
-                fill = np.nan if k == "t" else 0
-                buf[k] = np.concatenate((v, np.full((n - have, *v.shape[1:]), fill, v.dtype)))
-
-    # ------------------------------------------------------------------ plans
-    def _age(self, t: float, ids: NDArray[np.intp]) -> FloatArray:
-        """Age of the readable plans of ``ids`` at ``t``, in stages (``inf`` = none)."""
-        age = (t - self._r["t"][ids]) / self.tau
-        return np.where(np.isfinite(age) & (age >= -1e-9), np.maximum(age, 0.0), np.inf)
-
-    def _shifted(self, t: float, ids: NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
-        """Own previous controls shifted to ``t`` (zeros without a plan), and their age."""
-        h = self.p.horizon
-        age = self._age(t, ids)
-        u = np.zeros((len(ids), h, 2))
-        live = age < h
-        if live.any():
-            idx = np.minimum(np.floor(age[live][:, None] + 1e-6).astype(np.intp)
-                             + np.arange(h), h - 1)
-            u[live] = take_rows(self._r["u"][ids[live]], idx)
-        return u, age
-
-    def _shifted_multipliers(self, ids: NDArray[np.intp], age: FloatArray
-                             ) -> tuple[FloatArray, FloatArray]:
-        """The robots' last multipliers shifted by ``age`` stages (zeros without them)."""
-        h, n = self.p.horizon, len(ids)
-        live = (age < h) & self._r["lam_ok"][ids]
-        shift = np.floor(np.where(live, age, 0.0) + 1e-6).astype(np.intp)
-        idx = np.minimum(np.arange(h) + shift[:, None], h - 1)
-        out = []
-        for key in ("lam_x", "lam_g"):
-            lam = take_rows(self._r[key][ids].reshape(n, h, -1), idx)
-            lam[~live] = 0.0
-            out.append(lam.reshape(n, -1))
-        return out[0], out[1]
-
-    def _store(self, g: NDArray[np.intp], t: float, pose: FloatArray, u: FloatArray,
-               x: FloatArray | None = None,
-               lam: tuple[FloatArray, FloatArray] | None = None) -> None:
-        """Write the plans made at ``t`` of global ids ``g`` ``(R,)``.
-
-        Controls ``u`` ``(R, H, 2)``; poses ``x`` ``(R, H + 1, 3)`` (rolled out from
-        ``pose`` ``(R, 3)`` when not given); multipliers ``(lam_x, lam_g)`` or None.
-        """
-        w = self._w
-        w["t"][g], w["u"][g] = t, u
-        w["x"][g] = x if x is not None else rollout(pose, u, self.tau)
-        w["lam_ok"][g] = lam is not None
-        if lam is not None:
-            w["lam_x"][g], w["lam_g"][g] = lam
 
     # ------------------------------------------------------------------ step
     def _problems(self, obs: Observation, u0: FloatArray, fresh: NDArray[np.bool_],
-                  problem: NmpcProblem | None = None
+                  problem: NmpcProblem | None = None, nb_ids: NDArray[np.intp] | None = None
                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Initial guesses ``(N, nw H)``, parameter vectors and constraint lower bounds.
+        """Initial guesses ``(R, nw H)``, parameter vectors and constraint lower bounds.
 
-        Linearisation points: the rollout of the shifted plan, or the current
-        position for robots without a plan (``fresh``). In ``problem``'s layout
-        (default: the controller's problem).
+        Every row of every run at once (elementwise over rows). Linearisation
+        points: the rollout of the shifted plan, or the current position for
+        robots without a plan (``fresh``). Static obstacles of each row's own
+        world; neighbours' plans by the global ids ``nb_ids`` (default: from
+        ``obs``, :meth:`_global_ids`). In ``problem``'s layout (default: the
+        controller's problem).
         """
         problem = problem or self.problem
+        if nb_ids is None:
+            nb_ids = self._global_ids(obs)[1]
         p, h, n = self.p, self.p.horizon, obs.n
         x0 = rollout(obs.pose, u0, self.tau)
         lin = np.where(fresh[:, None, None], obs.pose[:, None, :2], x0[:, 1:, :2])
-        ref, psi, uref = slot_reference(obs.leader, obs.slot_offset,
-                                        self.tau * np.arange(1, h + 1))
-        on, oc = obstacle_halfplanes(lin, self.static, obs.obstacles, self.tau, p.max_obstacles,
-                                     self.radius + p.margin, p.reach)
+        ref, psi, uref = slot_reference(obs.leader if obs.env is None else obs.row_leader(),
+                                        obs.slot_offset, self.tau * np.arange(1, h + 1))
+        world = None if obs.env is None or len(self.statics.maps) == 1 else \
+            self._static_of[obs.env]
+        on, oc = obstacle_halfplanes(lin, self.statics, obs.obstacles, self.tau,
+                                     p.max_obstacles, self.radius + p.margin, p.reach, world)
         every = np.arange(len(self._r["t"]))
         pred, mask = neighbour_predictions(obs.neighbours, p.max_neighbours, self._r["x"][..., :2],
-                                           self._age(float(obs.t), every), self.tau, h)
+                                           self._age(float(obs.t), every), self.tau, h, nb_ids)
         rn, rc = robot_halfplanes(lin, pred, mask, 2.0 * self.radius + p.margin, p.reach)
         normals = np.concatenate((on, rn), axis=2).reshape(n, h, -1)
         stage = np.concatenate((ref, psi[..., None], uref, normals), axis=2).reshape(n, -1)
@@ -312,43 +279,41 @@ class Nmpc:
         lam = map_multipliers(step["lam_x"][i], step["lam_g"][i], self.spec, problem.spec)
         return problem.guesses(u0, x0[:, 1:])[0], step["params"][i], lbg, *lam
 
-    def _accept(self, rows: NDArray[np.intp], obs: Observation, u: FloatArray, x: FloatArray,
+    def _accept(self, rows: NDArray[np.intp], step: dict, u: FloatArray, x: FloatArray,
                 slack: FloatArray, lam: tuple[FloatArray, FloatArray], out: dict) -> None:
         """Apply and store the solutions of ``rows``.
 
         Controls ``(R, H, 2)``, poses ``(R, H, 3)``, slacks ``(R, H)`` m, multipliers;
         ``out``: the step's commands and largest slacks, written in place.
         """
+        obs = step["obs"]
         out["cmd"][rows] = u[:, 0]
         out["slack"][rows] = np.maximum(slack.max(axis=1), 0.0)
-        ids = np.asarray(obs.robot_ids, dtype=np.intp)[rows]
-        self._store(ids, float(obs.t), obs.pose[rows], u.copy(),
+        self._store(step["ids"][rows], float(obs.t), obs.pose[rows], u.copy(),
                     np.concatenate((obs.pose[rows, None], x), axis=1), lam)
 
     def _prepare(self, obs: Observation) -> tuple[FloatArray, dict]:
-        """The packed inputs ``(N, n)`` of this step's problems, and the step's arrays.
+        """The packed inputs ``(R, n)`` of this step's problems, and the step's arrays.
 
-        The step's arrays (observation, shifted controls and their age, parameters,
-        bounds, shifted multipliers) are those a rescue's inputs are made from.
+        The step's arrays (observation, global ids, shifted controls and their age,
+        parameters, bounds, shifted multipliers) are those a rescue's inputs are
+        made from.
         """
         h, t = self.p.horizon, float(obs.t)
-        if self._t is None or t > self._t + 1e-9:  # a new step: last step's plans become readable
-            self._r = {k: v.copy() for k, v in self._w.items()}
-            self._t = t
-        ids = np.asarray(obs.robot_ids, dtype=np.intp)
-        self._grow(int(max(ids.max(initial=-1), obs.neighbours.index.max(initial=-1))) + 1)
+        self._advance(t)
+        ids, nb_ids = self._global_ids(obs)
         u0, age = self._shifted(t, ids)
         fresh = age >= h  # no plan: guess the goto command
-        for i in np.flatnonzero(fresh):
+        for i in np.flatnonzero(fresh):  # (the first step of a run, or a fallback run out)
             u0[i] = goto_command(obs.pose[i], obs.slot[i], self.p.goto_gain, self.spec)
-        guess, params, lbg = self._problems(obs, u0, fresh)
+        guess, params, lbg = self._problems(obs, u0, fresh, nb_ids=nb_ids)
         lam_x, lam_g = self._shifted_multipliers(ids, age)
-        step = {"obs": obs, "u0": u0, "age": age, "params": params, "lbg": lbg,
+        step = {"obs": obs, "ids": ids, "u0": u0, "age": age, "params": params, "lbg": lbg,
                 "lam_x": lam_x, "lam_g": lam_g}
         return self.problem.pack(guess, params, lbg, lam_x, lam_g), step
 
     def act(self, obs: Observation) -> FloatArray:
-        """One solve per robot, one compiled call for all of them.
+        """One solve per row (every robot of every run), one compiled call for all of them.
 
         Row i uses row i of ``obs`` and its neighbours' last plans.
         """
@@ -361,7 +326,7 @@ class Nmpc:
         self.last_iterations = sol.iterations.copy()
         self.last_rescued = np.zeros(n, dtype=bool)
         ok = np.flatnonzero(sol.success)
-        self._accept(ok, obs, sol.u[ok], sol.x[ok], sol.slack[ok],
+        self._accept(ok, step, sol.u[ok], sol.x[ok], sol.slack[ok],
                      (sol.lam_x[ok], sol.lam_g[ok]), out)
         solve_time = sol.seconds.copy()
         for i in np.flatnonzero(~sol.success):
@@ -369,26 +334,25 @@ class Nmpc:
             rescue = self._rescue(i, step)
             solve_time[i] += time.perf_counter() - t0
             if rescue is not None and rescue.success:
-                self._accept(np.array([i]), obs, rescue.u[None], rescue.x[None],
+                self._accept(np.array([i]), step, rescue.u[None], rescue.x[None],
                              rescue.slack[None], (rescue.lam_x[None], rescue.lam_g[None]), out)
             else:
                 status[i] = STATUS_SOLVER_FAIL
-                out["cmd"][i] = self._fallback(obs, i, step["u0"][i], step["age"][i])
+                out["cmd"][i] = self._fallback(step, i)
         self.last_result = FilterResult(out["cmd"].copy(), status, out["slack"], solve_time)
         return out["cmd"]
 
-    def _fallback(self, obs: Observation, i: int, shifted: FloatArray, age: float) -> FloatArray:
+    def _fallback(self, step: dict, i: int) -> FloatArray:
         """The ``on_failure`` command of row ``i``; stores the plan it implies."""
-        g, t, pose, h = int(obs.robot_ids[i]), float(obs.t), obs.pose[i], self.p.horizon
-        policy = self.p.on_failure
-        if policy == "shift" and age < h:
+        obs, g, h = step["obs"], step["ids"][i:i + 1], self.p.horizon
+        pose, policy = obs.pose[i], self.p.on_failure
+        if policy == "shift" and step["age"][i] < h:
             # keep the previous plan (neighbours go on reading it); it runs out after H stages
-            for key, buf in self._w.items():
-                buf[g] = self._r[key][g]
-            return shifted[0].copy()
+            self._keep(int(g[0]))
+            return step["u0"][i][0].copy()
         if policy == "goto":
             u = goto_command(pose, obs.slot[i], self.p.goto_gain, self.spec)
         else:
             u = np.zeros(2)
-        self._store(np.array([g]), t, pose[None], np.tile(u, (h, 1))[None])
+        self._store(g, float(obs.t), pose[None], np.tile(u, (h, 1))[None])
         return u

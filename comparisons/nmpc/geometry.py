@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from comparisons.constraints.distance import StaticObstacles, disc_nearest, pair_geometry
+from comparisons.nmpc.statics import WorldShapes
 from dfcoa_opt.control.base import MovingObstacles, Neighbours
 from dfcoa_opt.geometry import take_rows
 
@@ -29,8 +30,12 @@ def slot_reference(leader: FloatArray, offsets: FloatArray, times: FloatArray
                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Slots over the horizon, with the leader at constant (v, omega) (exact arc).
 
+    Elementwise over the rows: row ``i`` of a batch gives the numbers of its
+    leader state alone, bit for bit (the same IEEE operations in the same order).
+
     Args:
-        leader: ``(5,)`` broadcast leader state (x m, y m, theta rad, v m/s, omega rad/s).
+        leader: ``(5,)`` broadcast leader state (x m, y m, theta rad, v m/s, omega rad/s),
+            or ``(N, 5)`` one per row (:meth:`~dfcoa_opt.control.base.Observation.row_leader`).
         offsets: ``(N, 2)`` slot offsets in the leader frame, m.
         times: ``(H,)`` prediction times from now, s.
 
@@ -40,7 +45,11 @@ def slot_reference(leader: FloatArray, offsets: FloatArray, times: FloatArray
         the slot is still) and the slot's feed-forward twist ``(|d/dt slot| m/s,
         omega rad/s)``, which a unicycle on the slot's path would apply.
     """
-    x, y, th, v, w = (float(c) for c in leader)
+    lead = np.asarray(leader, dtype=float)
+    if lead.ndim == 1:
+        x, y, th, v, w = (float(c) for c in lead)
+    else:  # (N, 1) columns: broadcast against times (H,) like the scalars above
+        x, y, th, v, w = (lead[:, j:j + 1] for j in range(5))
     half = 0.5 * w * times
     small = np.abs(half) < 1e-9
     sinc = np.where(small, 1.0, np.sin(half) / np.where(small, 1.0, half))
@@ -54,7 +63,7 @@ def slot_reference(leader: FloatArray, offsets: FloatArray, times: FloatArray
     vx, vy = v * c - w * ry, v * s + w * rx
     speed = np.hypot(vx, vy)
     heading = np.where(speed > _STILL, np.arctan2(vy, vx), np.broadcast_to(lth, speed.shape))
-    twist = np.stack((speed, np.full(speed.shape, w)), axis=-1)
+    twist = np.stack((speed, np.broadcast_to(w, speed.shape)), axis=-1)
     return ref, heading, twist
 
 
@@ -85,7 +94,8 @@ def plan_positions(plans: FloatArray, age: FloatArray, horizon: int) -> FloatArr
 
 
 def neighbour_predictions(nb: Neighbours, count: int, plans: FloatArray, plan_age: FloatArray,
-                          tau: float, horizon: int) -> tuple[FloatArray, NDArray[np.bool_]]:
+                          tau: float, horizon: int, index: NDArray[np.intp] | None = None
+                          ) -> tuple[FloatArray, NDArray[np.bool_]]:
     """Predicted centres of each robot's ``count`` nearest neighbours at stages 1 .. H.
 
     A neighbour with a plan of the previous steps (``plan_age`` finite, in
@@ -94,20 +104,23 @@ def neighbour_predictions(nb: Neighbours, count: int, plans: FloatArray, plan_ag
     velocity.
 
     Args:
-        nb: The observation's neighbour table (global robot ids in ``index``).
+        nb: The observation's neighbour table.
         count: Neighbour slots ``K`` (extra ones are dropped, missing ones padded).
         plans: ``(R, H + 1, 2)`` every robot's last plan, by global id, m.
         plan_age: ``(R,)`` age of each plan in stages (``inf`` = none).
         tau: Stage length, s.
         horizon: Stages ``H``.
+        index: ``(N, K')`` the neighbours' global ids (rows of ``plans``, -1 padded);
+            default ``nb.index`` (a table whose indices are global ids).
 
     Returns:
         ``(pred (N, K, H, 2) m, mask (N, K))``.
     """
-    n = len(nb.index)
+    index = nb.index if index is None else index
+    n = len(index)
     idx = np.full((n, count), -1, dtype=np.intp)
-    take = min(count, nb.index.shape[1])
-    idx[:, :take] = nb.index[:, :take]
+    take = min(count, index.shape[1])
+    idx[:, :take] = index[:, :take]
     pos = np.zeros((n, count, 2))
     vel = np.zeros((n, count, 2))
     pos[:, :take], vel[:, :take] = nb.position[:, :take], nb.velocity[:, :take]
@@ -118,7 +131,9 @@ def neighbour_predictions(nb: Neighbours, count: int, plans: FloatArray, plan_ag
     age = plan_age[safe]
     planned = mask & (age < horizon)
     if planned.any():
-        traj = plan_positions(plans[safe[planned]], age[planned], horizon)
+        # each plan is sampled once (a robot is the neighbour of several), then gathered
+        used, slot = np.unique(safe[planned], return_inverse=True)
+        traj = plan_positions(plans[used], plan_age[used], horizon)[slot]
         pred[planned] = traj[:, 1:] + (pos[planned] - traj[:, 0])[:, None, :]
     return pred, mask
 
@@ -148,52 +163,81 @@ def robot_halfplanes(lin: FloatArray, pred: FloatArray, mask: NDArray[np.bool_],
     return normal, np.where(active, offset, -np.inf)
 
 
-def obstacle_halfplanes(lin: FloatArray, static: StaticObstacles, moving: MovingObstacles,
-                        tau: float, count: int, distance: float, reach: float
+def moving_nearest(lin: FloatArray, moving: MovingObstacles, tau: float
+                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Nearest points of the moving discs each row senses, predicted to each stage.
+
+    The discs a row senses are packed first, in their order (padding after):
+    ``q = 0``, ``delta = inf``, ``n = (1, 0)``. Each (stage, disc) pair is one
+    :func:`~comparisons.constraints.distance.disc_nearest` evaluation of the disc
+    centred at ``position + velocity (k + 1) tau``.
+
+    Args:
+        lin: ``(N, H, 2)`` linearisation points, m.
+        moving: The observation's moving obstacles (``M`` slots).
+        tau: Stage length, s.
+
+    Returns:
+        ``(q (N, H, M, 2) m, delta (N, H, M) m, normal (N, H, M, 2))``.
+    """
+    n, h = lin.shape[:2]
+    m = moving.mask.shape[1]
+    order = np.argsort(~moving.mask, axis=1, kind="stable")  # sensed discs first, in order
+    sensed = np.take_along_axis(moving.mask, order, axis=1)
+    pos = take_rows(moving.position, order)
+    vel = take_rows(moving.velocity, order)
+    rad = np.take_along_axis(moving.radius, order, axis=1)
+    times = tau * np.arange(1, h + 1)
+    centre = pos[:, None] + vel[:, None] * times[None, :, None, None]  # (N, H, M, 2)
+    discs = np.concatenate((centre, np.broadcast_to(rad[:, None, :, None], (n, h, m, 1))),
+                           axis=-1)
+    q, delta, normal = disc_nearest(lin.reshape(n * h, 2), discs.reshape(n * h, m, 3))
+    q, delta, normal = q.reshape(n, h, m, 2), delta.reshape(n, h, m), normal.reshape(n, h, m, 2)
+    off = ~np.broadcast_to(sensed[:, None, :], (n, h, m))
+    q[off], delta[off], normal[off] = 0.0, np.inf, (1.0, 0.0)
+    return q, delta, normal
+
+
+def obstacle_halfplanes(lin: FloatArray, static: StaticObstacles | WorldShapes,
+                        moving: MovingObstacles, tau: float, count: int, distance: float,
+                        reach: float, world: NDArray[np.intp] | None = None
                         ) -> tuple[FloatArray, FloatArray]:
     """Half-planes of the ``count`` nearest static and moving obstacles at each stage.
 
     Static shapes (discs and polygons) go through
-    :meth:`~comparisons.constraints.distance.StaticObstacles.nearest`; moving
-    discs are predicted at constant velocity to each stage's time and go through
-    :func:`~comparisons.constraints.distance.disc_nearest`. The ``count`` nearest
-    of both (signed distance from the linearisation point) within ``reach`` are kept.
+    :meth:`~comparisons.constraints.distance.StaticObstacles.nearest` (or
+    :meth:`~comparisons.nmpc.statics.WorldShapes.nearest`, the same numbers with
+    each row in its own map); moving discs are predicted at constant
+    velocity to each stage's time and go through
+    :func:`~comparisons.constraints.distance.disc_nearest` (:func:`moving_nearest`).
+    The ``count`` nearest of both (signed distance from the linearisation point)
+    within ``reach`` are kept.
 
     Args:
         lin: ``(N, H, 2)`` linearisation points, m (stage k at ``(k + 1) tau`` s from now).
-        static: The map's shapes.
+        static: The map's shapes, or the maps of a batch (with ``world``).
         moving: The observation's moving obstacles.
         tau: Stage length, s.
         count: Slots per stage ``M``.
         distance: ``D`` = robot radius + margin, m.
         reach: Obstacles farther than this (signed distance) are left out, m.
+        world: ``(N,)`` each row's map in ``static`` (a :class:`WorldShapes`; None: map 0).
 
     Returns:
         ``(normal (N, H, M, 2), offset (N, H, M) m)``; inactive rows have offset ``-inf``.
     """
     n, h = lin.shape[:2]
-    near = static.nearest(lin.reshape(n * h, 2), count, reach)
+    if isinstance(static, WorldShapes):
+        near = static.nearest(lin, count, reach, world)
+    else:
+        near = static.nearest(lin.reshape(n * h, 2), count, reach)
     q = near.point.reshape(n, h, count, 2)
     delta = near.delta.reshape(n, h, count)
     normal = near.normal.reshape(n, h, count, 2)
-    m = moving.mask.shape[1]
-    if m and moving.mask.any():
-        times = tau * np.arange(1, h + 1)
-        mq = np.zeros((n, h, m, 2))
-        md = np.full((n, h, m), np.inf)
-        mn = np.zeros((n, h, m, 2))
-        mn[..., 0] = 1.0
-        for i in np.flatnonzero(moving.mask.any(axis=1)):
-            sel = moving.mask[i]
-            c = moving.position[i, sel][None] + moving.velocity[i, sel][None] * times[:, None, None]
-            r = np.broadcast_to(moving.radius[i, sel], c.shape[:2])
-            discs = np.concatenate((c, r[..., None]), axis=-1).reshape(-1, 3)
-            qq, dd, nn = disc_nearest(lin[i], discs)  # (H, H * m_i): stage j vs all stages
-            diag = np.arange(h)
-            mi = int(sel.sum())
-            mq[i, :, :mi] = qq.reshape(h, h, mi, 2)[diag, diag]
-            md[i, :, :mi] = dd.reshape(h, h, mi)[diag, diag]
-            mn[i, :, :mi] = nn.reshape(h, h, mi, 2)[diag, diag]
+    if moving.mask.shape[1] and moving.mask.any():
+        # rows that sense nothing keep their static slots: those are sorted already,
+        # the moving padding (delta = inf) goes after them
+        mq, md, mn = moving_nearest(lin, moving, tau)
         q = np.concatenate((q, mq), axis=2)
         delta = np.concatenate((delta, md), axis=2)
         normal = np.concatenate((normal, mn), axis=2)

@@ -1,0 +1,140 @@
+"""The plan buffers of the ``nmpc`` controller (:mod:`comparisons.nmpc.controller`).
+
+Every robot's last plan (made at ``t``: controls, poses, multipliers) is kept in
+arrays indexed by **global id**: ``env * N + robot`` in a batch of runs of ``N``
+robots (one run: the robot index; a hand-made observation without ``env``: its
+``robot_ids``). Plans are written to ``_w`` and read from ``_r``, a copy of
+``_w`` taken when a new step begins, so every robot reads its neighbours' plans
+of the previous step, whatever the order of the rows.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from comparisons.nmpc.model import rollout
+from dfcoa_opt.geometry import take_rows
+
+if TYPE_CHECKING:
+    from comparisons.nmpc.problem import ProblemSpec
+    from dfcoa_opt.control.base import Observation
+
+FloatArray = NDArray[np.float64]
+
+
+class PlanBuffers:
+    """Mixin of :class:`~comparisons.nmpc.controller.Nmpc`: the plans by global id.
+
+    Needs ``spec`` (:class:`~comparisons.nmpc.problem.ProblemSpec`), ``tau`` (s)
+    and ``_n`` (robots per run) on the object.
+
+    Attributes:
+        _w: Written plans: ``t`` (s, NaN = none), ``u`` ``(G, H, 2)``, ``x``
+            ``(G, H + 1, 3)``, ``lam_x``, ``lam_g`` and ``lam_ok`` (multipliers kept).
+        _r: Readable plans (same keys): ``_w`` as it was when the step began.
+        _t: Time of the current step, s (None before the first).
+    """
+
+    spec: ProblemSpec
+    tau: float
+    _n: int
+    _w: dict[str, np.ndarray]
+    _r: dict[str, np.ndarray]
+    _t: float | None
+
+    def _alloc(self, n: int) -> None:
+        """Plan buffers for ``n`` global ids, empty; no step yet."""
+        h, rows = self.spec.horizon, self.spec.rows
+        self._w = {"t": np.full(n, np.nan), "u": np.zeros((n, h, 2)),
+                   "x": np.zeros((n, h + 1, 3)), "lam_x": np.zeros((n, self.spec.nw * h)),
+                   "lam_g": np.zeros((n, rows * h)), "lam_ok": np.zeros(n, dtype=bool)}
+        self._r = {k: v.copy() for k, v in self._w.items()}
+        self._t = None
+
+    def _grow(self, n: int) -> None:
+        """Make room for global ids below ``n`` (hand-made observations)."""
+        have = len(self._w["t"])
+        if n <= have:
+            return
+        for buf in (self._w, self._r):
+            for k, v in buf.items():
+                fill = np.nan if k == "t" else 0
+                buf[k] = np.concatenate((v, np.full((n - have, *v.shape[1:]), fill, v.dtype)))
+
+    def _advance(self, t: float) -> None:
+        """At a new step (``t`` later than the last), last step's plans become readable."""
+        if self._t is None or t > self._t + 1e-9:
+            self._r = {k: v.copy() for k, v in self._w.items()}
+            self._t = t
+
+    def _global_ids(self, obs: Observation) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Global ids ``(R,)`` of the rows and ``(R, K)`` of their neighbours (-1 padded).
+
+        In a batch (``obs.env`` set) a row is ``env * N + robot_ids`` and a
+        neighbour index is a row of ``obs``; without ``env`` both ``robot_ids``
+        and the neighbour indices are global ids already (a hand-made observation
+        may hold any robots, e.g. :meth:`Observation.take`). Grows the buffers.
+        """
+        index = np.asarray(obs.neighbours.index, dtype=np.intp)
+        if obs.env is None:
+            ids = np.asarray(obs.robot_ids, dtype=np.intp)
+            nb = index
+        else:
+            ids = np.asarray(obs.env, dtype=np.intp) * self._n + obs.robot_ids
+            nb = np.where(index >= 0, ids[np.maximum(index, 0)], -1)
+        self._grow(int(max(ids.max(initial=-1), nb.max(initial=-1))) + 1)
+        return ids, nb
+
+    def _age(self, t: float, ids: NDArray[np.intp]) -> FloatArray:
+        """Age of the readable plans of ``ids`` at ``t``, in stages (``inf`` = none)."""
+        age = (t - self._r["t"][ids]) / self.tau
+        return np.where(np.isfinite(age) & (age >= -1e-9), np.maximum(age, 0.0), np.inf)
+
+    def _shifted(self, t: float, ids: NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
+        """Own previous controls shifted to ``t`` (zeros without a plan), and their age."""
+        h = self.spec.horizon
+        age = self._age(t, ids)
+        u = np.zeros((len(ids), h, 2))
+        live = age < h
+        if live.any():
+            idx = np.minimum(np.floor(age[live][:, None] + 1e-6).astype(np.intp)
+                             + np.arange(h), h - 1)
+            u[live] = take_rows(self._r["u"][ids[live]], idx)
+        return u, age
+
+    def _shifted_multipliers(self, ids: NDArray[np.intp], age: FloatArray
+                             ) -> tuple[FloatArray, FloatArray]:
+        """The robots' last multipliers shifted by ``age`` stages (zeros without them)."""
+        h, n = self.spec.horizon, len(ids)
+        live = (age < h) & self._r["lam_ok"][ids]
+        shift = np.floor(np.where(live, age, 0.0) + 1e-6).astype(np.intp)
+        idx = np.minimum(np.arange(h) + shift[:, None], h - 1)
+        out = []
+        for key in ("lam_x", "lam_g"):
+            lam = take_rows(self._r[key][ids].reshape(n, h, -1), idx)
+            lam[~live] = 0.0
+            out.append(lam.reshape(n, -1))
+        return out[0], out[1]
+
+    def _store(self, g: NDArray[np.intp], t: float, pose: FloatArray, u: FloatArray,
+               x: FloatArray | None = None,
+               lam: tuple[FloatArray, FloatArray] | None = None) -> None:
+        """Write the plans made at ``t`` of global ids ``g`` ``(R,)``.
+
+        Controls ``u`` ``(R, H, 2)``; poses ``x`` ``(R, H + 1, 3)`` (rolled out from
+        ``pose`` ``(R, 3)`` when not given); multipliers ``(lam_x, lam_g)`` or None.
+        """
+        w = self._w
+        w["t"][g], w["u"][g] = t, u
+        w["x"][g] = x if x is not None else rollout(pose, u, self.tau)
+        w["lam_ok"][g] = lam is not None
+        if lam is not None:
+            w["lam_x"][g], w["lam_g"][g] = lam
+
+    def _keep(self, g: int) -> None:
+        """Global id ``g`` keeps its readable plan (the ``shift`` fallback)."""
+        for key, buf in self._w.items():
+            buf[g] = self._r[key][g]
