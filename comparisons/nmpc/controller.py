@@ -33,6 +33,11 @@ set, :mod:`comparisons.nmpc.problem`) and applies the first control ``(v, omega)
   shifted previous solution and multipliers. A failed solve (no success, an
   exception, a non-finite value) applies ``on_failure`` and is logged with status
   ``STATUS_SOLVER_FAIL``; ``last_result.solve_time`` is the solver time per robot, s.
+* **Real-time iteration** (``rti = true``, ``sqp`` only; Diehl, Bock and Schloeder
+  2005): a robot whose plan was solved at the previous step makes one full SQP step
+  from it (shifted plan and multipliers), applied whatever its KKT measures when it
+  returns finite values without error; otherwise (first step, after a fallback) the
+  full SQP solves its problem. Rescue and ``on_failure`` as above.
 
 Formulation, measurements and limits: ``docs/methods/nmpc.md``.
 """
@@ -58,6 +63,7 @@ from comparisons.nmpc.geometry import (
 )
 from comparisons.nmpc.plans import PlanBuffers
 from comparisons.nmpc.problem import (
+    BatchOutput,
     NmpcProblem,
     ProblemSpec,
     SolveOutput,
@@ -68,6 +74,7 @@ from comparisons.nmpc.problem import (
 from comparisons.nmpc.statics import WorldShapes
 from dfcoa_opt.control.base import BatchedController, FilterResult, Observation
 from dfcoa_opt.control.registry import register
+from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.params import param
 from dfcoa_opt.sim.log import STATUS_OK, STATUS_SOLVER_FAIL
 
@@ -105,6 +112,8 @@ class Nmpc(PlanBuffers, BatchedController):
         last_iterations: ``(R,)`` iterations of the latest SQP solves, not of the IPOPT
             rescues (-1 when unknown: compiled solver, or an exception).
         last_rescued: ``(R,)`` which rows' SQP failed and IPOPT then succeeded.
+        last_rti: ``(R,)`` which rows made one real-time iteration (``rti``; the others
+            ran the full SQP).
         statics: The static shapes of the maps of the batch (``static``: the first map).
     """
 
@@ -155,6 +164,11 @@ class Nmpc(PlanBuffers, BatchedController):
                                          "the same results, without a C compiler).")
         rescue: bool = param(True, doc="When an 'sqp' solve fails, solve again with IPOPT "
                                        "before applying on_failure.")
+        rti: bool = param(False, doc="Real-time iteration ('sqp' only): a robot with a plan "
+                                     "solved at the previous step makes one full SQP step "
+                                     "from it, applied when finite whatever its KKT "
+                                     "measures; the full SQP on its first step and after "
+                                     "a fallback.")
         max_iter: int | None = param(None, doc="Iteration limit of the solver (hitting it is "
                                                "a failure); default 20 for 'sqp', 100 for "
                                                "'ipopt' and an IPOPT rescue.", ge=1, le=10_000)
@@ -171,8 +185,10 @@ class Nmpc(PlanBuffers, BatchedController):
         self.last_result: FilterResult | None = None
         self.last_iterations: NDArray[np.intp] = np.zeros(0, dtype=np.intp)
         self.last_rescued: NDArray[np.bool_] = np.zeros(0, dtype=bool)
+        self.last_rti: NDArray[np.bool_] = np.zeros(0, dtype=bool)
         self.problem: NmpcProblem | None = None
         self.rescuer: NmpcProblem | None = None
+        self.iterate: NmpcProblem | None = None  # the real-time iteration's (rti)
 
     # ------------------------------------------------------------------ set-up
     def reset_batch(self, scenarios: list[Scenario], rngs: list[np.random.Generator]) -> None:
@@ -198,6 +214,12 @@ class Nmpc(PlanBuffers, BatchedController):
             max_iter=p.max_iter or (SQP_MAX_ITER if p.solver == "sqp" else IPOPT_MAX_ITER),
             tol=p.tol, formulation=p.formulation, compiled=p.compiled)
         self.problem = _problem(self.spec)
+        self.iterate = None
+        if p.rti:
+            if p.solver != "sqp":
+                raise ScenarioError(scenario.source, "controllers.nmpc.rti",
+                                    "a real-time iteration needs solver = 'sqp'")
+            self.iterate = _problem(replace(self.spec, max_iter=1, rti=True))
         self.rescuer = None
         if p.rescue and p.solver == "sqp":  # multiple shooting: IPOPT is faster on it
             self.rescuer = _problem(replace(self.spec, solver="ipopt", hessian="exact",
@@ -308,8 +330,9 @@ class Nmpc(PlanBuffers, BatchedController):
             u0[i] = goto_command(obs.pose[i], obs.slot[i], self.p.goto_gain, self.spec)
         guess, params, lbg = self._problems(obs, u0, fresh, nb_ids=nb_ids)
         lam_x, lam_g = self._shifted_multipliers(ids, age)
+        rti = self._solved_last_step(ids) & (self.iterate is not None)
         step = {"obs": obs, "ids": ids, "u0": u0, "age": age, "params": params, "lbg": lbg,
-                "lam_x": lam_x, "lam_g": lam_g}
+                "lam_x": lam_x, "lam_g": lam_g, "rti": rti}
         return self.problem.pack(guess, params, lbg, lam_x, lam_g), step
 
     def act(self, obs: Observation) -> FloatArray:
@@ -320,11 +343,12 @@ class Nmpc(PlanBuffers, BatchedController):
         assert self.problem is not None, "reset() first"
         n = obs.n
         z, step = self._prepare(obs)
-        sol = self.problem.solve_rows(z)
+        sol = self._solve(z, step["rti"])
         out = {"cmd": np.zeros((n, 2)), "slack": np.zeros(n)}
         status = np.full(n, STATUS_OK, dtype=np.int8)
         self.last_iterations = sol.iterations.copy()
         self.last_rescued = np.zeros(n, dtype=bool)
+        self.last_rti = step["rti"].copy()
         ok = np.flatnonzero(sol.success)
         self._accept(ok, step, sol.u[ok], sol.x[ok], sol.slack[ok],
                      (sol.lam_x[ok], sol.lam_g[ok]), out)
@@ -341,6 +365,20 @@ class Nmpc(PlanBuffers, BatchedController):
                 out["cmd"][i] = self._fallback(step, i)
         self.last_result = FilterResult(out["cmd"].copy(), status, out["slack"], solve_time)
         return out["cmd"]
+
+    def _solve(self, z: FloatArray, rti: NDArray[np.bool_]) -> BatchOutput:
+        """Solve packed inputs ``z`` ``(R, n)``: rows ``rti`` by one real-time iteration.
+
+        The other rows run the full SQP; one compiled call per kind of row.
+        """
+        if not rti.any():
+            return self.problem.solve_rows(z)
+        assert self.iterate is not None
+        full = np.flatnonzero(~rti)
+        parts = [(np.flatnonzero(rti), self.iterate.solve_rows(z[rti]))]
+        if len(full):
+            parts.append((full, self.problem.solve_rows(z[full])))
+        return BatchOutput.gather(len(z), parts)
 
     def _fallback(self, step: dict, i: int) -> FloatArray:
         """The ``on_failure`` command of row ``i``; stores the plan it implies."""

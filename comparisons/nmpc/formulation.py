@@ -90,6 +90,8 @@ def solver_options(spec: ProblemSpec) -> dict:
     qp_options = {"error_on_fail": False}
     if spec.qp_solver == "qrqp":
         qp_options.update(print_iter=False, print_header=False, print_info=False, max_iter=200)
+    if spec.rti:  # real-time iteration: full steps, as Diehl et al. (2005) and acados
+        common["max_iter_ls"] = 0
     return {**common, "qpsol": spec.qp_solver, "qpsol_options": qp_options,
             "max_iter": spec.max_iter, "tol_pr": spec.tol, "tol_du": spec.tol,
             "print_header": False, "print_iteration": False, "print_status": False}

@@ -36,6 +36,7 @@ class PlanBuffers:
             ``(G, H + 1, 3)``, ``lam_x``, ``lam_g`` and ``lam_ok`` (multipliers kept).
         _r: Readable plans (same keys): ``_w`` as it was when the step began.
         _t: Time of the current step, s (None before the first).
+        _t_prev: Time of the step before it, s (NaN before the second).
     """
 
     spec: ProblemSpec
@@ -44,6 +45,7 @@ class PlanBuffers:
     _w: dict[str, np.ndarray]
     _r: dict[str, np.ndarray]
     _t: float | None
+    _t_prev: float
 
     def _alloc(self, n: int) -> None:
         """Plan buffers for ``n`` global ids, empty; no step yet."""
@@ -52,7 +54,7 @@ class PlanBuffers:
                    "x": np.zeros((n, h + 1, 3)), "lam_x": np.zeros((n, self.spec.nw * h)),
                    "lam_g": np.zeros((n, rows * h)), "lam_ok": np.zeros(n, dtype=bool)}
         self._r = {k: v.copy() for k, v in self._w.items()}
-        self._t = None
+        self._t, self._t_prev = None, np.nan
 
     def _grow(self, n: int) -> None:
         """Make room for global ids below ``n`` (hand-made observations)."""
@@ -68,7 +70,16 @@ class PlanBuffers:
         """At a new step (``t`` later than the last), last step's plans become readable."""
         if self._t is None or t > self._t + 1e-9:
             self._r = {k: v.copy() for k, v in self._w.items()}
+            self._t_prev = np.nan if self._t is None else self._t
             self._t = t
+
+    def _solved_last_step(self, ids: NDArray[np.intp]) -> NDArray[np.bool_]:
+        """Which of ``ids`` have a readable plan solved at the previous step.
+
+        Solved: with multipliers (not a ``stop`` or ``goto`` fallback's); at the
+        previous step (not one kept by ``shift``, nor an older one).
+        """
+        return self._r["lam_ok"][ids] & (self._r["t"][ids] == self._t_prev)
 
     def _global_ids(self, obs: Observation) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         """Global ids ``(R,)`` of the rows and ``(R, K)`` of their neighbours (-1 padded).

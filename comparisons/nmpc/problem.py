@@ -50,6 +50,7 @@ from comparisons.nmpc.formulation import (
     solver_options,
 )
 from comparisons.nmpc.model import arc_step, rollout
+from comparisons.nmpc.outputs import BatchOutput, SolveOutput
 
 __all__ = ["NW", "BatchOutput", "NmpcProblem", "ProblemSpec", "SolveOutput", "arc_step",
            "map_lbg", "map_multipliers", "rollout"]
@@ -88,6 +89,9 @@ class ProblemSpec:
         formulation: ``"condensed"`` (states eliminated) or ``"multiple-shooting"``.
         compiled: Compile the SQP solver to C (:mod:`comparisons.nmpc.compiled`);
             it falls back to the interpreted one without a compiler.
+        rti: A real-time iteration (``sqp`` only; give ``max_iter = 1``): full SQP
+            steps (no line search), and a solve succeeds when it returns without error
+            and with finite values, whatever its KKT measures.
     """
 
     horizon: int
@@ -110,6 +114,7 @@ class ProblemSpec:
     tol: float
     formulation: Formulation = "condensed"
     compiled: bool = False
+    rti: bool = False
 
     @property
     def nw(self) -> int:
@@ -132,76 +137,6 @@ class ProblemSpec:
         return 5 + 2 * self.slots
 
 
-@dataclass
-class SolveOutput:
-    """One solve's result.
-
-    Attributes:
-        w: ``(nw H,)`` decision vector (see the module layout).
-        lam_x: Bound multipliers.
-        lam_g: Constraint multipliers.
-        success: The solver reported success and every value is finite.
-        iterations: Solver iterations (-1 when unknown: the compiled solver does not count).
-        u: ``(H, 2)`` planned controls (v m/s, omega rad/s).
-        x: ``(H, 3)`` planned poses at stages 1 .. H (m, m, rad).
-        slack: ``(H,)`` slacks ``s_1 .. s_H``, m.
-    """
-
-    w: FloatArray
-    lam_x: FloatArray
-    lam_g: FloatArray
-    success: bool
-    iterations: int
-    u: FloatArray | None = None
-    x: FloatArray | None = None
-    slack: FloatArray | None = None
-
-
-@dataclass
-class BatchOutput:
-    """The solves of ``N`` packed inputs (:meth:`NmpcProblem.solve_rows`), row by row.
-
-    Attributes:
-        w: ``(N, nw H)`` decision vectors.
-        lam_x: ``(N, nw H)`` bound multipliers.
-        lam_g: ``(N, rows H)`` constraint multipliers.
-        x: ``(N, H, 3)`` planned poses at stages 1 .. H (m, m, rad).
-        success: ``(N,)`` the solver's success test passed and every value is finite.
-        iterations: ``(N,)`` solver iterations (-1 when unknown, as compiled).
-        seconds: ``(N,)`` wall time of each row's solve, s.
-    """
-
-    w: FloatArray
-    lam_x: FloatArray
-    lam_g: FloatArray
-    x: FloatArray
-    success: NDArray[np.bool_]
-    iterations: NDArray[np.intp]
-    seconds: FloatArray
-
-    @property
-    def u(self) -> FloatArray:
-        """``(N, H, 2)`` planned controls (v m/s, omega rad/s)."""
-        return self.w.reshape(len(self.w), self.x.shape[1], -1)[..., :2]
-
-    @property
-    def slack(self) -> FloatArray:
-        """``(N, H)`` slacks ``s_1 .. s_H``, m."""
-        return self.w.reshape(len(self.w), self.x.shape[1], -1)[..., -1]
-
-    def row(self, i: int) -> SolveOutput:
-        """Row ``i`` as a :class:`SolveOutput` (copies)."""
-        return SolveOutput(self.w[i].copy(), self.lam_x[i].copy(), self.lam_g[i].copy(),
-                           bool(self.success[i]), int(self.iterations[i]), self.u[i].copy(),
-                           self.x[i].copy(), self.slack[i].copy())
-
-    def put(self, rows: NDArray[np.intp], other: BatchOutput) -> None:
-        """Overwrite ``rows`` with ``other``'s rows (same layout); their times add up."""
-        for key in ("w", "lam_x", "lam_g", "x", "success", "iterations"):
-            getattr(self, key)[rows] = getattr(other, key)
-        self.seconds[rows] += other.seconds
-
-
 class NmpcProblem:
     """One robot's NLP as a casadi ``nlpsol`` behind one packed Function.
 
@@ -213,6 +148,8 @@ class NmpcProblem:
     only) it runs compiled (:func:`comparisons.nmpc.compiled.compile_function`); a
     solve then succeeds when both measures are below ``tol``, which is the test
     ``sqpmethod`` stops on (``stats()["success"]``, used by the interpreted solver).
+    With ``spec.rti`` (one real-time iteration) a solve succeeds when it returns
+    without error and with finite values, whatever those measures say.
 
     Args:
         spec: Shape, weights, limits and solver.
@@ -354,7 +291,8 @@ class NmpcProblem:
         """The solver itself on one packed input (its stats are those of this call).
 
         Returns:
-            The packed output (KKT measures NaN), ``stats()["success"]``, iterations.
+            The packed output (KKT measures NaN), ``stats()["success"]`` (True with
+            ``rti``: it returned), iterations.
         """
         nx, n_p, ng = self.sizes
         w0, p, lbg, lam_x0, lam_g0 = np.split(z, np.cumsum([nx, n_p, ng, nx]))
@@ -366,19 +304,20 @@ class NmpcProblem:
                                    for k in ("lam_x", "lam_g")),
                               np.asarray(self.states(w, p), dtype=float).ravel(),
                               np.full(2, np.nan)])
-        return out, bool(stats.get("success", False)), int(stats.get("iter_count", -1))
+        ok = self.spec.rti or bool(stats.get("success", False))
+        return out, ok, int(stats.get("iter_count", -1))
 
     def _unpack(self, out: FloatArray, ok: NDArray[np.bool_], iterations: NDArray[np.intp],
                 seconds: FloatArray) -> BatchOutput:
         """Split packed outputs ``(N, compiled_size)``; success as the solver's own test.
 
         ``ok``: no error and (interpreted) ``stats()["success"]``. Compiled rows
-        converge when both KKT measures are below ``tol``.
+        converge when both KKT measures are below ``tol`` (not tested with ``rti``).
         """
         nx, _, ng = self.sizes
         h = self.spec.horizon
         w = out[:, :nx]
-        if self.compiled is not None:
+        if self.compiled is not None and not self.spec.rti:
             ok = ok & (out[:, -2] < self.spec.tol) & (out[:, -1] < self.spec.tol)
         return BatchOutput(w, out[:, nx:2 * nx], out[:, 2 * nx:2 * nx + ng],
                            out[:, 2 * nx + ng:2 * nx + ng + 3 * h].reshape(-1, h, 3),
