@@ -1,7 +1,8 @@
 """``reshape``: a formation that reshapes itself to get through (beyond the papers, issue 20).
 
 - :mod:`~comparisons.reshape.controller`: the controller ``Reshape`` (registered
-  as ``reshape``): central formation planning, distributed CBF tracking;
+  as ``reshape``, batched): distributed CBF tracking of every run's robots;
+- :mod:`~comparisons.reshape.central`: the central formation planning of one run;
 - :mod:`~comparisons.reshape.region`: convex obstacle-free regions around the
   leader's look-ahead segment (IRIS style);
 - :mod:`~comparisons.reshape.planner`: the choice of template, rotation, scale

@@ -23,7 +23,8 @@ and picks one of three modes (docs/methods/reshape.md):
    fits, the look-ahead is halved (twice), then the formation waits on its
    previous plan: counted as ``shrinks`` and ``waits``.
 
-Robots take their own slots in the scenario's shape (success is judged on
+The planning of a run is :mod:`~comparisons.reshape.central` (one planner per
+run). Robots take their own slots in the scenario's shape (success is judged on
 those) and the Hungarian assignment otherwise, kept unless a new one is
 ``hysteresis`` cheaper. Tracking is distributed
 (:mod:`~comparisons.reshape.tracking`): each robot drives to its target (to a
@@ -32,41 +33,69 @@ through the ``cbf`` filter; a robot held still away from its target has its
 command turned (``unsticks``). Broadcast per plan: the mode and template id,
 ``t`` (2 floats), ``theta``, ``s`` and the assignment (N integers) -- 4 N + 24
 bytes. The counters are in the run's metrics as ``ctl_*``.
+
+Batched (:class:`~dfcoa_opt.control.base.BatchedController`): one object steps
+every run of a batch. The due runs are planned one by one, each from its own
+rows; the tracking is one elementwise pass over every row of every run (one
+``cbf`` call), so each run's commands and counters are, bit for bit, those of
+the run alone (``tests/test_batch.py``).
 """
 
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import linear_sum_assignment
 
 from comparisons.cbf.filter import CbfFilter
 from comparisons.reshape import planner
-from comparisons.reshape.region import grow_region, shape_segments, swept_disc_segments
-from comparisons.reshape.route_mode import RouteMode
-from comparisons.reshape.routes import ConfigurationSpace, RoutePlanner, heading_bin
-from comparisons.reshape.tracking import Guidance, StuckMonitor
-from dfcoa_opt.control.base import FilterResult, Observation, slot_velocity
+from comparisons.reshape.central import CentralPlanner, RunMap
+from comparisons.reshape.tracking import StuckMonitor
+from dfcoa_opt.control.base import (
+    BatchedController,
+    FilterResult,
+    MovingObstacles,
+    Neighbours,
+    Observation,
+    as_batch,
+    slot_velocity,
+)
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.formation import line_offsets
-from dfcoa_opt.geometry import point_segment_distance, rotate
+from dfcoa_opt.geometry import rotate
 from dfcoa_opt.params import param
-from dfcoa_opt.planning.pure_pursuit import PurePursuit
+
+if TYPE_CHECKING:
+    from dfcoa_opt.sim.scenario import Scenario
 
 FloatArray = NDArray[np.float64]
-#: The nominal formation must also fit this far along the leader's path, m.
-NOMINAL_AHEAD = 1.0
-#: Smallest gap between two robots' discs in a template (sets the smallest scale), m.
-GAP = 0.3
+#: How a run's robots track, by its latest plan: their own slots on the leader ...
+NOMINAL = 0
+#: ... fixed targets ...
+FIXED = 1
+#: ... or targets carried along in the leader's frame.
+CARRIED = 2
 
 
 @register("reshape")
-class Reshape(RouteMode):
-    """Reshaping formation: free region, template choice, assignment, CBF tracking."""
+class Reshape(BatchedController):
+    """Reshaping formation: free region, template choice, assignment, CBF tracking.
+
+    Batched (:class:`~dfcoa_opt.control.base.BatchedController`): one object
+    for the E runs of a batch. Each run has its own
+    :class:`~comparisons.reshape.central.CentralPlanner` (planning is per run);
+    the tracking -- targets, guidance waypoints, stuck robots, the ``cbf``
+    filter and the speed clip -- is one elementwise pass over every row of
+    every run, with per-row state in row ``env * N + robot``.
+
+    Attributes:
+        p: Parameters.
+        safety: The tracking filter (built by the reset: it needs the robots' ``v_max``).
+        runs: The planner of each run, by ``env``.
+        last_result: The filter's result of the latest step, one entry per row.
+    """
 
     command = "velocity"
     uses_scan = False
@@ -121,227 +150,122 @@ class Reshape(RouteMode):
 
     def __init__(self, params: Params) -> None:
         self.p = params
-        self.safety: CbfFilter | None = None  # built by reset (it needs the robots' v_max)
+        self.safety: CbfFilter | None = None
         self.last_result: FilterResult | None = None
-        self.counters: dict[str, int] = {}
-        self.plan_times: list[float] = []
-        #: ``(t, template, scale)`` of every plan (None when the formation waited).
-        self.history: list[tuple[float, str | None, float]] = []
+        self.runs: list[CentralPlanner] = []
+        self._n = 0
+        self._v_max = 1.0
+        self._stuck = StuckMonitor(np.zeros((0, 2)), params.unstick_time, params.unstick_angle)
+        self._next = np.zeros(0)  # time of each run's next plan, s
+        self._mode = np.zeros(0, dtype=np.int8)  # NOMINAL, FIXED or CARRIED, per run
+        self._target = np.zeros((0, 2))  # FIXED targets, per row, m
+        self._carried = np.zeros((0, 2))  # CARRIED targets in the leader frame, per row, m
+        self._waypoint = np.zeros((0, 2))  # guidance waypoints, per row, m
+        self._guided = np.zeros(0, dtype=bool)  # rows heading for their waypoint
+        # the assignment's state for :meth:`_assignment` alone (a run's is its planner's)
+        self._assign = np.zeros(0, dtype=np.intp)
+        self._template: str | None = None
 
     # ---------------------------------------------------------------------- set-up
-    def reset(self, scenario, rng: np.random.Generator) -> None:
-        """Read the team, the map and the leader's path; build the templates."""
-        spec = scenario.spec
+    def reset_batch(self, scenarios: list[Scenario], rngs: list[np.random.Generator]) -> None:
+        """Build the filter, the stuck-robot monitor and one planner per run.
+
+        Args:
+            scenarios: One scenario per run (one file: the same team and robots;
+                the worlds differ when a clutter field follows the seed).
+            rngs: One generator per run (``reshape`` draws nothing; the filter gets them).
+        """
+        spec = scenarios[0].spec
         # the box |u_x|, |u_y| <= v_max (the filter's default, v_max / sqrt 2, would hold
         # a formation moving along an axis to 71 % of its speed), the result clipped to
         # |u| <= v_max afterwards: a uniform saturation, which keeps every barrier row
         self.safety = CbfFilter(CbfFilter.Params(solver="exact", v_max=spec.robots.v_max,
                                                  gamma=self.p.gamma), owner="reshape")
-        self.safety.reset(scenario, rng)
-        self._n = scenario.n
-        self._r = spec.robots.radius
-        self._v_max = spec.robots.v_max
-        self._offsets = np.asarray(scenario.offsets, dtype=float)
-        spacing = _spacing(self._offsets, self._r)
-        column = np.column_stack([-spacing * np.arange(self._n), np.zeros(self._n)])
-        every = {"scenario": self._offsets, "line": line_offsets(self._n, spacing),
-                 "column": column}
-        self._templates = {k: every[k] for k in self.p.templates if k in every}
-        self._cost = {k: (0.0 if k == "scenario" else self.p.template_cost)
-                      for k in self._templates}
-        self._path = PurePursuit(scenario.leader_path, 0.0, 0.0, 0.0)
-        self._world = scenario.world
-        self._segments = shape_segments(scenario.world.shapes)
-        self._bounds = scenario.world.grid.extent
-        self._guide = Guidance(scenario.world.grid, self._r + self.p.margin)
-        half = 0.5 * (self.p.rotations - 1)
-        self._rotations = (np.linspace(-self.p.rotation_max, self.p.rotation_max,
-                                       self.p.rotations) if half else np.zeros(1))
-        floor = (2.0 * self._r + GAP) / _spacing(self._offsets, 0.0)  # 1 for a lone robot
-        self._scales = np.linspace(1.0, min(1.0, max(self.p.s_min, floor)), self.p.scales)
-        self._weights = planner.Weights(self.p.weight_progress, self.p.weight_scale,
-                                        self.p.weight_rotation, self.p.switch_cost)
-        self._spacing = spacing
-        self._centre = self._offsets.mean(axis=0)
-        rho = self._r + self.p.margin
-        grid, wide = scenario.world.grid, self.p.route_clearance
-        self._cspace = ConfigurationSpace(grid, self._offsets - self._centre, rho, wide)
-        self._extent = float(np.max(np.hypot(*(self._offsets - self._centre).T)))
-        end = self._path.length
-        self._goal_heading = self._tangent(end)
-        self._goal_centre = self._path.point_at(end) + rotate(self._centre, self._goal_heading)
-        single = (ConfigurationSpace(grid, np.zeros((1, 2)), rho, wide)
-                  if "column" in self._templates else None)
-        self._routes = RoutePlanner(self._cspace, single, self._scales,
-                                    self._spacing * (self._n - 1), self._goal_centre,
-                                    self.p.route_detour, self.p.route_period, self._spacing)
-        self._next = 0.0
-        self._targets = np.zeros((self._n, 2))
-        self._nominal = True
-        self._template: str | None = None
-        self._assign = np.arange(self._n)
-        self._waypoint: dict[int, FloatArray] = {}
-        self._carried: FloatArray | None = None  # the targets in the leader's frame
-        self.counters = {"replans": 0, "shrinks": 0, "waits": 0, "switches": 0, "unsticks": 0}
-        self._stuck = StuckMonitor(np.asarray(scenario.initial_pose, float)[:, :2],
-                                   self.p.unstick_time, self.p.unstick_angle)
-        self.plan_times = []
-        self.history = []
+        self.safety.reset_batch(scenarios, rngs)
+        n, runs = scenarios[0].n, len(scenarios)
+        self._n, self._v_max = n, spec.robots.v_max
+        start = np.concatenate([np.asarray(sc.initial_pose, float)[:, :2] for sc in scenarios])
+        self._stuck = StuckMonitor(start, self.p.unstick_time, self.p.unstick_angle)
+        maps: dict[int, RunMap] = {}  # runs of one scenario object share its map objects
+        self.runs = [CentralPlanner(self.p, sc, maps, self._stuck, slice(e * n, (e + 1) * n),
+                                    self.safety.pair_distance)
+                     for e, sc in enumerate(scenarios)]
+        self._next = np.zeros(runs)
+        self._mode = np.full(runs, NOMINAL, dtype=np.int8)
+        self._target = np.zeros((runs * n, 2))
+        self._carried = np.zeros((runs * n, 2))
+        self._waypoint = np.zeros((runs * n, 2))
+        self._guided = np.zeros(runs * n, dtype=bool)
         self.last_result = None
 
-    # ------------------------------------------------------------------- planning
-    @staticmethod
-    def _moving(obs: Observation) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Position, velocity and radius of each sensed moving disc, once (m, m/s, m)."""
-        m = obs.obstacles
-        pos, vel, rad = m.position[m.mask], m.velocity[m.mask], m.radius[m.mask]
-        keys = np.round(np.column_stack([pos, rad]), 6)  # several robots sense one disc
-        _, first = np.unique(keys, axis=0, return_index=True)
-        return pos[first], vel[first], rad[first]
+    # ------------------------------------------------------------ one run's results
+    @property
+    def counters(self) -> dict[str, int]:
+        """Counters of the first run (of the only one outside a batch); see :meth:`run_counters`."""
+        return self.runs[0].counters if self.runs else {}
 
-    def _moving_segments(self, obs: Observation) -> FloatArray:
-        if not obs.obstacles.mask.any():
-            return np.zeros((0, 2, 2))
-        return swept_disc_segments(*self._moving(obs), self.p.horizon)
+    @property
+    def history(self) -> list[tuple[float, str | None, float]]:
+        """``(t, template, scale)`` of every plan of the first run (None: it waited)."""
+        return self.runs[0].history if self.runs else []
 
-    def _nominal_fits(self, obs: Observation, s_l: float) -> bool:
-        """Whether the scenario's formation fits on the leader, now and ``NOMINAL_AHEAD`` on.
+    @property
+    def plan_times(self) -> list[float]:
+        """Wall time of every plan of the first run, s."""
+        return self.runs[0].plan_times if self.runs else []
 
-        Every slot keeps ``r + margin`` from the static obstacles and from each
-        sensed moving disc's sweep over ``horizon``.
-        """
-        ahead = min(s_l + NOMINAL_AHEAD, self._path.length)
-        later = self._path.point_at(ahead) + rotate(self._offsets, self._tangent(ahead))
-        slots = np.concatenate([obs.slot, later])
-        need = self._r + self.p.margin
-        if not bool(np.all(self._world.clearance(slots, cap=need) >= need)):  # cap: same answer
-            return False
-        if not obs.obstacles.mask.any():
-            return True
-        pos, vel, rad = self._moving(obs)
-        gap = point_segment_distance(slots[:, None], pos[None], (pos + self.p.horizon * vel)[None])
-        return bool(np.all(gap >= need + rad[None]))
-
-    def _plan(self, obs: Observation) -> None:
-        t0 = time.perf_counter()
-        self.counters["replans"] += 1
-        pos = obs.pose[:, :2]
-        centroid = pos.mean(axis=0)
-        s_c = float(self._path.arc_length(centroid[None])[0])
-        s_l = float(self._path.arc_length(obs.leader[None, :2])[0])
-        k = heading_bin(self._tangent(s_c + self.p.lookahead))
-        if self._path_blocked(s_c, k) and self._follow_route(obs, pos, centroid, k):
-            self.plan_times.append(time.perf_counter() - t0)
-            return
-        self._routes.clear()
-        if s_c + self.p.lookahead >= s_l and self._nominal_fits(obs, s_l):
-            self._nominal_plan(obs)  # nothing in the way: the scenario's formation
-            self.plan_times.append(time.perf_counter() - t0)
-            return
-        segments = np.concatenate([self._segments, self._moving_segments(obs)])
-        start = centroid if self._guide.free(centroid, centroid, self._r) else \
-            self._path.point_at(s_c)
-        cand = None
-        for shrink in (1.0, 0.5, 0.25):
-            following = s_c + shrink * self.p.lookahead >= s_l
-            goal = obs.leader[:2].copy() if following else \
-                self._path.point_at(s_c + shrink * self.p.lookahead)
-            if not self._guide.free(start, goal, self._r + self.p.margin):
-                goal = self._guide.point_along(start, goal, shrink * self.p.lookahead)
-            end = goal.copy()
-            for _ in range(8):  # shorten the seed until it is free
-                if self._guide.free(start, end, 0.5 * self._r):
-                    break
-                end = 0.5 * (start + end)
-            seed = np.array([start, end])
-            psi = (float(obs.leader[2]) if following or math.hypot(*(end - start)) < 0.2
-                   else math.atan2(*(end - start)[::-1]))
-            region = grow_region(seed, segments, self._bounds)
-            cand = planner.choose(region, self._templates, self._cost, goal, psi, self._rotations,
-                                  self._scales, self._r + self.p.margin, self._template,
-                                  self._weights)
-            if cand is not None:
-                break
-            self.counters["shrinks"] += 1
-        self._carried = None
-        if cand is None:
-            self.counters["waits"] += 1
-            self.history.append((obs.t, None, math.nan))
-            if self._template is None:
-                self._targets, self._nominal = pos.copy(), False
-            self.plan_times.append(time.perf_counter() - t0)
-            return
-        self.history.append((obs.t, cand.template, cand.scale))
-        slots = cand.slots(self._templates[cand.template])
-        self._nominal = (cand.template == "scenario" and cand.scale == 1.0
-                         and abs(cand.theta - float(obs.leader[2])) < 1e-12
-                         and bool(np.allclose(cand.t, obs.leader[:2])))
-        if cand.template != self._template and self._template is not None:
-            self.counters["switches"] += 1
-        self._assign = self._assignment(pos, slots, cand.template)
-        self._template = cand.template
-        self._targets = slots[self._assign]
-        # keeping up with the leader: the plan moves with it until the next one
-        self._carried = (rotate(self._targets - obs.leader[:2], -float(obs.leader[2]))
-                         if following and not self._nominal else None)
-        self._waypoint = self._waypoints(obs.t, pos)
-        self.plan_times.append(time.perf_counter() - t0)
-
-    def _nominal_plan(self, obs: Observation) -> None:
-        """The scenario's formation on the virtual leader (``goto_slot`` with the CBF filter)."""
-        if self._template not in (None, "scenario"):
-            self.counters["switches"] += 1
-        self.history.append((obs.t, "scenario", 1.0))
-        self._template, self._nominal, self._carried = "scenario", True, None
-        self._assign = np.arange(self._n)
-        self._targets = obs.slot.copy()
-        self._waypoint = self._waypoints(obs.t, obs.pose[:, :2])
-
-    def _waypoints(self, t: float, pos: FloatArray) -> dict[int, FloatArray]:
-        """Guidance waypoints towards the targets (stuck robots: around the others too)."""
-        assert self.safety is not None, "reset() first"
-        keep = self.safety.pair_distance + self._guide.inflated.cell_size
-        return self._guide.waypoints(pos, self._targets, self._stuck.stuck(t), keep,
-                                     self._stuck.freed(t))
+    def run_counters(self, env: int) -> dict[str, int]:
+        """Run ``env``'s ``replans``, ``shrinks``, ``waits``, ``switches`` and ``unsticks``."""
+        return dict(self.runs[env].counters)
 
     def _assignment(self, pos: FloatArray, slots: FloatArray, template: str) -> NDArray[np.intp]:
-        """Robot i -> slot index: its own for the scenario's template, else Hungarian."""
-        if template == "scenario":
-            return np.arange(self._n)
-        cost = np.sum((pos[:, None, :] - slots[None]) ** 2, axis=2)
-        _, best = linear_sum_assignment(cost)
-        keep = self._assign
-        if template == self._template and \
-                cost[np.arange(self._n), keep].sum() <= (1.0 + self.p.hysteresis) * \
-                cost[np.arange(self._n), best].sum():
-            return keep
-        return best
+        """:func:`~comparisons.reshape.planner.assign` after ``_template`` and ``_assign``.
 
+        The assignment as one run's planner makes it, with this object's
+        ``_template`` and ``_assign`` as the previous plan's (set by hand: the
+        runs' own are in :attr:`runs`).
+        """
+        return planner.assign(pos, slots, template, self._template, self._assign,
+                              self.p.hysteresis)
+
+    # ------------------------------------------------------------------ each step
     def act(self, obs: Observation) -> FloatArray:
-        """Replan when due (central), then every robot to its target through the CBF filter."""
-        if obs.t >= self._next - 1e-9:
-            self._plan(obs)
-            self._next = obs.t + self.p.replan_period
+        """Replan the due runs (central, per run), then track: every row of every run at once.
+
+        Args:
+            obs: The observation of one run, or of every active run of a batch.
+
+        Returns:
+            ``(R, 2)`` velocity commands (vx, vy), m/s, one per row.
+        """
+        assert self.safety is not None, "reset() first"
+        obs = as_batch(obs)
+        envs = np.unique(obs.env)
+        for e in envs[obs.t >= self._next[envs] - 1e-9]:
+            self._plan(obs, int(e))
         pos = obs.pose[:, :2]
-        ids = obs.robot_ids
-        if self._nominal:
-            target = obs.slot.copy()
-            ff = slot_velocity(obs.leader, target)
-        elif self._carried is None:
-            target = self._targets[ids].copy()
-            ff = np.zeros_like(target)
-        else:  # a plan made while keeping up: carried along in the leader's frame
-            target = obs.leader[:2] + rotate(self._carried[ids], float(obs.leader[2]))
-            ff = slot_velocity(obs.leader, target)
-        for row, i in enumerate(ids):
-            if int(i) in self._waypoint:
-                target[row], ff[row] = self._waypoint[int(i)], 0.0
+        rows = obs.env * self._n + obs.robot_ids
+        lead = obs.row_leader()
+        mode = self._mode[obs.env]
+        target = self._target[rows]
+        nominal = mode == NOMINAL
+        carried = mode == CARRIED
+        target[nominal] = obs.slot[nominal]
+        if carried.any():  # a plan made while keeping up: carried along in the leader's frame
+            target[carried] = lead[carried, :2] + rotate(self._carried[rows[carried]],
+                                                         lead[carried, 2])
+        ff = slot_velocity(lead, target)  # the leader's feed-forward (nominal and carried)
+        ff[~(nominal | carried)] = 0.0
+        guided = self._guided[rows]
+        target[guided], ff[guided] = self._waypoint[rows[guided]], 0.0
         u = self.p.kp * (target - pos) + ff
-        u, turned = self._stuck.turn(obs.t, ids, pos, target, u)
-        self.counters["unsticks"] += turned
+        u, turned = self._stuck.turn(obs.t, rows, pos, target, u)
+        if turned:
+            for e, count in zip(*np.unique(obs.env[self._stuck.turned], return_counts=True),
+                                strict=True):
+                self.runs[int(e)].counters["unsticks"] += int(count)
         speed = np.hypot(u[:, 0], u[:, 1])
         u = u * np.minimum(1.0, self._v_max / np.maximum(speed, 1e-12))[:, None]
-        assert self.safety is not None, "reset() first"
         res = self.safety.filter(obs, u)
         speed = np.hypot(res.command[:, 0], res.command[:, 1])
         over = speed > self._v_max
@@ -350,11 +274,37 @@ class Reshape(RouteMode):
         self.last_result = res
         return res.command
 
+    def _plan(self, obs: Observation, e: int) -> None:
+        """Run ``e``'s plan, from its own rows; its targets into the batch's rows."""
+        run = self.runs[e]
+        run.plan(_run_rows(obs, e))
+        self._next[e] = obs.t + self.p.replan_period
+        rows = slice(e * self._n, (e + 1) * self._n)
+        self._mode[e] = NOMINAL if run.nominal else FIXED if run.carried is None else CARRIED
+        if not run.nominal:
+            if run.carried is None:
+                self._target[rows] = run.targets
+            else:
+                self._carried[rows] = run.carried
+        self._guided[rows] = False
+        for i, point in run.waypoints.items():
+            self._guided[e * self._n + i] = True
+            self._waypoint[e * self._n + i] = point
 
-def _spacing(offsets: FloatArray, radius: float) -> float:
-    """Nearest-neighbour distance of the scenario's slots, at least 2 radii + GAP, m."""
-    if len(offsets) < 2:
-        return 2.0 * radius + GAP
-    d = np.linalg.norm(offsets[:, None] - offsets[None], axis=2)
-    np.fill_diagonal(d, np.inf)
-    return float(max(d.min(), 2.0 * radius + GAP))
+
+def _run_rows(obs: Observation, e: int) -> Observation:
+    """The observation of run ``e`` alone, as its planner gets it: ``leader`` ``(5,)``, no env.
+
+    The rows are views of the batch's (a run's rows are one block); the
+    neighbour indices stay rows of the batch, and there is no scan (the
+    planner reads neither).
+    """
+    at = slice(int(np.searchsorted(obs.env, e)), int(np.searchsorted(obs.env, e, side="right")))
+    nb, mv = obs.neighbours, obs.obstacles
+    return Observation(obs.t, obs.dt, obs.robot_ids[at], obs.pose[at], obs.velocity[at],
+                       obs.twist[at], None,
+                       Neighbours(nb.index[at], nb.position[at], nb.velocity[at],
+                                  nb.distance[at], None if nb.heading is None else nb.heading[at]),
+                       MovingObstacles(mv.position[at], mv.velocity[at], mv.radius[at],
+                                       mv.mask[at]),
+                       obs.leader[e], obs.goal, obs.slot_offset[at], obs.slot[at])

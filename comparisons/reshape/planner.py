@@ -20,7 +20,8 @@ grid; the cost of each is
 
 and the cheapest feasible one wins. A grid over ``(theta, s)`` keeps the choice
 exact per cell and its cost independent of the team size (the maximum over
-slots is one matrix product per candidate).
+slots is one matrix product per candidate). :func:`assign` gives the robots
+their slots.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
 
 from comparisons.orca.lp import FEASIBLE, solve_lines
 from comparisons.reshape.region import Region
@@ -128,3 +130,33 @@ def choose(region: Region, templates: Mapping[str, FloatArray], template_cost: M
     total[~ok] = np.inf
     i = int(np.argmin(total))
     return Candidate(names[i], thetas[i], ss[i], t[i].copy(), float(total[i]))
+
+
+def assign(pos: FloatArray, slots: FloatArray, template: str, previous_template: str | None,
+           previous: NDArray[np.intp], hysteresis: float) -> NDArray[np.intp]:
+    """Robot i -> slot index: its own in the scenario's template, else Hungarian.
+
+    The Hungarian assignment on squared distances; the previous one is kept,
+    in the same template, unless the new one is ``hysteresis`` cheaper.
+
+    Args:
+        pos: ``(N, 2)`` robot positions, m.
+        slots: ``(N, 2)`` the template's slots, m.
+        template: The slots' template (``"scenario"``: every robot its own slot).
+        previous_template: The template of the previous plan, or None.
+        previous: ``(N,)`` the previous assignment.
+        hysteresis: A new assignment must be this fraction cheaper.
+
+    Returns:
+        ``(N,)`` the slot of each robot.
+    """
+    n = len(pos)
+    if template == "scenario":
+        return np.arange(n)
+    cost = np.sum((pos[:, None, :] - slots[None]) ** 2, axis=2)
+    _, best = linear_sum_assignment(cost)
+    if template == previous_template and \
+            cost[np.arange(n), previous].sum() <= (1.0 + hysteresis) * \
+            cost[np.arange(n), best].sum():
+        return previous
+    return best

@@ -1,8 +1,8 @@
 """The route mode of ``reshape``: the rigid formation, or single file, along a route.
 
-A mixin of :class:`~comparisons.reshape.controller.Reshape` (it uses the
-controller's map, leader path, templates and route planner, set by its
-``reset``). The mode is in docs/methods/reshape.md, "1. Route".
+A mixin of :class:`~comparisons.reshape.central.CentralPlanner`, one run's
+planner (it uses the planner's map, leader path, templates and route planner,
+set by its constructor). The mode is in docs/methods/reshape.md, "1. Route".
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ FloatArray = NDArray[np.float64]
 
 
 class RouteMode:
-    """Route-mode methods of ``Reshape`` (see the module docstring)."""
+    """Route-mode methods of ``CentralPlanner`` (see the module docstring)."""
 
     def _tangent(self, s: float) -> float:
         """Heading (rad) of the leader's path around arc length ``s`` (m)."""
@@ -36,7 +36,7 @@ class RouteMode:
         """
         end = min(s_c + self.p.lookahead + self._extent, self._path.length)
         s = np.append(np.arange(max(s_c, 0.0), end, 2.0 * self._guide.inflated.cell_size), end)
-        lead = np.array([self._path.point_at(v) for v in s])
+        lead = self._path.points_at(s)
         centres = lead + rotate(self._centre, bin_heading(k))
         return not bool(self._cspace.free_at(centres, float(self._scales[-1]), k).all())
 

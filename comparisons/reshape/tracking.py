@@ -13,11 +13,13 @@ Each robot drives to its target through the ``cbf`` filter (in
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
 from numpy.typing import NDArray
 
+from comparisons.reshape.routes import cell_of
 from dfcoa_opt.geometry import point_segment_distance, rotate
 from dfcoa_opt.planning.astar import search
 from dfcoa_opt.world.grid import OccupancyGrid
@@ -57,9 +59,23 @@ class Guidance:
         and the exact search stops within ``clearance`` of each probe (with the
         default 10 m cap it scanned up to 10 m around each one on open maps).
         """
-        steps = max(2, int(math.ceil(math.hypot(*(b - a)) / PROBE)) + 1)
-        pts = a + np.linspace(0.0, 1.0, steps)[:, None] * (b - a)
-        return bool(np.all(self.grid.clearance(pts, cap=clearance) >= clearance))
+        return bool(self.free_many(a[None], b[None], clearance)[0])
+
+    def free_many(self, a: FloatArray, b: FloatArray, clearance: float) -> NDArray[np.bool_]:
+        """:meth:`free` of every segment ``[a_k, b_k]`` (``(K, 2)`` each, m): one distance call.
+
+        Each segment is probed every ``PROBE`` m, ends included, as :meth:`free`
+        does; the probes of all segments go to the clearance kernel at once.
+        """
+        if len(a) == 0:
+            return np.zeros(0, dtype=bool)
+        d = b - a
+        counts = [max(2, int(math.ceil(math.hypot(dx, dy) / PROBE)) + 1)
+                  for dx, dy in d.tolist()]
+        frac = np.concatenate([_unit(c) for c in counts])
+        pts = np.repeat(a, counts, axis=0) + frac[:, None] * np.repeat(d, counts, axis=0)
+        ok = self.grid.clearance(pts, cap=clearance) >= clearance
+        return np.logical_and.reduceat(ok, np.cumsum([0, *counts[:-1]]))
 
     def path(self, a: FloatArray, b: FloatArray, blocked: NDArray[np.bool_] | None = None,
              reach: float = 0.0) -> FloatArray | None:
@@ -75,8 +91,7 @@ class Guidance:
         """
         grid = self.inflated
         occ = grid.occupied if blocked is None else blocked
-        ca = tuple(int(v) for v in grid.world_to_cell(a))
-        cb = tuple(int(v) for v in grid.world_to_cell(b))
+        ca, cb = cell_of(grid, a), cell_of(grid, b)
         if not (grid.in_bounds(*ca) and grid.in_bounds(*cb)) or occ[cb]:
             return None
         if occ[ca]:
@@ -146,17 +161,18 @@ class Guidance:
             pts = self.path(pos[i], targets[i], self._with_robots(others, keep), reach=keep)
             if pts is not None:
                 out[int(i)] = pts[min(len(pts) - 1, step)]
+        clear = self.free_many(pos, targets, self.clearance)
         for i in range(len(pos)):
-            if i in out or self.free(pos[i], targets[i], self.clearance):
+            if i in out or clear[i]:
                 continue
             pts = self.path(pos[i], targets[i])
             if pts is None:
                 continue
             out[i] = pts[1]
-            for p in pts[reach:0:-1]:
-                if self.free(pos[i], p, self.clearance):
-                    out[i] = p
-                    break
+            ahead = pts[reach:0:-1]  # the farthest first
+            seen = self.free_many(np.broadcast_to(pos[i], ahead.shape), ahead, self.clearance)
+            if seen.any():
+                out[i] = ahead[int(np.argmax(seen))]
         return out
 
 
@@ -167,7 +183,7 @@ class Guidance:
         h = g.cell_size
         span = int(math.ceil(radius / h)) + 1
         for c in centres:
-            row, col = (int(v) for v in g.world_to_cell(c))
+            row, col = cell_of(g, c)
             r0, r1 = max(row - span, 0), min(row + span + 1, occ.shape[0])
             c0, c1 = max(col - span, 0), min(col + span + 1, occ.shape[1])
             if r0 >= r1 or c0 >= c1:
@@ -176,6 +192,14 @@ class Guidance:
             xs = g.origin[0] + (np.arange(c0, c1) + 0.5) * h
             occ[r0:r1, c0:c1] |= np.hypot(xs[None] - c[0], ys[:, None] - c[1]) <= radius
         return occ
+
+
+@functools.lru_cache(maxsize=256)
+def _unit(steps: int) -> FloatArray:
+    """``np.linspace(0, 1, steps)`` (read-only, cached: the probes' fractions)."""
+    out = np.linspace(0.0, 1.0, steps)
+    out.setflags(write=False)
+    return out
 
 
 def _nearest_free(blocked: NDArray[np.bool_], cell: tuple[int, int],
@@ -203,10 +227,16 @@ class StuckMonitor:
     Turning every stuck robot the same way sends two that block each other
     around each other.
 
+    One monitor serves every run of a batch: row ``env * N + i`` is robot
+    ``i`` of run ``env``, and every row is updated from its own values alone.
+
     Args:
-        start: ``(N, 2)`` initial positions, m.
+        start: ``(R, 2)`` initial positions of every row, m.
         after: Time still before a robot counts as stuck, s.
         angle: Turn of a stuck robot's command, rad (counter-clockwise).
+
+    Attributes:
+        turned: ``(K,)`` True for each row of the latest :meth:`turn` whose command was turned.
     """
 
     def __init__(self, start: FloatArray, after: float, angle: float) -> None:
@@ -215,14 +245,27 @@ class StuckMonitor:
         self.left = np.full(len(self.anchor), -np.inf)
         self.after = after
         self.angle = angle
+        self.turned = np.zeros(0, dtype=bool)
 
-    def stuck(self, t: float) -> NDArray[np.intp]:
-        """Indices of the robots still for ``after`` s or more (their targets unchecked)."""
-        return np.flatnonzero(t - self.since >= self.after)
+    def stuck(self, t: float, rows: slice | None = None) -> NDArray[np.intp]:
+        """Indices of the robots still for ``after`` s or more (their targets unchecked).
 
-    def freed(self, t: float) -> NDArray[np.intp]:
-        """Robots that got moving again from being stuck less than ``FREED_MEMORY`` s ago."""
-        return np.flatnonzero(t - self.left < FREED_MEMORY)
+        Args:
+            t: Time, s.
+            rows: Only these rows (one run of a batch), indices relative to its start.
+        """
+        since = self.since if rows is None else self.since[rows]
+        return np.flatnonzero(t - since >= self.after)
+
+    def freed(self, t: float, rows: slice | None = None) -> NDArray[np.intp]:
+        """Robots that got moving again from being stuck less than ``FREED_MEMORY`` s ago.
+
+        Args:
+            t: Time, s.
+            rows: Only these rows (one run of a batch), indices relative to its start.
+        """
+        left = self.left if rows is None else self.left[rows]
+        return np.flatnonzero(t - left < FREED_MEMORY)
 
     def turn(self, t: float, ids: NDArray[np.intp], pos: FloatArray, target: FloatArray,
              u: FloatArray) -> tuple[FloatArray, int]:
@@ -230,10 +273,10 @@ class StuckMonitor:
 
         Args:
             t: Time, s.
-            ids: ``(N,)`` robot indices of the rows.
-            pos: ``(N, 2)`` positions, m.
-            target: ``(N, 2)`` targets, m.
-            u: ``(N, 2)`` velocity commands, m/s.
+            ids: ``(K,)`` the monitor's row of each command (robot indices in one run).
+            pos: ``(K, 2)`` positions, m.
+            target: ``(K, 2)`` targets, m.
+            u: ``(K, 2)`` velocity commands, m/s.
         """
         moved = np.hypot(*(pos - self.anchor[ids]).T) > STILL_RADIUS
         freed = moved & (t - self.since[ids] >= self.after)
@@ -242,6 +285,7 @@ class StuckMonitor:
         self.since[ids[moved]] = t
         periods = np.floor((t - self.since[ids]) / self.after)
         stuck = (periods >= 1) & (np.hypot(*(target - pos).T) > STILL_RADIUS)
+        self.turned = stuck
         if not stuck.any():
             return u, 0
         out = u.copy()

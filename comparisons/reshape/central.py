@@ -1,0 +1,323 @@
+"""The central planner of one run of ``reshape``: its mode, targets and assignment.
+
+Every ``replan_period`` s the controller (:mod:`~comparisons.reshape.controller`)
+hands each due run's own rows to that run's :class:`CentralPlanner`, which
+picks the route, nominal or region mode (docs/methods/reshape.md, "The
+programs") from the robots' broadcast positions and leaves the run's targets,
+the assignment and the guidance waypoints. Planning is per run by nature:
+every run of a batch has its own planner, counters and history, and runs of
+one static world share what is derived from that world (:class:`RunMap`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from comparisons.reshape import planner
+from comparisons.reshape.region import grow_region, shape_segments, swept_disc_segments
+from comparisons.reshape.route_mode import RouteMode
+from comparisons.reshape.routes import ConfigurationSpace, RoutePlanner, heading_bin
+from comparisons.reshape.tracking import Guidance, StuckMonitor
+from dfcoa_opt.control.base import Observation
+from dfcoa_opt.formation import line_offsets
+from dfcoa_opt.geometry import point_segment_distance, rotate
+from dfcoa_opt.planning.pure_pursuit import PurePursuit
+
+if TYPE_CHECKING:
+    from comparisons.reshape.controller import Reshape
+    from dfcoa_opt.sim.scenario import Scenario, World
+
+FloatArray = NDArray[np.float64]
+#: The nominal formation must also fit this far along the leader's path, m.
+NOMINAL_AHEAD = 1.0
+#: Smallest gap between two robots' discs in a template (sets the smallest scale), m.
+GAP = 0.3
+
+
+class LeaderPath(PurePursuit):
+    """The leader's path as a polyline (only its geometry; the tracker's state is unused)."""
+
+    def __init__(self, path: FloatArray) -> None:
+        super().__init__(path, 0.0, 0.0, 0.0)
+
+    def points_at(self, s: FloatArray) -> FloatArray:
+        """``(K, 2)`` :meth:`point_at` of every arc length of ``s`` ``(K,)`` (m), at once."""
+        s = np.asarray(s, dtype=float)
+        if len(self.path) == 1:
+            return np.repeat(self.path[:1], len(s), axis=0)
+        s = np.minimum(np.maximum(s, 0.0), self.length)
+        k = np.minimum(np.searchsorted(self._cum, s, side="right") - 1, len(self._seg_len) - 1)
+        frac = (s - self._cum[k]) / self._seg_len[k]
+        return self.path[k] + frac[:, None] * (self.path[k + 1] - self.path[k])
+
+
+@dataclass(frozen=True)
+class RunMap:
+    """What a run's planner derives from its static world and leader path.
+
+    Built once per scenario object: the runs of a batch share one unless the
+    world follows the seed (a seeded clutter field). Every part answers the
+    same whoever asks (the configuration spaces cache what they computed).
+
+    Attributes:
+        path: The leader's path (only its geometry is used).
+        world: The static world.
+        segments: ``(S, 2, 2)`` the static obstacles' edges, m.
+        bounds: ``(xmin, xmax, ymin, ymax)`` of the map, m.
+        guide: Free-segment tests and A* paths on the inflated map.
+        cspace: Configuration space of the scenario's formation.
+        single: That of one robot (single file), or None without the column.
+    """
+
+    path: LeaderPath
+    world: World
+    segments: FloatArray
+    bounds: tuple[float, float, float, float]
+    guide: Guidance
+    cspace: ConfigurationSpace
+    single: ConfigurationSpace | None
+
+    @classmethod
+    def build(cls, scenario: Scenario, offsets: FloatArray, rho: float, wide: float,
+              column: bool) -> RunMap:
+        """The map objects of ``scenario``.
+
+        Args:
+            scenario: The run's scenario.
+            offsets: ``(N, 2)`` template offsets relative to the formation's centre, m.
+            rho: Robot radius plus margin, m.
+            wide: Extra clearance that routes keep where they can, m.
+            column: Whether single file is a template (its configuration space).
+        """
+        grid = scenario.world.grid
+        return cls(LeaderPath(scenario.leader_path), scenario.world,
+                   shape_segments(scenario.world.shapes), grid.extent, Guidance(grid, rho),
+                   ConfigurationSpace(grid, offsets, rho, wide),
+                   ConfigurationSpace(grid, np.zeros((1, 2)), rho, wide) if column else None)
+
+
+class CentralPlanner(RouteMode):
+    """One run's planner (module docstring); its results are read by the controller.
+
+    Args:
+        p: The controller's parameters (``Reshape.Params``).
+        scenario: The run's scenario.
+        maps: Cache of :class:`RunMap` by scenario object (shared by a batch's runs).
+        stuck: The batch's stuck-robot monitor.
+        rows: This run's rows in ``stuck`` (``env * N`` on), robot order.
+        pair_distance: Distance the safety filter keeps between two robots, m.
+
+    Attributes:
+        counters: ``replans``, ``shrinks``, ``waits``, ``switches``, ``unsticks``
+            (the last counted by the controller's tracking).
+        plan_times: Wall time of every plan, s.
+        history: ``(t, template, scale)`` of every plan (None when the formation waited).
+    """
+
+    def __init__(self, p: Reshape.Params, scenario: Scenario, maps: dict[int, RunMap],
+                 stuck: StuckMonitor, rows: slice, pair_distance: float) -> None:
+        self.p = p
+        spec = scenario.spec
+        self._n = scenario.n
+        self._r = spec.robots.radius
+        self._offsets = np.asarray(scenario.offsets, dtype=float)
+        spacing = _spacing(self._offsets, self._r)
+        column = np.column_stack([-spacing * np.arange(self._n), np.zeros(self._n)])
+        every = {"scenario": self._offsets, "line": line_offsets(self._n, spacing),
+                 "column": column}
+        self._templates = {k: every[k] for k in p.templates if k in every}
+        self._cost = {k: (0.0 if k == "scenario" else p.template_cost) for k in self._templates}
+        half = 0.5 * (p.rotations - 1)
+        self._rotations = (np.linspace(-p.rotation_max, p.rotation_max, p.rotations)
+                           if half else np.zeros(1))
+        floor = (2.0 * self._r + GAP) / _spacing(self._offsets, 0.0)  # 1 for a lone robot
+        self._scales = np.linspace(1.0, min(1.0, max(p.s_min, floor)), p.scales)
+        self._weights = planner.Weights(p.weight_progress, p.weight_scale, p.weight_rotation,
+                                        p.switch_cost)
+        self._spacing = spacing
+        self._centre = self._offsets.mean(axis=0)
+        if id(scenario) not in maps:
+            maps[id(scenario)] = RunMap.build(scenario, self._offsets - self._centre,
+                                              self._r + p.margin, p.route_clearance,
+                                              "column" in self._templates)
+        m = maps[id(scenario)]
+        self._path, self._world, self._segments = m.path, m.world, m.segments
+        self._bounds, self._guide, self._cspace = m.bounds, m.guide, m.cspace
+        self._extent = float(np.max(np.hypot(*(self._offsets - self._centre).T)))
+        end = self._path.length
+        self._goal_heading = self._tangent(end)
+        self._goal_centre = self._path.point_at(end) + rotate(self._centre, self._goal_heading)
+        self._routes = RoutePlanner(self._cspace, m.single, self._scales,
+                                    self._spacing * (self._n - 1), self._goal_centre,
+                                    p.route_detour, p.route_period, self._spacing)
+        self._stuck, self._rows = stuck, rows
+        self._keep = pair_distance + self._guide.inflated.cell_size
+        self._targets = np.zeros((self._n, 2))
+        self._nominal = True
+        self._template: str | None = None
+        self._assign = np.arange(self._n)
+        self._waypoint: dict[int, FloatArray] = {}
+        self._carried: FloatArray | None = None  # the targets in the leader's frame
+        self.counters = {"replans": 0, "shrinks": 0, "waits": 0, "switches": 0, "unsticks": 0}
+        self.plan_times: list[float] = []
+        self.history: list[tuple[float, str | None, float]] = []
+
+    # ------------------------------------------------------------------- results
+    @property
+    def nominal(self) -> bool:
+        """Whether every robot tracks its own slot on the leader (``goto_slot``)."""
+        return self._nominal
+
+    @property
+    def targets(self) -> FloatArray:
+        """``(N, 2)`` each robot's target, m (not used when :attr:`nominal`)."""
+        return self._targets
+
+    @property
+    def carried(self) -> FloatArray | None:
+        """``(N, 2)`` the targets in the leader's frame, m, when the plan moves with it."""
+        return self._carried
+
+    @property
+    def waypoints(self) -> dict[int, FloatArray]:
+        """Robot -> ``(2,)`` guidance waypoint (m) that replaces its target."""
+        return self._waypoint
+
+    # ------------------------------------------------------------------ planning
+    @staticmethod
+    def _moving(obs: Observation) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Position, velocity and radius of each sensed moving disc, once (m, m/s, m)."""
+        m = obs.obstacles
+        pos, vel, rad = m.position[m.mask], m.velocity[m.mask], m.radius[m.mask]
+        keys = np.round(np.column_stack([pos, rad]), 6)  # several robots sense one disc
+        _, first = np.unique(keys, axis=0, return_index=True)
+        return pos[first], vel[first], rad[first]
+
+    def _moving_segments(self, obs: Observation) -> FloatArray:
+        if not obs.obstacles.mask.any():
+            return np.zeros((0, 2, 2))
+        return swept_disc_segments(*self._moving(obs), self.p.horizon)
+
+    def _nominal_fits(self, obs: Observation, s_l: float) -> bool:
+        """Whether the scenario's formation fits on the leader, now and ``NOMINAL_AHEAD`` on.
+
+        Every slot keeps ``r + margin`` from the static obstacles and from each
+        sensed moving disc's sweep over ``horizon``.
+        """
+        ahead = min(s_l + NOMINAL_AHEAD, self._path.length)
+        later = self._path.point_at(ahead) + rotate(self._offsets, self._tangent(ahead))
+        slots = np.concatenate([obs.slot, later])
+        need = self._r + self.p.margin
+        if not bool(np.all(self._world.clearance(slots, cap=need) >= need)):  # cap: same answer
+            return False
+        if not obs.obstacles.mask.any():
+            return True
+        pos, vel, rad = self._moving(obs)
+        gap = point_segment_distance(slots[:, None], pos[None], (pos + self.p.horizon * vel)[None])
+        return bool(np.all(gap >= need + rad[None]))
+
+    def plan(self, obs: Observation) -> None:
+        """Choose the mode and set the targets, the assignment and the waypoints.
+
+        Args:
+            obs: The observation of this run alone: every robot, in robot order,
+                and ``leader`` ``(5,)``.
+        """
+        t0 = time.perf_counter()
+        self.counters["replans"] += 1
+        pos = obs.pose[:, :2]
+        centroid = pos.mean(axis=0)
+        s_c = float(self._path.arc_length(centroid[None])[0])
+        s_l = float(self._path.arc_length(obs.leader[None, :2])[0])
+        k = heading_bin(self._tangent(s_c + self.p.lookahead))
+        if self._path_blocked(s_c, k) and self._follow_route(obs, pos, centroid, k):
+            self.plan_times.append(time.perf_counter() - t0)
+            return
+        self._routes.clear()
+        if s_c + self.p.lookahead >= s_l and self._nominal_fits(obs, s_l):
+            self._nominal_plan(obs)  # nothing in the way: the scenario's formation
+            self.plan_times.append(time.perf_counter() - t0)
+            return
+        segments = np.concatenate([self._segments, self._moving_segments(obs)])
+        start = centroid if self._guide.free(centroid, centroid, self._r) else \
+            self._path.point_at(s_c)
+        cand = None
+        for shrink in (1.0, 0.5, 0.25):
+            following = s_c + shrink * self.p.lookahead >= s_l
+            goal = obs.leader[:2].copy() if following else \
+                self._path.point_at(s_c + shrink * self.p.lookahead)
+            if not self._guide.free(start, goal, self._r + self.p.margin):
+                goal = self._guide.point_along(start, goal, shrink * self.p.lookahead)
+            end = goal.copy()
+            for _ in range(8):  # shorten the seed until it is free
+                if self._guide.free(start, end, 0.5 * self._r):
+                    break
+                end = 0.5 * (start + end)
+            seed = np.array([start, end])
+            psi = (float(obs.leader[2]) if following or math.hypot(*(end - start)) < 0.2
+                   else math.atan2(*(end - start)[::-1]))
+            region = grow_region(seed, segments, self._bounds)
+            cand = planner.choose(region, self._templates, self._cost, goal, psi, self._rotations,
+                                  self._scales, self._r + self.p.margin, self._template,
+                                  self._weights)
+            if cand is not None:
+                break
+            self.counters["shrinks"] += 1
+        self._carried = None
+        if cand is None:
+            self.counters["waits"] += 1
+            self.history.append((obs.t, None, math.nan))
+            if self._template is None:
+                self._targets, self._nominal = pos.copy(), False
+            self.plan_times.append(time.perf_counter() - t0)
+            return
+        self.history.append((obs.t, cand.template, cand.scale))
+        slots = cand.slots(self._templates[cand.template])
+        self._nominal = (cand.template == "scenario" and cand.scale == 1.0
+                         and abs(cand.theta - float(obs.leader[2])) < 1e-12
+                         and bool(np.allclose(cand.t, obs.leader[:2])))
+        if cand.template != self._template and self._template is not None:
+            self.counters["switches"] += 1
+        self._assign = self._assignment(pos, slots, cand.template)
+        self._template = cand.template
+        self._targets = slots[self._assign]
+        # keeping up with the leader: the plan moves with it until the next one
+        self._carried = (rotate(self._targets - obs.leader[:2], -float(obs.leader[2]))
+                         if following and not self._nominal else None)
+        self._waypoint = self._waypoints(obs.t, pos)
+        self.plan_times.append(time.perf_counter() - t0)
+
+    def _nominal_plan(self, obs: Observation) -> None:
+        """The scenario's formation on the virtual leader (``goto_slot`` with the CBF filter)."""
+        if self._template not in (None, "scenario"):
+            self.counters["switches"] += 1
+        self.history.append((obs.t, "scenario", 1.0))
+        self._template, self._nominal, self._carried = "scenario", True, None
+        self._assign = np.arange(self._n)
+        self._targets = obs.slot.copy()
+        self._waypoint = self._waypoints(obs.t, obs.pose[:, :2])
+
+    def _waypoints(self, t: float, pos: FloatArray) -> dict[int, FloatArray]:
+        """Guidance waypoints towards the targets (stuck robots: around the others too)."""
+        return self._guide.waypoints(pos, self._targets, self._stuck.stuck(t, self._rows),
+                                     self._keep, self._stuck.freed(t, self._rows))
+
+    def _assignment(self, pos: FloatArray, slots: FloatArray, template: str) -> NDArray[np.intp]:
+        """Robot i -> slot index (:func:`~comparisons.reshape.planner.assign`)."""
+        return planner.assign(pos, slots, template, self._template, self._assign,
+                              self.p.hysteresis)
+
+
+def _spacing(offsets: FloatArray, radius: float) -> float:
+    """Nearest-neighbour distance of the scenario's slots, at least 2 radii + GAP, m."""
+    if len(offsets) < 2:
+        return 2.0 * radius + GAP
+    d = np.linalg.norm(offsets[:, None] - offsets[None], axis=2)
+    np.fill_diagonal(d, np.inf)
+    return float(max(d.min(), 2.0 * radius + GAP))
