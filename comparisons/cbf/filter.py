@@ -45,7 +45,7 @@ nominal one under ``pass_through``. Method notes: ``docs/methods/cbf.md``.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -64,6 +64,7 @@ from comparisons.constraints.distance import (
     pair_geometry,
 )
 from comparisons.constraints.solvers import check_solver
+from comparisons.constraints.world_shapes import WorldShapes
 from dfcoa_opt.control.base import BatchedController, FilterResult, Observation
 from dfcoa_opt.control.registry import register_filter
 from dfcoa_opt.errors import ScenarioError
@@ -118,7 +119,7 @@ class CbfFilter(BatchedController):
         self._offset = 0.0
         self._v_box = 1.0
         self._gamma = params.gamma
-        self._statics = [StaticObstacles.from_shapes(())]
+        self._statics = WorldShapes([StaticObstacles.from_shapes(())])
         self._static_of = np.zeros(1, dtype=np.intp)
 
     def reset_batch(self, scenarios, rngs) -> None:
@@ -144,24 +145,16 @@ class CbfFilter(BatchedController):
         worlds: dict[int, int] = {}  # runs of one world (all but a seeded clutter field) share
         for sc in scenarios:
             worlds.setdefault(id(sc.world), len(worlds))
-        self._statics = [StaticObstacles.from_shapes(sc.world.shapes) for sc in
-                         {id(sc.world): sc for sc in scenarios}.values()]
+        self._statics = WorldShapes([StaticObstacles.from_shapes(sc.world.shapes) for sc in
+                                     {id(sc.world): sc for sc in scenarios}.values()])
         self._static_of = np.array([worlds[id(sc.world)] for sc in scenarios], dtype=np.intp)
 
     def _nearest(self, p: np.ndarray, env: np.ndarray | None) -> Nearest:
-        """Each row's nearest static obstacles, in the world of its own run."""
+        """Each row's nearest static obstacles, in the world of its own run (one call)."""
         args = (self.p.max_obstacles, self.p.obstacle_range)
-        if len(self._statics) == 1:
-            return self._statics[0].nearest(p, *args)
-        world = self._static_of[env]
-        parts = [(world == w, self._statics[w].nearest(p[world == w], *args))
-                 for w in np.unique(world)]
-        out = {f.name: np.empty((len(p), *getattr(parts[0][1], f.name).shape[1:]),
-                                dtype=getattr(parts[0][1], f.name).dtype) for f in fields(Nearest)}
-        for rows, part in parts:
-            for name, arr in out.items():
-                arr[rows] = getattr(part, name)
-        return Nearest(**out)
+        if len(self._statics.maps) == 1:
+            return self._statics.maps[0].nearest(p, *args)
+        return self._statics.nearest(p[:, None, :], *args, world=self._static_of[env])
 
     @property
     def pair_distance(self) -> float:

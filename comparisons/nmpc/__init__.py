@@ -7,8 +7,6 @@
   the distance half-planes;
 - :mod:`~comparisons.nmpc.plans`: every robot's last plan, by global id
   (``env * N + robot`` in a batch of runs);
-- :mod:`~comparisons.nmpc.statics`: the static shapes of each run's map, all rows
-  in one compiled call.
 
 Notes: ``docs/methods/nmpc.md``.
 """

@@ -54,6 +54,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from comparisons.constraints.distance import StaticObstacles
+from comparisons.constraints.world_shapes import WorldShapes
 from comparisons.nmpc.fallback import goto_command, solve_time_stats
 from comparisons.nmpc.geometry import (
     neighbour_predictions,
@@ -71,7 +72,6 @@ from comparisons.nmpc.problem import (
     map_multipliers,
     rollout,
 )
-from comparisons.nmpc.statics import WorldShapes
 from dfcoa_opt.control.base import BatchedController, FilterResult, Observation
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.errors import ScenarioError

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from comparisons.constraints.distance import StaticObstacles, disc_nearest, pair_geometry
-from comparisons.nmpc.statics import WorldShapes
+from comparisons.constraints.world_shapes import WorldShapes
 from dfcoa_opt.control.base import MovingObstacles, Neighbours
 from dfcoa_opt.geometry import take_rows
 
@@ -206,7 +206,7 @@ def obstacle_halfplanes(lin: FloatArray, static: StaticObstacles | WorldShapes,
 
     Static shapes (discs and polygons) go through
     :meth:`~comparisons.constraints.distance.StaticObstacles.nearest` (or
-    :meth:`~comparisons.nmpc.statics.WorldShapes.nearest`, the same numbers with
+    :meth:`~comparisons.constraints.world_shapes.WorldShapes.nearest`, the same numbers with
     each row in its own map); moving discs are predicted at constant
     velocity to each stage's time and go through
     :func:`~comparisons.constraints.distance.disc_nearest` (:func:`moving_nearest`).

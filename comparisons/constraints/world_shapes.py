@@ -1,4 +1,4 @@
-"""The static shapes of the ``nmpc`` controller: every run's own map, all rows in one call.
+"""The static shapes of a batch's maps (every run's own map), all rows in one call.
 
 A batch's runs share one map, except with a seeded clutter field (one map per
 run). :class:`WorldShapes` holds the maps' discs and polygons end to end, and
