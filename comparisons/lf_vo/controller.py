@@ -32,11 +32,17 @@ runs the same law on its own observation row:
 Speed: ``kernel = "numba"`` (default) computes step 3 with
 :func:`comparisons.lf_vo.kernel.vo_clearance` (one call and one rollout per
 robot for robots, humans and discs, each checked over its own horizon; exact
-clearances with culling of obstacles that cannot be the nearest) and the choice
-with :func:`comparisons.lf_vo.kernel.vo_choose` (costs of the safe samples
-only, trigonometry once per turn rate); ``kernel = "numpy"`` is the dense reference
+clearances with culling of obstacles that cannot be the nearest, and, since the
+choice reads only their sign and the negative values, of those that cannot
+bring a clearance below 0) and the choice with
+:func:`comparisons.lf_vo.choose.vo_choose` (costs of the safe samples only,
+trigonometry once per turn rate); ``kernel = "numpy"`` is the dense reference
 (:func:`comparisons.lf_vo.equations.rollout`, :func:`~comparisons.lf_vo.equations.path_clearance`,
 :func:`~comparisons.lf_vo.equations.vo_cost`). Both give the same commands.
+
+Batches: the controller is batched (one object and one :meth:`~LeaderFollowerVO.act`
+per step for every run of a batch, every row through the same kernel calls);
+each row's command is the one the run simulated alone gives, bit for bit.
 
 Decisions (the paper's words, the choice and the reason; also in
 ``docs/methods/lf_vo.md``):
@@ -81,6 +87,7 @@ from typing import Literal
 
 import numpy as np
 
+from comparisons.lf_vo.choose import vo_choose
 from comparisons.lf_vo.equations import (
     formation_target,
     path_clearance,
@@ -89,8 +96,8 @@ from comparisons.lf_vo.equations import (
     target_error,
     vo_cost,
 )
-from comparisons.lf_vo.kernel import vo_choose, vo_clearance
-from dfcoa_opt.control.base import Observation
+from comparisons.lf_vo.kernel import vo_clearance
+from dfcoa_opt.control.base import BatchedController, Observation, as_batch
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.params import param
 
@@ -99,8 +106,18 @@ _STILL = 1e-3
 
 
 @register("lf_vo")
-class LeaderFollowerVO:
-    """Leader-follower V formation (eq 4-11) with a sampled velocity obstacle (eq 12)."""
+class LeaderFollowerVO(BatchedController):
+    """Leader-follower V formation (eq 4-11) with a sampled velocity obstacle (eq 12).
+
+    Batched (:class:`~dfcoa_opt.control.base.BatchedController`): one object
+    steps every run of a batch in one :meth:`act`. Every row's command is
+    computed as in a single run (elementwise, the kernels per row); what is
+    per run is kept by ``obs.env``: the leader robot's offset, and the static
+    discs of the run's world (a seeded clutter field differs between runs).
+    A follower finds its leader robot among its neighbours by row: in a
+    batch, neighbour indices are rows, and the leader robot of row ``i`` is
+    row ``i - robot_ids[i] + leader_index`` (runs are blocks of N rows).
+    """
 
     command = "unicycle"
     uses_scan = False  # obstacles come from the map's discs, obs.neighbours and obs.obstacles
@@ -162,54 +179,78 @@ class LeaderFollowerVO:
     def __init__(self, params: Params) -> None:
         self.p = params
         self.last_fallbacks = 0
+        self.last_fell = np.zeros(0, dtype=bool)
         self._radius = 0.2
         self._v_lead, self._v_fol, self._w_max = (params.leader_v_max, params.follower_v_max,
                                                   params.w_max)
-        self._lead_offset = np.zeros(2)
-        self._circles = np.zeros((0, 2))
-        self._circle_r = np.zeros(0)
-        self._circle_reach = np.zeros(0)
+        self._lead_offset = np.zeros((1, 2))  # (E, 2): each run's leader robot's slot offset
+        self._discs = np.zeros((0, 3))  # every world's discs (cx, cy, reach), world after world
+        self._disc_ptr = np.zeros(2, dtype=np.intp)  # world g's: rows ptr[g]:ptr[g + 1]
+        self._world_of = np.zeros(1, dtype=np.intp)  # (E,) each run's world
         self._grid: tuple[float, np.ndarray, np.ndarray] = (np.nan, np.zeros(0), np.zeros(0))
 
-    def reset(self, scenario, rng: np.random.Generator) -> None:
-        """Keep the robot radius, speed limits, the leader's offset and the static discs.
+    def reset_batch(self, scenarios, rngs: list[np.random.Generator]) -> None:
+        """Keep the robot radius, speed limits, and per run the leader's offset and the discs.
+
+        Args:
+            scenarios: Run ``e``'s scenario (the same file and overrides; runs with a
+                seeded clutter field have their own world).
+            rngs: Run ``e``'s generator (unused: ``lf_vo`` draws nothing).
 
         Raises:
             ValueError: ``leader_index`` is not a robot of the scenario.
         """
-        p, spec = self.p, scenario.spec
-        if p.leader_index >= scenario.n:
+        p, sc0 = self.p, scenarios[0]
+        spec = sc0.spec
+        if p.leader_index >= sc0.n:
             raise ValueError(f"lf_vo: leader_index = {p.leader_index} but the scenario has "
-                             f"{scenario.n} robot(s) (0..{scenario.n - 1})")
+                             f"{sc0.n} robot(s) (0..{sc0.n - 1})")
         self._radius = spec.robots.radius
         self._v_lead = min(p.leader_v_max, spec.robots.v_max)
         self._v_fol = min(p.follower_v_max, spec.robots.v_max)
         self._w_max = min(p.w_max, spec.robots.w_max)
-        self._lead_offset = np.asarray(scenario.offsets[p.leader_index], dtype=float)
-        circles = scenario.world.circles
-        self._circles = np.array([c.center for c in circles], dtype=float).reshape(-1, 2)
-        self._circle_r = np.array([c.radius for c in circles], dtype=float)
-        self._circle_reach = self._circle_r + (self._radius + p.safety_margin)
+        self._lead_offset = np.array([np.asarray(sc.offsets[p.leader_index], dtype=float)
+                                      for sc in scenarios]).reshape(len(scenarios), 2)
+        worlds: dict[int, int] = {}  # runs of one world (all but a seeded clutter field) share
+        tables = []
+        for sc in scenarios:
+            if id(sc.world) not in worlds:
+                worlds[id(sc.world)] = len(tables)
+                tables.append(np.array([(*c.center, c.radius) for c in sc.world.circles],
+                                       dtype=float).reshape(-1, 3))
+        discs = np.concatenate(tables)
+        discs[:, 2] = discs[:, 2] + (self._radius + p.safety_margin)  # radius -> reach
+        self._discs = discs
+        self._disc_ptr = np.concatenate(([0], np.cumsum([len(t) for t in tables])))
+        self._world_of = np.array([worlds[id(sc.world)] for sc in scenarios], dtype=np.intp)
         self.last_fallbacks = 0
+        self.last_fell = np.zeros(0, dtype=bool)
 
     def targets(self, obs: Observation) -> np.ndarray:
-        """``(N, 2)`` eq 5-6 targets: the slot for the leader robot, else around its state."""
+        """``(N, 2)`` eq 5-6 targets, m: the slot for the leader robot, else around its state.
+
+        In a batch (``obs.env`` set) the leader robot is looked up by row among
+        the neighbours (``i - robot_ids[i] + leader_index``); in one run's
+        observation neighbour indices are robot indices.
+        """
         target = obs.slot.copy()
         if self.p.follow == "virtual":
             return target
-        nb = obs.neighbours
-        hit = nb.index == self.p.leader_index  # (N, K)
-        seen = hit.any(axis=1) & (obs.robot_ids != self.p.leader_index)
+        nb, lead = obs.neighbours, self.p.leader_index
+        rows = np.arange(obs.n)
+        lead_row = lead if obs.env is None else (rows - obs.robot_ids + lead)[:, None]
+        hit = nb.index == lead_row  # (N, K)
+        seen = hit.any(axis=1) & (obs.robot_ids != lead)
         if not seen.any():
             return target
+        obs = as_batch(obs)
         k = np.argmax(hit, axis=1)
-        rows = np.arange(obs.n)
         pos = nb.position[rows, k]
         vel = nb.velocity[rows, k]
         moving = np.hypot(vel[:, 0], vel[:, 1]) > _STILL
-        heading = np.where(moving, np.arctan2(vel[:, 1], vel[:, 0]), obs.leader[2])
+        heading = np.where(moving, np.arctan2(vel[:, 1], vel[:, 0]), obs.row_leader()[:, 2])
         lead_pose = np.column_stack((pos, heading))
-        around = formation_target(lead_pose, obs.slot_offset - self._lead_offset)
+        around = formation_target(lead_pose, obs.slot_offset - self._lead_offset[obs.env])
         return np.where(seen[:, None], around, target)
 
     def _robots(self, obs: Observation) -> tuple[np.ndarray, ...]:
@@ -227,23 +268,33 @@ class LeaderFollowerVO:
         mo = obs.obstacles
         return mo.position, mo.velocity, mo.radius + self._radius + self.p.safety_margin, mo.mask
 
-    def _static(self, n: int) -> tuple[np.ndarray, ...]:
-        """The static discs for every row: ``(N, C, ...)`` as in :meth:`_robots`."""
-        return (np.broadcast_to(self._circles, (n, *self._circles.shape)),
-                np.zeros((n, *self._circles.shape)),
-                np.broadcast_to(self._circle_reach, (n, len(self._circle_reach))),
-                np.ones((n, len(self._circle_reach)), dtype=bool))
+    def _static(self, env: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Each row's static discs (its run's world): ``(N, C, ...)`` as in :meth:`_robots`.
+
+        ``C`` is the most discs of a row's world; a row of a world with fewer
+        is padded (mask False), which leaves the reference's minimum as it is.
+        """
+        world = self._world_of[env]
+        first, count = self._disc_ptr[world], np.diff(self._disc_ptr)[world]
+        j = np.arange(count.max(initial=0))
+        mask = j < count[:, None]
+        table = self._discs[np.where(mask, first[:, None] + j, 0)] if len(self._discs) else \
+            np.zeros((len(env), len(j), 3))
+        return table[..., :2], np.zeros((*mask.shape, 2)), table[..., 2], mask
 
     def clearance(self, obs: Observation, v: np.ndarray, w: np.ndarray,
-                  hold: np.ndarray | None = None) -> np.ndarray:
+                  hold: np.ndarray | None = None, exact_below: float = np.inf) -> np.ndarray:
         """``(N, S)`` clearance of each sample, m (< 0: inside the velocity obstacle).
 
         Static discs and humans are checked over ``horizon``, the other robots
         over ``robot_horizon`` (the first steps of the same rollout). Rows where
         ``hold`` is True (robots at their target) do not check the other robots:
-        an arrived robot holds its place and the moving ones give way.
+        an arrived robot holds its place and the moving ones give way. With the
+        numba kernel, clearances of at least ``exact_below`` (m) are only known
+        to be at least it (:func:`~comparisons.lf_vo.kernel.vo_clearance`).
         """
         p, pose = self.p, obs.pose
+        env = as_batch(obs).env
         step = p.horizon / p.horizon_steps
         steps_r = min(p.horizon_steps, max(1, round(p.robot_horizon / step)))
         robots = self._robots(obs)
@@ -251,7 +302,7 @@ class LeaderFollowerVO:
             robots = (*robots[:3], robots[3] & ~np.asarray(hold, dtype=bool)[:, None])
         if p.kernel == "numpy":  # the reference: the robots over the first steps_r steps
             pts = rollout(pose, v, w, step, p.horizon_steps, p.turn_time)
-            parts = [np.concatenate(pair, axis=1) for pair in zip(self._static(obs.n),
+            parts = [np.concatenate(pair, axis=1) for pair in zip(self._static(env),
                                                                   self._humans(obs), strict=True)]
             far = path_clearance(pts, step, *parts)
             near = path_clearance(pts[:, :, :steps_r], step, *robots)
@@ -261,8 +312,10 @@ class LeaderFollowerVO:
         cols = [np.concatenate(pair, axis=1) for pair in zip(humans, robots, strict=True)]
         limit = np.concatenate((np.full(humans[3].shape[1], p.horizon_steps),
                                 np.full(robots[3].shape[1], steps_r)))
-        return vo_clearance(pose, v, w, step, p.horizon_steps, p.turn_time, *cols, self._circles,
-                            self._circle_reach, w_stride=p.w_samples, limit=limit)
+        return vo_clearance(pose, v, w, step, p.horizon_steps, p.turn_time, *cols,
+                            self._discs[:, :2], self._discs[:, 2], w_stride=p.w_samples,
+                            limit=limit, static_ptr=self._disc_ptr, static_of=self._world_of[env],
+                            exact_below=exact_below)
 
     def samples(self, v_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(N, S)`` grid of (v, omega) samples for per-robot speed limits ``v_max`` (m/s)."""
@@ -295,7 +348,13 @@ class LeaderFollowerVO:
         return out
 
     def act(self, obs: Observation) -> np.ndarray:
-        """Row i uses robot i's pose, neighbours, sensed humans, slot and the broadcast leader."""
+        """``(R, 2)`` commands (v m/s, omega rad/s) of every row of one run or of a batch.
+
+        Row i uses robot i's pose, neighbours, sensed humans, slot, the leader
+        state its run broadcast, and its run's static discs; all rows of all
+        runs go through the kernels in one call. Sets ``last_fell`` ``(R,)``
+        (the rows without a safe sample) and ``last_fallbacks`` (their number).
+        """
         p = self.p
         pose = obs.pose
         lead = obs.robot_ids == p.leader_index
@@ -307,7 +366,9 @@ class LeaderFollowerVO:
         if p.include_preferred:
             v = np.column_stack((v, v_ref))
             w = np.column_stack((w, w_ref))
-        clear = self.clearance(obs, v, w, hold=dist <= p.arrival_radius)
+        # the choice reads the clearances' signs, and values only of negative ones (the
+        # fallback's argmax when none is safe, escape_turn's among unsafe moving samples)
+        clear = self.clearance(obs, v, w, hold=dist <= p.arrival_radius, exact_below=0.0)
         weights = (p.turn_time, p.pref_weight, p.heading_weight, p.turn_weight)
         if p.kernel == "numba":
             best, fell = vo_choose(pose[:, 2], v, w, v_ref, w_ref, theta_t, clear, *weights,
@@ -324,5 +385,6 @@ class LeaderFollowerVO:
             cmd = self._escape(cmd, v, w, clear, fell | (dist <= p.arrival_radius))
         if p.fallback == "stop":
             cmd[fell] = 0.0
+        self.last_fell = fell
         self.last_fallbacks = int(fell.sum())
         return cmd

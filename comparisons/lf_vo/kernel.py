@@ -1,4 +1,4 @@
-"""Fast sampled velocity obstacle of ``lf_vo``: rollout, clearance and choice in numba kernels.
+"""Fast sampled velocity obstacle of ``lf_vo``: rollout and clearance in a numba kernel.
 
 :func:`vo_clearance` returns the same ``(N, S)`` clearances as
 ``path_clearance(rollout(...), ...)`` of :mod:`comparisons.lf_vo.equations` (the
@@ -23,21 +23,25 @@ numpy reference), without the dense ``(N, S, H, Q)`` arrays. Per robot:
    gap of obstacle ``q`` at step ``k`` is at least
    ``lb_k = d_q - (v_max + |u_q|) t_k - r_q`` (``d_q``: distance now,
    ``v_max``: the robot's largest ``|v|``). Obstacles are visited by
-   increasing ``lb`` at their last step, the first one alone and then
-   :data:`CHUNK` at a time in one pass over the rollout. Before each batch,
-   once that bound of the next obstacle is at least the largest current
-   clearance of the robot's samples, neither it nor any later obstacle can
-   lower any sample's minimum, and the loop stops. Within a batch, an
-   obstacle's first steps whose ``lb_k`` is at least that largest clearance are
-   skipped for the same reason. Skipped gaps are never below the minimum kept,
-   so the result is the exact minimum over all obstacles and steps (``inf``
-   when a robot has no real obstacle, as in the reference). The bounds are
-   lowered by :data:`SLACK` to absorb rounding.
+   increasing ``lb`` at their last step, :data:`CHUNK` at a time in one pass
+   over the rollout. Let ``worst`` be the largest current clearance of the
+   robot's samples, capped at ``exact_below``. Once that bound of the next
+   obstacle is at least ``worst``, neither it nor any later obstacle can
+   lower a minimum below ``worst``, and the loop stops; within a pass, an
+   obstacle's first steps whose ``lb_k`` is at least ``worst`` are skipped.
+   Skipped gaps are never below the minimum kept or below ``exact_below``, so
+   every clearance below ``exact_below`` is the exact minimum over all
+   obstacles and steps, and every other one is at least ``exact_below``
+   (default ``inf``: all exact; ``inf`` when a robot has no real obstacle, as
+   in the reference). The bounds are lowered by :data:`SLACK` to absorb
+   rounding.
+4. **Batches.** Rows are independent: a batch of runs is one call, each row
+   seeing the static discs of its own run's world (``static_ptr``,
+   ``static_of``). Rows are split into one block per thread; a block
+   allocates its work space (the rollout) once, not once per robot.
 
-:func:`vo_choose` picks each robot's sample as ``lf_vo`` does with the numpy
-reference (:func:`comparisons.lf_vo.equations.vo_cost`, ``argmin`` over the safe
-samples, ``argmax`` of the clearance when none is safe), with the same
-floating-point operations per cost, computed for the safe samples only.
+:func:`~comparisons.lf_vo.choose.vo_choose` (re-exported here) picks each
+robot's sample from the clearances.
 """
 
 from __future__ import annotations
@@ -48,47 +52,38 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from comparisons.lf_vo.choose import _roots, vo_choose
+
+__all__ = ["CHUNK", "SLACK", "vo_choose", "vo_clearance"]
+
 FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 
 #: Margin subtracted from every culling bound (covers rounding of the gaps), m.
 SLACK = 1e-6
 
-#: Obstacles checked together in one pass over the rollout (after the first one).
+#: Obstacles checked together in one pass over the rollout.
 CHUNK = 8
 
 
 @numba.njit(cache=True)
-def _roots(w, w_stride):  # pragma: no cover - numba
-    """For each sample, the first sample ``w_stride`` steps back with the bitwise same ``w``."""
-    n_s = w.shape[0]
-    root = np.empty(n_s, np.int64)
-    for s in range(n_s):
-        root[s] = s
-        if w_stride > 0 and s >= w_stride and w[s - w_stride] == w[s]:
-            root[s] = root[s - w_stride]
-    return root
-
-
-@numba.njit(cache=True)
-def _extend(x, y, theta, w, t_mid, root, vs, cs, sn, ax, ay, px, py, k_from,
+def _extend(x, y, theta, w, t_mid, root, uniq, n_uniq, vs, cs, sn, ax, ay, px, py, k_from,
             k_to):  # pragma: no cover - numba
     """Fill rows ``k_from..k_to - 1`` of ``px, py`` ``(H, S)``, continuing the sums ``ax, ay``.
 
-    ``cs, sn`` hold the cos/sin of the headings of step ``k_from - 1``.
+    ``cs, sn`` hold the cos/sin of the headings of step ``k_from - 1``; they are
+    computed for the samples ``uniq[:n_uniq]`` (the roots) and copied to the others.
     """
     n_s = vs.shape[0]
     for k in range(k_from, k_to):
         if k == 0 or t_mid[k] != t_mid[k - 1]:  # else: same heading as the step before
+            for u in range(n_uniq):
+                s = uniq[u]
+                h = theta + w[s] * t_mid[k]
+                cs[s] = math.cos(h)
+                sn[s] = math.sin(h)
             for s in range(n_s):
-                r = root[s]
-                if r == s:
-                    h = theta + w[s] * t_mid[k]
-                    cs[s] = math.cos(h)
-                    sn[s] = math.sin(h)
-                else:
-                    cs[s] = cs[r]
-                    sn[s] = sn[r]
+                cs[s] = cs[root[s]]
+                sn[s] = sn[root[s]]
         if k == 0:
             for s in range(n_s):
                 ax[s] = vs[s] * cs[s]
@@ -103,11 +98,18 @@ def _extend(x, y, theta, w, t_mid, root, vs, cs, sn, ax, ay, px, py, k_from,
 
 
 @numba.njit(cache=True)
-def _robot(x, y, theta, v, w, step, t_mid, w_stride, obst, lim, n_obst,
-           clear):  # pragma: no cover - numba
+def _robot(x, y, theta, v, w, step, t_mid, w_stride, obst, lim, n_obst, exact_below, clear,
+           roots, per_s, px, py, per_q, order, d2min, picked):  # pragma: no cover - numba
     """Exact min clearance of one robot's samples against ``obst[:n_obst]`` (cx, cy, ux, uy, r).
 
-    Obstacle ``q`` is checked over the steps ``0..lim[q] - 1``.
+    Obstacle ``q`` is checked over the steps ``0..lim[q] - 1``. The obstacle
+    with the lowest bound is checked first, alone (unless ``exact_below`` is
+    finite); then only the obstacles whose bound is below the largest
+    clearance so far and ``exact_below``, by increasing bound (the order
+    changes which gaps are skipped, never a minimum below ``exact_below``).
+    The arguments after ``clear`` are work space, overwritten: ``roots``
+    ``(2, S)``, ``per_s`` ``(5, S)``, ``px, py`` ``(H, S)``, ``per_q`` ``(3, Q)``,
+    ``order`` ``(Q,)``, ``d2min`` ``(CHUNK, S)``, ``picked`` ``(2, CHUNK)``.
     """
     n_s, n_h = v.shape[0], t_mid.shape[0]
     for s in range(n_s):
@@ -117,36 +119,53 @@ def _robot(x, y, theta, v, w, step, t_mid, w_stride, obst, lim, n_obst,
     v_max = 0.0
     for s in range(n_s):
         v_max = max(v_max, abs(v[s]))
-    d_now = np.empty(n_obst)
-    speed = np.empty(n_obst)
-    bound = np.empty(n_obst)
+    d_now, speed, bound = per_q[0], per_q[1], per_q[2]
+    lowest = 0
     for q in range(n_obst):
         d_now[q] = math.sqrt((x - obst[q, 0]) ** 2 + (y - obst[q, 1]) ** 2)
         speed[q] = math.sqrt(obst[q, 2] ** 2 + obst[q, 3] ** 2)
         bound[q] = d_now[q] - (v_max + speed[q]) * (step * lim[q]) - obst[q, 4] - SLACK
-    order = np.argsort(bound)
+        if bound[q] < bound[lowest]:
+            lowest = q
+    order[0] = lowest
+    n_order = 1
     # the rollout, filled up to row k_done - 1 as the obstacles need it
-    root = _roots(w, w_stride)
-    vs = np.empty(n_s)
+    root, uniq = roots[0], roots[1]
+    _roots(w, w_stride, root)
+    n_uniq = 0
+    for s in range(n_s):
+        if root[s] == s:
+            uniq[n_uniq] = s
+            n_uniq += 1
+    vs, cs, sn, ax, ay = per_s[0], per_s[1], per_s[2], per_s[3], per_s[4]
     for s in range(n_s):
         vs[s] = v[s] * step
-    cs, sn, ax, ay = np.empty(n_s), np.empty(n_s), np.empty(n_s), np.empty(n_s)
-    px = np.empty((n_h, n_s))
-    py = np.empty((n_h, n_s))
     k_done = 0
-    chunk = np.empty(CHUNK, np.int64)
-    k_first = np.empty(CHUNK, np.int64)
-    d2min = np.empty((CHUNK, n_s))
-    worst = np.inf  # largest clearance over the samples so far
+    chunk, k_first = picked[0], picked[1]
+    worst = exact_below  # skip gaps >= this: the largest clearance so far, at most exact_below
     j = 0
-    while j < n_obst:
-        # the next obstacles by increasing bound (one first, to get a finite `worst`)
+    ranked = False
+    while j < n_order or not ranked:
+        if not ranked and (j > 0 or worst < np.inf):
+            # the obstacles that may still lower a minimum (bound < worst), by increasing bound
+            ranked = True
+            for q in range(n_obst):
+                if q == lowest or bound[q] >= worst:
+                    continue
+                r = n_order
+                while r > 1 and bound[order[r - 1]] > bound[q]:
+                    order[r] = order[r - 1]
+                    r -= 1
+                order[r] = q
+                n_order += 1
+            continue
+        # the next obstacles by increasing bound (without exact_below, one first: a finite worst)
         m = 0
-        size = 1 if j == 0 else CHUNK
-        while j < n_obst and m < size:
+        size = CHUNK if ranked else 1
+        while j < n_order and m < size:
             q = order[j]
             if bound[q] >= worst:
-                j = n_obst  # this and every later one: gap >= bound >= worst >= clear[s]
+                j = n_order  # this and every later one: gap >= bound >= worst >= clear[s]
                 break
             j += 1
             k0 = 0
@@ -169,7 +188,8 @@ def _robot(x, y, theta, v, w, step, t_mid, w_stride, obst, lim, n_obst,
             for s in range(n_s):
                 d2min[c, s] = np.inf
         if k_hi > k_done:
-            _extend(x, y, theta, w, t_mid, root, vs, cs, sn, ax, ay, px, py, k_done, k_hi)
+            _extend(x, y, theta, w, t_mid, root, uniq, n_uniq, vs, cs, sn, ax, ay, px, py,
+                    k_done, k_hi)
             k_done = k_hi
         for k in range(k_lo, k_hi):
             t = step * (k + 1.0)
@@ -183,8 +203,8 @@ def _robot(x, y, theta, v, w, step, t_mid, w_stride, obst, lim, n_obst,
                     dx = px[k, s] - fx
                     dy = py[k, s] - fy
                     d2 = dx * dx + dy * dy
-                    if d2 < d2min[c, s]:
-                        d2min[c, s] = d2
+                    # a plain store (not a masked one): the next step reads it back
+                    d2min[c, s] = d2 if d2 < d2min[c, s] else d2min[c, s]
         for c in range(m):
             reach = obst[chunk[c], 4]
             for s in range(n_s):
@@ -194,19 +214,26 @@ def _robot(x, y, theta, v, w, step, t_mid, w_stride, obst, lim, n_obst,
         worst = -np.inf
         for s in range(n_s):
             worst = max(worst, clear[s])
+        worst = min(worst, exact_below)
 
 
-@numba.njit(cache=True, parallel=True)
-def _batch(pose, v, w, step, t_mid, w_stride, static, pos, vel, reach, mask, limit,
-           clear):  # pragma: no cover - numba
-    """Fill ``clear`` ``(N, S)``: every robot's static discs and real per-robot obstacles."""
-    n, n_stat, n_dyn = pose.shape[0], static.shape[0], pos.shape[1]
-    n_h = t_mid.shape[0]
-    for i in numba.prange(n):
-        obst = np.empty((n_stat + n_dyn, 5))
-        lim = np.empty(n_stat + n_dyn, np.int64)
+@numba.njit(cache=True)
+def _rows(lo, hi, pose, v, w, step, t_mid, w_stride, static, static_ptr, static_of, pos, vel,
+          reach, mask, limit, exact_below, clear):  # pragma: no cover - numba
+    """Fill rows ``lo..hi - 1`` of ``clear`` (see :func:`_batch`), with one work space."""
+    n_s, n_h, n_dyn = v.shape[1], t_mid.shape[0], pos.shape[1]
+    n_q = n_dyn
+    for g in range(static_ptr.shape[0] - 1):
+        n_q = max(n_q, static_ptr[g + 1] - static_ptr[g] + n_dyn)
+    obst = np.empty((n_q, 5))
+    lim = np.empty(n_q, np.int64)
+    roots, per_s = np.empty((2, n_s), np.int64), np.empty((5, n_s))
+    px, py = np.empty((n_h, n_s)), np.empty((n_h, n_s))
+    per_q, order = np.empty((3, n_q)), np.empty(n_q, np.int64)
+    d2min, picked = np.empty((CHUNK, n_s)), np.empty((2, CHUNK), np.int64)
+    for i in range(lo, hi):
         m = 0
-        for q in range(n_stat):
+        for q in range(static_ptr[static_of[i]], static_ptr[static_of[i] + 1]):
             for c in range(5):
                 obst[m, c] = static[q, c]
             lim[m] = n_h
@@ -221,14 +248,29 @@ def _batch(pose, v, w, step, t_mid, w_stride, static, pos, vel, reach, mask, lim
                 lim[m] = limit[q]
                 m += 1
         _robot(pose[i, 0], pose[i, 1], pose[i, 2], v[i], w[i], step, t_mid, w_stride, obst, lim,
-               m, clear[i])
+               m, exact_below, clear[i], roots, per_s, px, py, per_q, order, d2min, picked)
+
+
+@numba.njit(cache=True, parallel=True)
+def _batch(pose, v, w, step, t_mid, w_stride, static, static_ptr, static_of, pos, vel, reach,
+           mask, limit, exact_below, clear, blocks):  # pragma: no cover - numba
+    """Fill ``clear`` ``(N, S)``: each robot's static discs (its world's) and real obstacles.
+
+    ``blocks`` blocks of rows (one per thread), each with its own work space,
+    allocated once per block: a fresh rollout per robot cost more than its checks.
+    """
+    n = pose.shape[0]
+    for b in numba.prange(blocks):
+        _rows(b * n // blocks, (b + 1) * n // blocks, pose, v, w, step, t_mid, w_stride, static,
+              static_ptr, static_of, pos, vel, reach, mask, limit, exact_below, clear)
 
 
 def vo_clearance(pose: ArrayLike, v: ArrayLike, w: ArrayLike, step: float, steps: int,
                  turn_time: float, centres: ArrayLike, velocities: ArrayLike, reach: ArrayLike,
                  mask: ArrayLike, static_centres: ArrayLike | None = None,
                  static_reach: ArrayLike | None = None, w_stride: int = 0,
-                 limit: ArrayLike | None = None) -> FloatArray:
+                 limit: ArrayLike | None = None, static_ptr: ArrayLike | None = None,
+                 static_of: ArrayLike | None = None, exact_below: float = np.inf) -> FloatArray:
     """``path_clearance(rollout(pose, v, w, step, steps, turn_time), step, ...)``, fast.
 
     Args:
@@ -242,7 +284,8 @@ def vo_clearance(pose: ArrayLike, v: ArrayLike, w: ArrayLike, step: float, steps
         velocities: ``(N, Q, 2)`` obstacle velocities, m/s.
         reach: ``(N, Q)`` collision distance between centres, m.
         mask: ``(N, Q)`` True where obstacle q is real (False = padding).
-        static_centres: ``(C, 2)`` static discs seen by every robot, m (optional).
+        static_centres: ``(C, 2)`` static discs, m (optional): seen by every robot,
+            or by the robots of their world (``static_ptr``).
         static_reach: ``(C,)`` their collision distances, m.
         w_stride: Samples ``s`` and ``s - w_stride`` often share ``w`` (a speed-major
             grid with ``w_stride`` turn rates); only a speed-up, any value is exact.
@@ -250,10 +293,18 @@ def vo_clearance(pose: ArrayLike, v: ArrayLike, w: ArrayLike, step: float, steps
             per-robot obstacles (clipped to ``0..steps``; default ``steps``): the
             result is then the minimum of the reference over the columns' own
             first ``limit_q`` steps (static discs: all ``steps``).
+        static_ptr: ``(W + 1,)`` the static discs of W worlds (a batch of runs whose
+            maps differ): world ``g``'s are rows ``static_ptr[g]:static_ptr[g + 1]`` of
+            ``static_centres``. Default: one world, every disc.
+        static_of: ``(N,)`` each robot's world (default 0): a robot sees its world's
+            discs only, and gets the clearances of a call with those discs alone.
+        exact_below: Clearances below this (m) are exact; the others are only at
+            least this (any gap whose bound reaches it is skipped). ``lf_vo``'s choice
+            needs the sign and the negative values only (``exact_below = 0``).
 
     Returns:
         ``(N, S)`` clearance in m (``inf`` when the robot has no obstacle), equal
-        to the reference's.
+        to the reference's (below ``exact_below``).
     """
     p = np.ascontiguousarray(pose, dtype=np.float64)
     vv = np.ascontiguousarray(v, dtype=np.float64)
@@ -271,107 +322,12 @@ def vo_clearance(pose: ArrayLike, v: ArrayLike, w: ArrayLike, step: float, steps
         static = np.zeros((len(sc), 5))
         static[:, :2] = sc
         static[:, 4] = np.asarray(static_reach, dtype=np.float64).reshape(-1)
+    ptr = np.array([0, len(static)], dtype=np.int64) if static_ptr is None else \
+        np.ascontiguousarray(static_ptr, dtype=np.int64)
+    world = np.zeros(len(p), dtype=np.int64) if static_of is None else \
+        np.ascontiguousarray(static_of, dtype=np.int64).reshape(len(p))
     t_mid = np.minimum((np.arange(steps, dtype=float) + 0.5) * step, turn_time)
     clear = np.empty(vv.shape)
-    _batch(p, vv, ww, float(step), t_mid, int(w_stride), static, pos, vel, rch, msk, lim, clear)
+    _batch(p, vv, ww, float(step), t_mid, int(w_stride), static, ptr, world, pos, vel, rch, msk,
+           lim, float(exact_below), clear, min(len(p), numba.get_num_threads()))
     return clear
-
-
-@numba.njit(cache=True)
-def _choose(theta, v, w, v_ref, w_ref, theta_t, clear, tau, pref_weight, heading_weight,
-            turn_weight, w_stride, best, fell):  # pragma: no cover - numba
-    """Fill ``best`` and ``fell`` ``(N,)`` (see :func:`vo_choose`)."""
-    n, n_s = v.shape
-    cp, sp, cg = np.empty(n_s), np.empty(n_s), np.empty(n_s)
-    done = np.zeros(n_s, np.bool_)
-    for i in range(n):
-        th = theta[i]
-        psi_ref = th + w_ref[i] * tau
-        vr = v_ref[i]
-        rx = vr * math.cos(psi_ref)
-        ry = vr * math.sin(psi_ref)
-        root = _roots(w[i], w_stride)
-        done[:] = False
-        k = -1
-        low = np.inf
-        for s in range(n_s):
-            if not clear[i, s] >= 0.0:
-                continue
-            r = root[s]
-            if not done[r]:  # the heading aimed for, once per distinct w
-                psi = th + w[i, r] * tau
-                cp[r] = math.cos(psi)
-                sp[r] = math.sin(psi)
-                cg[r] = math.cos(psi - theta_t[i])
-                done[r] = True
-            dvx = v[i, s] * cp[r] - rx
-            dvy = v[i, s] * sp[r] - ry
-            short = vr - v[i, s] * cg[r]
-            if not (short >= 0.0 or short != short):  # np.maximum(short, 0.0)
-                short = 0.0
-            cost = (pref_weight * math.hypot(dvx, dvy) + heading_weight * short
-                    + turn_weight * abs(w[i, s] - w_ref[i]))
-            if cost != cost:  # np.argmin: the first NaN
-                k = s
-                break
-            if k < 0 or cost < low:
-                k, low = s, cost
-        fell[i] = k < 0
-        if k < 0:  # np.argmax of the clearance: the first maximum (or NaN)
-            k, high = 0, clear[i, 0]
-            for s in range(n_s):
-                c = clear[i, s]
-                if c != c:
-                    k = s
-                    break
-                if c > high:
-                    k, high = s, c
-        best[i] = k
-
-
-def vo_choose(theta: ArrayLike, v: ArrayLike, w: ArrayLike, v_ref: ArrayLike, w_ref: ArrayLike,
-              theta_t: ArrayLike, clear: ArrayLike, tau: float, pref_weight: float,
-              heading_weight: float, turn_weight: float = 0.0,
-              w_stride: int = 0) -> tuple[IntArray, NDArray[np.bool_]]:
-    """Each robot's sample: the cheapest safe one, else the one with the largest clearance.
-
-    The same choice as ``np.argmin(np.where(clear >= 0, vo_cost(...), inf), axis=1)``
-    with :func:`comparisons.lf_vo.equations.vo_cost` (bit for bit the same costs:
-    the same operations in the same order), replaced by ``np.argmax(clear,
-    axis=1)`` on the rows without a safe sample. Costs are computed for the
-    safe samples only, the trigonometry once per distinct turn rate
-    (``w_stride`` as in :func:`vo_clearance`).
-
-    Args:
-        theta: ``(N,)`` current headings, rad.
-        v: ``(N, S)`` sampled speeds, m/s.
-        w: ``(N, S)`` sampled turn rates, rad/s.
-        v_ref: ``(N,)`` preferred speeds (eq 4), m/s.
-        w_ref: ``(N,)`` preferred turn rates (eq 4), rad/s.
-        theta_t: ``(N,)`` target directions (eq 10), rad.
-        clear: ``(N, S)`` clearances (:func:`vo_clearance`), m; safe when ``>= 0``.
-        tau: Time over which the heading turns, s.
-        pref_weight: Weight of the velocity distance, s/m.
-        heading_weight: Weight of the progress shortfall, s/m.
-        turn_weight: Weight of the turn-rate distance to ``w_ref``, s/rad.
-        w_stride: Samples ``s`` and ``s - w_stride`` often share ``w``; any value is exact.
-
-    Returns:
-        ``(best (N,), fell (N,))``: the chosen sample's index and whether the row
-        had no safe sample.
-    """
-    vv = np.ascontiguousarray(v, dtype=np.float64)
-    n = vv.shape[0]
-    if vv.ndim != 2 or vv.shape[1] == 0:
-        raise ValueError(f"vo_choose needs (N, S) samples with S >= 1, got {vv.shape}")
-
-    def per_robot(a: ArrayLike) -> FloatArray:
-        return np.ascontiguousarray(a, dtype=np.float64).reshape(n)
-
-    best = np.empty(n, dtype=np.int64)
-    fell = np.empty(n, dtype=np.bool_)
-    _choose(per_robot(theta), vv, np.ascontiguousarray(w, dtype=np.float64), per_robot(v_ref),
-            per_robot(w_ref), per_robot(theta_t), np.ascontiguousarray(clear, dtype=np.float64),
-            float(tau), float(pref_weight), float(heading_weight), float(turn_weight),
-            int(w_stride), best, fell)
-    return best, fell
