@@ -46,6 +46,11 @@ Decisions (details, the paper's words and the reasons: ``docs/methods/consensus.
 4. ``v_max`` of eq 11 and 17 is the filter's ``v_max`` parameter, default the
    robots' ``robots.v_max``.
 
+Both controllers are batched (:class:`~dfcoa_opt.control.base.BatchedController`):
+one object serves every run of a batch and one call computes every row of
+every run (each row with its own run's leader state, formation and world);
+each run's rows are the rows of the run simulated alone, bit for bit.
+
 The paper's gains are the defaults: k1 = 0.25, k2 = 0.45, k3 = 37.5. Explicit
 Euler (the simulator's double integrator) of the velocity loop ``-k3 (v - w)``
 diverges for ``k3 dt > 2`` and overshoots for ``k3 dt > 1``; with
@@ -64,7 +69,13 @@ from typing import Literal
 import numpy as np
 
 from comparisons.orca.filter import OrcaFilter
-from dfcoa_opt.control.base import FilterResult, Observation, slot_velocity
+from dfcoa_opt.control.base import (
+    BatchedController,
+    FilterResult,
+    Observation,
+    as_batch,
+    slot_velocity,
+)
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.geometry import body_to_world
@@ -79,9 +90,11 @@ def consensus_command(obs: Observation, offsets: np.ndarray, k1: float, k2: floa
     """Eq 14 for every robot, row i from row i of ``obs`` only.
 
     Args:
-        obs: The step's observation; neighbours (``a_ij = 1``) are ``obs.neighbours``.
+        obs: The step's observation (one run, or the rows of every run of a
+            batch); neighbours (``a_ij = 1``) are ``obs.neighbours``.
         offsets: ``(n_team, 2)`` slot offsets of the whole team in the leader frame, m
-            (indexed by the neighbours' global indices).
+            (a neighbour's are those of its index within the team), or
+            ``(E, n_team, 2)``, those of each run of the batch (``obs.env``).
         k1: Position gain, 1/s^2.
         k2: Velocity gain, 1/s.
         b: Leader weight ``b_i`` (same for every robot), dimensionless.
@@ -89,16 +102,21 @@ def consensus_command(obs: Observation, offsets: np.ndarray, k1: float, k2: floa
     Returns:
         ``(N, 2)`` accelerations ``u_ci``, m/s^2.
     """
-    lead = np.asarray(obs.leader, dtype=float)
+    obs = as_batch(obs)
+    offsets = np.asarray(offsets, dtype=float)
+    offsets = offsets if offsets.ndim == 3 else offsets[None]
+    lead = obs.row_leader()  # (N, 5): each row's broadcast leader state
     x_hat = obs.pose[:, :2] - obs.slot
     v_hat = obs.velocity - slot_velocity(lead, obs.slot)
     nb = obs.neighbours
     mask = nb.mask
-    idx = np.where(mask, nb.index, 0)
-    nb_slot = body_to_world(lead[:3], offsets[idx])  # (N, K, 2)
+    # a neighbour index is a row of the batch (runs of n_team rows): its robot is index % n_team
+    idx = np.where(mask, nb.index, 0) % offsets.shape[1]
+    run = obs.env[:, None] if len(offsets) > 1 else 0
+    nb_slot = body_to_world(lead[:, None, :3], offsets[run, idx])  # (N, K, 2)
     a = mask.astype(float)[..., None]
     xj_hat = nb.position - nb_slot
-    vj_hat = nb.velocity - slot_velocity(lead, nb_slot)
+    vj_hat = nb.velocity - slot_velocity(lead[:, None, :], nb_slot)
     ex = (a * (x_hat[:, None, :] - xj_hat)).sum(axis=1) + b * x_hat
     ev = (a * (v_hat[:, None, :] - vj_hat)).sum(axis=1) + b * v_hat
     return -k1 * ex - k2 * ev
@@ -126,7 +144,7 @@ def preferred_velocity(obs: Observation, v_max: float, law: str,
 
 
 @register("consensus")
-class Consensus:
+class Consensus(BatchedController):
     """Paper 001 eq 14: second-order consensus formation control with a virtual leader."""
 
     command = "acceleration"
@@ -148,19 +166,24 @@ class Consensus:
 
     def __init__(self, params: Params) -> None:
         self.p = params
-        self._offsets = np.zeros((0, 2))
+        self._offsets = np.zeros((1, 0, 2))
 
-    def reset(self, scenario, rng: np.random.Generator) -> None:
-        """Keep the team's slot offsets (the formation is common knowledge)."""
-        self._offsets = np.asarray(scenario.offsets, dtype=float)
+    def reset_batch(self, scenarios, rngs) -> None:
+        """Keep each run's team slot offsets (the formation is common knowledge)."""
+        self._offsets = run_offsets(scenarios)
 
     def act(self, obs: Observation) -> np.ndarray:
         """Eq 14 accelerations ``(N, 2)``, row i from row i of ``obs``."""
         return consensus_command(obs, self._offsets, self.p.k1, self.p.k2, self.p.b)
 
 
+def run_offsets(scenarios) -> np.ndarray:
+    """``(E, n_team, 2)`` the team's slot offsets of each run, m (leader frame)."""
+    return np.stack([np.asarray(sc.offsets, dtype=float) for sc in scenarios])
+
+
 @register("consensus_ivo")
-class ConsensusIvo:
+class ConsensusIvo(BatchedController):
     """Paper 001 eq 15-17: eq 14 plus ``-k3 (v_i - w_i)``, ``w_i`` from the IVO/ORCA filter.
 
     Attributes:
@@ -193,32 +216,35 @@ class ConsensusIvo:
         self.p = params
         fields = {k: getattr(params, k) for k in OrcaFilter.Params.__dataclass_fields__}
         self._filter = OrcaFilter(OrcaFilter.Params(**fields), owner=self.name)
-        self._offsets = np.zeros((0, 2))
+        self._offsets = np.zeros((1, 0, 2))
         self._v_max = 1.0
         self._k3 = params.k3
         self.last_result: FilterResult | None = None
 
-    def reset(self, scenario, rng: np.random.Generator) -> None:
-        """Keep the offsets and the speed limit; reset the filter (obstacle edges).
+    def reset_batch(self, scenarios, rngs) -> None:
+        """Keep the offsets and the speed limit; reset the filter (each run's obstacles).
 
         Raises:
             ScenarioError: ``k3 dt >= 2`` without ``k3_step_limit``: explicit Euler of
                 ``-k3 (v - w)`` diverges.
         """
+        scenario = scenarios[0]
         dt = scenario.spec.dt
         self._k3 = min(self.p.k3, 1.0 / dt) if self.p.k3_step_limit else self.p.k3
         if self._k3 * dt >= 2.0:
             raise ScenarioError(scenario.source, f"controllers.{self.name}.k3",
                                 f"k3 dt = {self.p.k3 * dt:g} must be < 2 (dt = {dt:g} s): the "
                                 "explicit-Euler velocity loop -k3 (v - w) diverges")
-        self._offsets = np.asarray(scenario.offsets, dtype=float)
+        self._offsets = run_offsets(scenarios)
         self._v_max = self.p.v_max if self.p.v_max is not None else scenario.spec.robots.v_max
-        self._filter.reset(scenario, rng)
+        self._filter.reset_batch(scenarios, rngs)
         self.last_result = None
 
     def act(self, obs: Observation) -> np.ndarray:
-        """Eq 15 accelerations ``(N, 2)``, row i from row i of ``obs``."""
+        """Eq 15 accelerations ``(N, 2)``, row i from row i of ``obs`` (every run of a batch)."""
+        obs = as_batch(obs)
         u_c = consensus_command(obs, self._offsets, self.p.k1, self.p.k2, self.p.b)
         pref = preferred_velocity(obs, self._v_max, self.p.pref_law, self.p.arrival_radius)
-        self.last_result = self._filter.filter(obs, slot_velocity(obs.leader, obs.slot) + pref)
+        self.last_result = self._filter.filter(obs,
+                                               slot_velocity(obs.row_leader(), obs.slot) + pref)
         return u_c - self._k3 * (obs.velocity - self.last_result.command)

@@ -7,6 +7,8 @@
   2D solver and the batched update (numba);
 - :mod:`~comparisons.orca.obstacles`, :mod:`~comparisons.orca.obstacle_set`: static
   polygons the RVO2 way;
+- :mod:`~comparisons.orca.worlds`: the static obstacles of every run of a batch
+  (each run's own world, merged into one table per mode);
 - :mod:`~comparisons.orca.ivo`: paper 001's improved VO of polygons and discs;
 - :mod:`~comparisons.orca.qp`: the same selection through ``qpsolvers``;
 - :mod:`~comparisons.orca.safe`: the safe discrete-time mode;

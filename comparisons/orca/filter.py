@@ -32,10 +32,16 @@ import numpy as np
 from comparisons.constraints.solvers import check_solver
 from comparisons.orca import lp, safe
 from comparisons.orca.ivo import ivo_lines
-from comparisons.orca.ivo.ellipse import polygon_segments
-from comparisons.orca.obstacles import ObstacleSet, obstacle_lines, prepare_obstacles
+from comparisons.orca.obstacles import obstacle_lines
 from comparisons.orca.velocities import orca_velocities
-from dfcoa_opt.control.base import Filtered, FilterResult, Observation
+from comparisons.orca.worlds import StaticWorlds
+from dfcoa_opt.control.base import (
+    BatchedController,
+    Filtered,
+    FilterResult,
+    Observation,
+    as_batch,
+)
 from dfcoa_opt.control.registry import register, register_filter
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.geometry import take_rows
@@ -47,12 +53,11 @@ from dfcoa_opt.sim.log import (
     STATUS_SOLVER_FAIL,
     UNCHANGED_TOL,
 )
-from dfcoa_opt.world.shapes import Circle
 
 
 @register_filter("orca")
-class OrcaFilter:
-    """ORCA safety filter over nominal velocities (see the module docstring)."""
+class OrcaFilter(BatchedController):
+    """ORCA safety filter over nominal velocities (see the module docstring); batched."""
 
     command = "velocity"
     uses_scan = False
@@ -101,24 +106,22 @@ class OrcaFilter:
         self._owner = owner or self.name
         self._radius = 0.2
         self._v_max = 1.0
-        self._segments = np.zeros((0, 2, 2))
-        self._obstacles: ObstacleSet | None = None
-        self._polygons: list[np.ndarray] = []
-        self._ivo_segments = np.zeros((0, 4))
-        self._ivo_discs = np.zeros((0, 3))
+        self._worlds: StaticWorlds | None = None
 
-    def reset(self, scenario, rng: np.random.Generator) -> None:
-        """Read the robots' radius and speed limit and the static obstacles.
+    def reset_batch(self, scenarios, rngs) -> None:
+        """Read the robots' radius and speed limit and the static obstacles of every run.
 
         Modes 'orca' and 'next_step' (and the safe mode) see every shape as a
         polygon (a circle as its circumscribed 32-gon); mode 'ivo' takes circles
         as exact discs (one line each, :mod:`comparisons.orca.ivo.discs`) and the
-        other shapes as polygon edges.
+        other shapes as polygon edges. Runs with different worlds (a clutter
+        field drawn from the seed) each keep their own.
 
         Raises:
             ScenarioError: ``solver = 'qp'`` with a ``qp_solver`` that is not installed,
                 or ``safe_discrete`` with ``sensors.comm_radius`` below one step's reach.
         """
+        scenario = scenarios[0]
         if self.p.solver == "qp":
             check_solver(self.p.qp_solver, scenario.source,
                          f"controllers.{self._owner}.qp_solver")
@@ -132,18 +135,23 @@ class OrcaFilter:
                                 "every robot it could touch within one step")
         self._radius = rob.radius
         self._v_max = v_max
-        shapes = scenario.world.shapes
-        self._polygons = [shape.to_polygon().as_array() for shape in shapes]
-        edges = polygon_segments(self._polygons)
-        self._segments = edges.reshape(-1, 2, 2)
-        self._obstacles = (prepare_obstacles(self._polygons)
-                           if self._polygons and self.p.obstacles == "orca" else None)
-        circle = [isinstance(shape, Circle) for shape in shapes]
-        self._ivo_discs = np.array([(*shape.center, shape.radius) for shape in shapes
-                                    if isinstance(shape, Circle)], dtype=float).reshape(-1, 3)
-        self._ivo_segments = polygon_segments(
-            [poly for poly, disc in zip(self._polygons, circle, strict=True) if not disc],
-            self.p.ivo_max_segment)
+        self._worlds = StaticWorlds(scenarios, self.p.obstacles == "orca",
+                                    self.p.ivo_max_segment)
+
+    @property
+    def _segments(self) -> np.ndarray:
+        """``(S, 2, 2)`` the polygon edges of the first run's world, m."""
+        return self._worlds.segments[0] if self._worlds else np.zeros((0, 2, 2))
+
+    @property
+    def _ivo_segments(self) -> np.ndarray:
+        """``(S, 4)`` the polygon edges of mode 'ivo' in the first run's world, m."""
+        return self._worlds.ivo_items[0][0] if self._worlds else np.zeros((0, 4))
+
+    @property
+    def _ivo_discs(self) -> np.ndarray:
+        """``(C, 3)`` the discs (circles) of mode 'ivo' in the first run's world, m."""
+        return self._worlds.ivo_items[0][1] if self._worlds else np.zeros((0, 3))
 
     def _hard_lines(self, obs: Observation):
         """Hard lines of every robot: static obstacles and, in safe mode, next-step separation.
@@ -154,18 +162,21 @@ class OrcaFilter:
         n = obs.n
         radius = np.full(n, self._radius)
         v_max = np.full(n, self._v_max)
+        worlds = self._worlds
+        mode = self.p.obstacles if worlds is not None else "none"  # not reset: no map
+        world = worlds.row_world(obs.env) if worlds is not None else None
+        pos = obs.pose[:, :2]
         groups = []
-        if self.p.obstacles == "orca" and self._obstacles is not None:
-            groups.append(obstacle_lines(obs.pose[:, :2], obs.velocity, radius, v_max,
-                                         self.p.time_horizon_obst, self._obstacles))
-        if self.p.obstacles == "ivo" and len(self._ivo_segments) + len(self._ivo_discs):
+        if mode == "orca" and worlds.obstacles is not None:
+            groups.append(obstacle_lines(pos, obs.velocity, radius, v_max,
+                                         self.p.time_horizon_obst, worlds.obstacles, world))
+        if mode == "ivo" and worlds.ivo.segments.shape[1] + worlds.ivo.discs.shape[1]:
             reach = v_max[0] * self.p.time_horizon_obst + self._radius
-            groups.append(ivo_lines(obs.pose[:, :2], obs.velocity, radius, self._ivo_segments,
-                                    reach, tau=self.p.ivo_tau, tau_min=max(obs.dt, 0.1),
-                                    discs=self._ivo_discs))
-        if self.p.obstacles == "next_step" or self.p.safe_discrete:
-            groups.append(safe.segment_safety_lines(obs.pose[:, :2], radius, v_max, obs.dt,
-                                                    self._segments))
+            groups.append(ivo_lines(pos, obs.velocity, radius, worlds.ivo, reach,
+                                    tau=self.p.ivo_tau, tau_min=max(obs.dt, 0.1), world=world))
+        if worlds is not None and (mode == "next_step" or self.p.safe_discrete):
+            groups.append(safe.segment_safety_lines(pos, radius, v_max, obs.dt,
+                                                    worlds.row_segments(world)))
         blind = np.zeros(n, dtype=bool)
         if self.p.safe_discrete:
             *pair, blind = self._pair_lines(obs, radius, v_max)
@@ -198,8 +209,13 @@ class OrcaFilter:
         return points, directions, count, blind
 
     def filter(self, obs: Observation, nominal: np.ndarray) -> FilterResult:
-        """Closest velocity to ``nominal`` (rows ``(vx, vy)``) within the constraints."""
+        """Closest velocity to ``nominal`` (rows ``(vx, vy)``) within the constraints.
+
+        Every row of every run of the batch in one pass (an observation without
+        ``env`` is one run); row i from row i of ``obs`` and its own run's world.
+        """
         t0 = time.perf_counter()
+        obs = as_batch(obs)
         n = obs.n
         nominal = np.asarray(nominal, dtype=float)[:, :2]
         nb = obs.neighbours
@@ -270,8 +286,11 @@ def concat_lines(groups):
     return points, directions, count
 
 
-class _TowardsSlot:
-    """Preferred velocity of the navigator: towards the own slot at up to ``speed``."""
+class _TowardsSlot(BatchedController):
+    """Preferred velocity of the navigator: towards the own slot at up to ``speed`` (m/s).
+
+    Row-wise and stateless, so batched: the rows of every run in one call.
+    """
 
     command = "velocity"
     name = "pref"
@@ -280,7 +299,7 @@ class _TowardsSlot:
     def __init__(self, speed: float) -> None:
         self.speed = speed
 
-    def reset(self, scenario, rng: np.random.Generator) -> None:
+    def reset_batch(self, scenarios, rngs) -> None:
         """Stateless."""
 
     def act(self, obs: Observation) -> np.ndarray:
@@ -292,7 +311,10 @@ class _TowardsSlot:
 
 @register("orca_nav")
 class OrcaNavigator(Filtered):
-    """Standalone ORCA: preferred velocity towards the own slot, then the ``orca`` filter."""
+    """Standalone ORCA: preferred velocity towards the own slot, then the ``orca`` filter.
+
+    Batched (both parts are): one object for every run of a batch.
+    """
 
     @dataclass(frozen=True)
     class Params(OrcaFilter.Params):

@@ -25,7 +25,10 @@ supporting line of a chosen splitter edge is cut in two, the new vertex being
 convex); :func:`prepare_obstacles` rebuilds the same tree in single precision,
 so the rings, and the order in which equidistant edges are visited (the tree
 traversal order), are RVO2's. The line construction itself runs in double
-precision, batched over agents in a numba kernel.
+precision, batched over agents in a numba kernel; the search skips subtrees
+whose bounding box is out of range (no edge found, nor their order, changes),
+and agents of different worlds (a batch of runs, :func:`merge_obstacles`) each
+search their own world's tree in the same call.
 """
 
 from __future__ import annotations
@@ -38,10 +41,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from comparisons.orca.lp import EPSILON, det
-from comparisons.orca.obstacle_set import ObstacleSet, prepare_obstacles
+from comparisons.orca.obstacle_set import ObstacleSet, merge_obstacles, prepare_obstacles
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+
+__all__ = ["ObstacleSet", "edge_line", "merge_obstacles", "obstacle_lines", "prepare_obstacles"]
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
@@ -70,16 +75,22 @@ def _seg_dist_sq(px, py, pts, a, b):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _neighbours(px, py, range_sq, pts, nxt, tree, stack, nbr, nbr_d, sort):  # pragma: no cover
-    """Visible edges within range in RVO2's tree-traversal order; sorted (stably) if ``sort``.
+def _neighbours(px, py, range_sq, far_sq, pts, nxt, tree, boxes, root, stack, nbr, nbr_d
+                ):  # pragma: no cover - numba
+    """Visible edges within range in RVO2's tree-traversal order, sorted stably by distance.
 
-    The traversal visits the agent's side of a node's line first, then (when
+    The traversal starts at node ``root`` (the root of the agent's world in a
+    merged set) and visits the agent's side of a node's line first, then (when
     the line is in range) the node's own edge, if the agent is on its outer
-    side, and the other side. Returns the number of edges written to ``nbr``.
+    side, and the other side. A subtree whose bounding box is farther than
+    ``sqrt(far_sq)`` (the range plus a margin far above the single-precision
+    error of :func:`_seg_dist_sq`) holds no edge within range: it is skipped,
+    which changes neither the edges found nor their order. Returns the number
+    of edges written to ``nbr``.
     """
     m = 0
     top = 0
-    stack[0] = 0  # entries: 2 * node + (0: descend, 1: node and far side)
+    stack[0] = 2 * root  # entries: 2 * node + (0: descend, 1: node and far side)
     while top >= 0:
         entry = stack[top]
         top -= 1
@@ -91,6 +102,8 @@ def _neighbours(px, py, range_sq, pts, nxt, tree, stack, nbr, nbr_d, sort):  # p
         near = tree[node, 1] if side >= 0.0 else tree[node, 2]
         far = tree[node, 2] if side >= 0.0 else tree[node, 1]
         if entry & 1 == 0:
+            if _box_dist_sq(px, py, boxes[node]) > far_sq:
+                continue
             top += 1
             stack[top] = 2 * node + 1
             if near >= 0:
@@ -103,11 +116,10 @@ def _neighbours(px, py, range_sq, pts, nxt, tree, stack, nbr, nbr_d, sort):  # p
                 if d < range_sq:
                     slot = m
                     m += 1
-                    if sort:
-                        while slot > 0 and d < nbr_d[slot - 1]:
-                            nbr[slot] = nbr[slot - 1]
-                            nbr_d[slot] = nbr_d[slot - 1]
-                            slot -= 1
+                    while slot > 0 and d < nbr_d[slot - 1]:
+                        nbr[slot] = nbr[slot - 1]
+                        nbr_d[slot] = nbr_d[slot - 1]
+                        slot -= 1
                     nbr[slot] = e
                     nbr_d[slot] = d
             if far >= 0:
@@ -261,53 +273,59 @@ def edge_line(px, py, vx, vy, radius, inv_tau, e, pts, nxt, prv, dirs, convex, P
     return _push(P, D, m, rcx + margin * ry, rcy - margin * rx, -rx, -ry)
 
 
-@numba.njit(cache=True, error_model="numpy")
-def _near_box(px, py, range_sq, bbox):  # pragma: no cover - numba
-    dx = max(bbox[0] - px, 0.0, px - bbox[2])
-    dy = max(bbox[1] - py, 0.0, py - bbox[3])
-    return dx * dx + dy * dy < range_sq
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _box_dist_sq(px, py, box):  # pragma: no cover - numba
+    """Squared distance from ``(px, py)`` to the box ``(x_min, y_min, x_max, y_max)``, m^2."""
+    dx = max(box[0] - px, 0.0, px - box[2])
+    dy = max(box[1] - py, 0.0, py - box[3])
+    return dx * dx + dy * dy
 
 
 @numba.njit(cache=True, parallel=True, error_model="numpy")
-def _count_kernel(pos, range_sq, pts, nxt, tree, depth, bbox, chunk, count
+def _lines_kernel(pos, vel, radius, range_sq, far_sq, world, inv_tau, pts, nxt, prv, dirs,
+                  convex, tree, boxes, roots, depth, bboxes, chunk, P, D, count, need
                   ):  # pragma: no cover - numba
+    """Each agent's lines into ``P[i], D[i]`` (``count``), and how many it has (``need``).
+
+    An agent with more lines than ``P`` has columns writes none (``count`` 0):
+    the caller calls again with ``P`` as wide as ``need``.
+    """
     n = pos.shape[0]
     for c in numba.prange((n + chunk - 1) // chunk):
         stack = np.empty(depth + 2, np.int64)
         nbr = np.empty(pts.shape[0], np.int64)
         nbr_d = np.empty(pts.shape[0])
+        lp = np.empty((pts.shape[0], 2))  # this agent's lines, then copied into P, D
+        ld = np.empty((pts.shape[0], 2))
         for i in range(c * chunk, min(n, (c + 1) * chunk)):
             count[i] = 0
-            if _near_box(pos[i, 0], pos[i, 1], range_sq[i], bbox):
-                count[i] = _neighbours(pos[i, 0], pos[i, 1], range_sq[i], pts, nxt, tree, stack,
-                                       nbr, nbr_d, False)
-
-
-@numba.njit(cache=True, parallel=True, error_model="numpy")
-def _lines_kernel(pos, vel, radius, range_sq, inv_tau, pts, nxt, prv, dirs, convex, tree, depth,
-                  bbox, chunk, P, D, count):  # pragma: no cover - numba
-    n = pos.shape[0]
-    for c in numba.prange((n + chunk - 1) // chunk):
-        stack = np.empty(depth + 2, np.int64)
-        nbr = np.empty(pts.shape[0], np.int64)
-        nbr_d = np.empty(pts.shape[0])
-        for i in range(c * chunk, min(n, (c + 1) * chunk)):
-            count[i] = 0
+            need[i] = 0
             px, py = pos[i, 0], pos[i, 1]
-            if not _near_box(px, py, range_sq[i], bbox):
+            w = world[i]
+            if roots[w] < 0 or not _box_dist_sq(px, py, bboxes[w]) < range_sq[i]:
                 continue
-            k = _neighbours(px, py, range_sq[i], pts, nxt, tree, stack, nbr, nbr_d, True)
+            k = _neighbours(px, py, range_sq[i], far_sq[i], pts, nxt, tree, boxes, roots[w],
+                            stack, nbr, nbr_d)
             m = 0
             for j in range(k):
                 m = edge_line(px, py, vel[i, 0], vel[i, 1], radius[i], inv_tau, nbr[j], pts, nxt,
-                              prv, dirs, convex, P[i], D[i], m)
-            count[i] = m
+                              prv, dirs, convex, lp, ld, m)
+            need[i] = m
+            if m <= P.shape[1]:
+                P[i, :m] = lp[:m]
+                D[i, :m] = ld[:m]
+                count[i] = m
+
+
+#: Columns of the line tables of the first try of :func:`obstacle_lines` (an agent
+#: with more lines makes a second, wider one).
+FIRST_WIDTH = 32
 
 
 def obstacle_lines(pos: ArrayLike, vel: ArrayLike, radius: ArrayLike | float,
                    max_speed: ArrayLike | float, time_horizon_obst: float,
-                   obstacles: ObstacleSet | Sequence[ArrayLike]
-                   ) -> tuple[FloatArray, FloatArray, IntArray]:
+                   obstacles: ObstacleSet | Sequence[ArrayLike],
+                   world: ArrayLike | None = None) -> tuple[FloatArray, FloatArray, IntArray]:
     """RVO2's obstacle ORCA lines of every agent (hard lines for :mod:`comparisons.orca.lp`).
 
     Args:
@@ -317,14 +335,15 @@ def obstacle_lines(pos: ArrayLike, vel: ArrayLike, radius: ArrayLike | float,
         max_speed: ``(N,)`` or scalar speed limits, m/s (they set the search
             range ``time_horizon_obst * max_speed + radius``, m).
         time_horizon_obst: Obstacle time horizon tau_obst, s.
-        obstacles: A prepared :class:`ObstacleSet` or a list of polygons for
-            :func:`prepare_obstacles`.
+        obstacles: A prepared :class:`ObstacleSet` (possibly several worlds merged
+            by :func:`merge_obstacles`) or a list of polygons for :func:`prepare_obstacles`.
+        world: ``(N,)`` the world of each agent in a merged set (each agent sees
+            only its own world's obstacles, as if it were alone in it); default 0.
 
     Returns:
         ``(points (N, H, 2) m/s, directions (N, H, 2), count (N,))``: each agent's
         lines (allowed side on the left), nearest edge first, rows padded past
-        ``count``; ``H`` is the largest number of candidate edges of an agent
-        (0 when no agent is near an obstacle).
+        ``count``; ``H`` is the largest ``count`` (0 when no agent has a line).
     """
     obs = obstacles if isinstance(obstacles, ObstacleSet) else prepare_obstacles(obstacles)
     pos = np.ascontiguousarray(pos, dtype=np.float64).reshape(-1, 2)
@@ -336,14 +355,25 @@ def obstacle_lines(pos: ArrayLike, vel: ArrayLike, radius: ArrayLike | float,
     if obs.n_edges == 0 or n == 0:
         count[:] = 0
         return np.zeros((n, 0, 2)), np.zeros((n, 0, 2)), count
+    world = (np.zeros(n, np.int64) if world is None
+             else np.ascontiguousarray(np.broadcast_to(world, (n,)), dtype=np.int64))
+    # far_sq: the range plus 1e-4 of the coordinates' scale, ~1e3 times the float32
+    # error of a distance (2^-24 of the coordinates), so a skipped subtree has no edge
+    # that _seg_dist_sq could put within range
+    scale = 1.0 + reach + np.maximum(np.abs(pos).max(axis=1), np.abs(obs.bbox).max())
+    far_sq = np.ascontiguousarray((reach + 1e-4 * scale) ** 2)
+    vel = np.ascontiguousarray(vel, dtype=np.float64).reshape(-1, 2)
     chunk = max(1, -(-n // (4 * numba.get_num_threads())))
-    _count_kernel(pos, range_sq, obs.points, obs.next, obs.tree, obs.depth, obs.bbox, chunk,
-                  count)
+    need = np.empty(n, np.int64)
+    width = min(obs.n_edges, FIRST_WIDTH)
+    while True:
+        P = np.zeros((n, width, 2))
+        D = np.zeros((n, width, 2))
+        _lines_kernel(pos, vel, radius, range_sq, far_sq, world, 1.0 / time_horizon_obst,
+                      obs.points, obs.next, obs.prev, obs.directions, obs.convex, obs.tree,
+                      obs.boxes, obs.roots, obs.depth, obs.bboxes, chunk, P, D, count, need)
+        if need.max() <= width:
+            break
+        width = int(need.max())
     h = int(count.max())
-    P = np.zeros((n, h, 2))
-    D = np.zeros((n, h, 2))
-    if h > 0:
-        _lines_kernel(pos, np.ascontiguousarray(vel, dtype=np.float64).reshape(-1, 2), radius,
-                      range_sq, 1.0 / time_horizon_obst, obs.points, obs.next, obs.prev,
-                      obs.directions, obs.convex, obs.tree, obs.depth, obs.bbox, chunk, P, D, count)
-    return P, D, count
+    return P[:, :h], D[:, :h], count

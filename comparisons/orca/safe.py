@@ -97,16 +97,19 @@ def segment_safety_lines(pos: FloatArray, radius: FloatArray, max_speed: FloatAr
         radius: ``(N,)`` radii, m.
         max_speed: ``(N,)`` speed limits, m/s.
         dt: Step, s.
-        segments: ``(E, 2, 2)`` segment end points (polygon edges), m.
+        segments: ``(E, 2, 2)`` segment end points (polygon edges), m; or
+            ``(N, E, 2, 2)``, each robot's own (a batch of runs in different
+            worlds, padded with segments out of reach).
 
     Returns:
         ``(points (N, E', 2), directions (N, E', 2), count (N,))``, the segments
         within one step's reach of each robot first (nearest first).
     """
     n = len(pos)
-    if len(segments) == 0:
+    if segments.shape[-3] == 0:
         return np.zeros((n, 0, 2)), np.zeros((n, 0, 2)), np.zeros(n, np.int64)
-    q = closest_point_on_segment(pos[:, None, :], segments[:, 0], segments[:, 1])  # (N, E, 2)
+    q = closest_point_on_segment(pos[:, None, :], segments[..., 0, :],
+                                 segments[..., 1, :])  # (N, E, 2)
     rel = pos[:, None, :] - q
     dist = np.linalg.norm(rel, axis=-1)
     reach = radius + max_speed * dt

@@ -121,7 +121,7 @@ def disc_pair_line(cx, cy, big, r, vx, vy, tau_rule, tau_fixed, tau_min, tau_max
         tau_max: Cap of the horizon, s.
         alpha: Responsibility of eq 10.
         push_speed: Outward speed required inside ``K = D(c, big + r_A)``, m/s.
-        out: ``(10,)`` output, as :func:`comparisons.orca.ivo._pair_line`: point (2),
+        out: ``(10,)`` output, as :func:`comparisons.orca.ivo.kernel.pair_line`: point (2),
             direction (2), tau, inside flag, u (2), normal (2).
     """
     rad = big + r  # K = O' (+) D(r_A)
@@ -156,15 +156,17 @@ def disc_distances(pos: ArrayLike, discs: ArrayLike) -> FloatArray:
 
     Args:
         pos: ``(N, 2)`` robot positions, m.
-        discs: ``(C, 3)`` discs ``(cx, cy, R)``, m.
+        discs: ``(C, 3)`` discs ``(cx, cy, R)``, m, the same for every robot; or
+            ``(N, C, 3)`` (or ``(1, C, 3)``), each robot's own.
 
     Returns:
         ``(N, C)`` distances from each centre to each disc, m.
     """
     p = np.asarray(pos, dtype=float).reshape(-1, 2)
-    d = np.asarray(discs, dtype=float).reshape(-1, 3)
-    centre = np.linalg.norm(p[:, None, :] - d[None, :, 0:2], axis=-1)
-    return np.maximum(centre - d[None, :, 2], 0.0)
+    d = np.asarray(discs, dtype=float)
+    d = d if d.ndim == 3 else d.reshape(1, -1, 3)
+    centre = np.linalg.norm(p[:, None, :] - d[..., 0:2], axis=-1)
+    return np.maximum(centre - d[..., 2], 0.0)
 
 
 def disc_line(pos: ArrayLike, v_opt: ArrayLike, radius: float, centre: ArrayLike,

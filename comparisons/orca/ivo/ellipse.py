@@ -135,21 +135,31 @@ def polygon_segments(polygons: list[ArrayLike], max_segment: float | None = None
     Returns:
         ``(S, 4)`` segments ``(x0, y0, x1, y1)``, m; zero-length edges dropped.
     """
-    out = []
+    starts, ends = [], []
     for poly in polygons:
         v = np.asarray(poly, dtype=float).reshape(-1, 2)
         if len(v) > 2 and np.array_equal(v[0], v[-1]):
             v = v[:-1]
         if len(v) < 2:
             continue
-        ends = v[1:2] if len(v) == 2 else np.roll(v, -1, axis=0)
-        starts = v[:1] if len(v) == 2 else v
-        for p0, p1 in zip(starts, ends, strict=True):
-            length = float(np.hypot(*(p1 - p0)))
-            if length <= 0.0:
-                continue
-            pieces = 1 if max_segment is None else max(1, math.ceil(length / max_segment))
-            t = np.linspace(0.0, 1.0, pieces + 1)[:, None]
-            pts = p0 + t * (p1 - p0)
-            out.append(np.hstack([pts[:-1], pts[1:]]))
-    return np.vstack(out) if out else np.zeros((0, 4))
+        ends.append(v[1:2] if len(v) == 2 else np.roll(v, -1, axis=0))
+        starts.append(v[:1] if len(v) == 2 else v)
+    if not starts:
+        return np.zeros((0, 4))
+    p0, p1 = np.concatenate(starts), np.concatenate(ends)
+    length = np.hypot(p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1])
+    keep = length > 0.0  # zero-length edges dropped
+    p0, p1, length = p0[keep], p1[keep], length[keep]
+    pieces = (np.ones(len(p0), np.int64) if max_segment is None else
+              np.maximum(1, np.ceil(length / max_segment)).astype(np.int64))
+    # piece q of an edge of k pieces runs from t = linspace(0, 1, k + 1)[q] to [q + 1]
+    edge = np.repeat(np.arange(len(p0)), pieces)
+    q = np.arange(len(edge)) - np.repeat(np.cumsum(pieces) - pieces, pieces)
+    k = pieces[edge]
+    t_lo, t_hi = np.empty(len(edge)), np.empty(len(edge))
+    for kk in np.unique(k).tolist():
+        t = np.linspace(0.0, 1.0, kk + 1)
+        rows = k == kk
+        t_lo[rows], t_hi[rows] = t[q[rows]], t[q[rows] + 1]
+    a, d = p0[edge], (p1 - p0)[edge]
+    return np.hstack([a + t_lo[:, None] * d, a + t_hi[:, None] * d])

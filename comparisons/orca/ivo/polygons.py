@@ -98,200 +98,87 @@ here ``d = (n_y, -n_x)`` so that the left normal of ``d`` is ``n``.
 
 from __future__ import annotations
 
-import math
+from dataclasses import dataclass
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from comparisons.orca.ivo.discs import (
-    TAU_CENTER,
-    IvoLine,
-    as_line,
-    disc_distances,
-    disc_pair_line,
-    eq9_horizon,
-    tau_rule,
+from comparisons.orca.ivo.discs import IvoLine, as_line, disc_distances, tau_rule
+from comparisons.orca.ivo.ellipse import Ellipse, polygon_segments
+from comparisons.orca.ivo.kernel import (
+    BISECT_ITERS,
+    GOLDEN_ITERS,
+    N_REFINE,
+    N_SAMPLES,
+    lines_kernel,
+    pair_line,
 )
-from comparisons.orca.ivo.ellipse import Ellipse, ellipse_axes, polygon_segments
 from dfcoa_opt.geometry import point_segment_distance
 
 FloatArray = NDArray[np.float64]
 
-#: Angular samples of the 1D searches over normals (then golden-section refinement).
-N_SAMPLES = 128
-#: Local optima of the samples that are refined.
-N_REFINE = 3
-#: Golden-section iterations (bracket of two samples shrinks by 0.618 each).
-GOLDEN_ITERS = 60
-#: Bisection iterations for the legs of the cone (pi * 2^-60 rad).
-BISECT_ITERS = 60
+__all__ = ["BISECT_ITERS", "GOLDEN_ITERS", "N_REFINE", "N_SAMPLES", "IvoObstacles", "ivo_line",
+           "ivo_lines"]
 
-_GOLD = 0.6180339887498949
-_TWO_PI = 2.0 * math.pi
+#: Coordinate of the padding items of :class:`IvoObstacles`, m: a world with fewer
+#: segments or discs than the largest is padded with points this far away, whose
+#: distance (~1.4e100 m) exceeds any avoidance range, so they never get a line.
+FAR = 1e100
 
 
-# --------------------------------------------------------------------------- numba core
+@dataclass(frozen=True)
+class IvoObstacles:
+    """The segments and static discs of one or more worlds (a batch of runs), prepared once.
 
-
-@numba.njit(cache=True, inline="always")
-def _phi(th, cx, cy, ex, ey, a, b, r, w, vx, vy):  # pragma: no cover - numba
-    """``w h_K(n) - n . v`` at ``n = (cos th, sin th)``; ``h_K`` is the support of eq 9's sum."""
-    nx = math.cos(th)
-    ny = math.sin(th)
-    p = nx * ex + ny * ey
-    q = ny * ex - nx * ey
-    h = nx * cx + ny * cy + math.sqrt(a * a * p * p + b * b * q * q) + r
-    return w * h - (nx * vx + ny * vy)
-
-
-@numba.njit(cache=True)
-def _golden(lo, hi, cx, cy, ex, ey, a, b, r, w, vx, vy):  # pragma: no cover - numba
-    """Golden-section minimum of ``_phi`` on ``[lo, hi]`` (end points included)."""
-    best_x, best_f = lo, _phi(lo, cx, cy, ex, ey, a, b, r, w, vx, vy)
-    f_hi = _phi(hi, cx, cy, ex, ey, a, b, r, w, vx, vy)
-    if f_hi < best_f:
-        best_x, best_f = hi, f_hi
-    x1 = hi - _GOLD * (hi - lo)
-    x2 = lo + _GOLD * (hi - lo)
-    f1 = _phi(x1, cx, cy, ex, ey, a, b, r, w, vx, vy)
-    f2 = _phi(x2, cx, cy, ex, ey, a, b, r, w, vx, vy)
-    for _ in range(GOLDEN_ITERS):
-        if f1 <= f2:
-            hi, x2, f2 = x2, x1, f1
-            x1 = hi - _GOLD * (hi - lo)
-            f1 = _phi(x1, cx, cy, ex, ey, a, b, r, w, vx, vy)
-        else:
-            lo, x1, f1 = x1, x2, f2
-            x2 = lo + _GOLD * (hi - lo)
-            f2 = _phi(x2, cx, cy, ex, ey, a, b, r, w, vx, vy)
-    if f1 < best_f:
-        best_x, best_f = x1, f1
-    if f2 < best_f:
-        best_x, best_f = x2, f2
-    return best_x, best_f
-
-
-@numba.njit(cache=True)
-def _argmin(lo, hi, periodic, cx, cy, ex, ey, a, b, r, w, vx, vy, buf):  # pragma: no cover
-    """Global minimum of ``_phi`` over ``[lo, hi]`` (the whole circle if ``periodic``).
-
-    ``N_SAMPLES`` samples, then golden-section refinement of the ``N_REFINE``
-    lowest sampled local minima (bracket: the two neighbouring samples).
+    Attributes:
+        segments: ``(W, S, 4)`` each world's segments ``(x0, y0, x1, y1)``, m, padded
+            past its own with zero-length segments at ``(FAR, FAR)``.
+        discs: ``(W, C, 3)`` each world's discs ``(cx, cy, R)``, m, padded past its
+            own with ``(FAR, FAR, 0)``.
+        flat_segments: ``(sum S_w, 4)`` the real segments of every world, in order, m.
+        flat_discs: ``(sum C_w, 3)`` the real discs of every world, in order, m.
+        segment_start: ``(W,)`` index of each world's first segment in ``flat_segments``.
+        disc_start: ``(W,)`` index of each world's first disc in ``flat_discs``.
     """
-    n = N_SAMPLES if periodic else N_SAMPLES + 1
-    step = (hi - lo) / N_SAMPLES
-    for i in range(n):
-        buf[i] = _phi(lo + i * step, cx, cy, ex, ey, a, b, r, w, vx, vy)
-    best_x, best_f = lo, buf[0]
-    for i in range(n):
-        if buf[i] < best_f:
-            best_x, best_f = lo + i * step, buf[i]
-    done = np.zeros(n, np.bool_)
-    for _ in range(N_REFINE):
-        pick, pick_f = -1, np.inf
-        for i in range(n):
-            if done[i]:
-                continue
-            if periodic:
-                left, right = buf[(i - 1) % n], buf[(i + 1) % n]
-            else:
-                left = buf[i - 1] if i > 0 else np.inf
-                right = buf[i + 1] if i < n - 1 else np.inf
-            if buf[i] <= left and buf[i] <= right and buf[i] < pick_f:
-                pick, pick_f = i, buf[i]
-        if pick < 0:
-            break
-        done[pick] = True
-        x_lo = lo + (pick - 1) * step
-        x_hi = lo + (pick + 1) * step
-        if not periodic:
-            x_lo = max(x_lo, lo)
-            x_hi = min(x_hi, hi)
-        x, f = _golden(x_lo, x_hi, cx, cy, ex, ey, a, b, r, w, vx, vy)
-        if f < best_f:
-            best_x, best_f = x, f
-    return best_x, best_f
 
+    segments: FloatArray
+    discs: FloatArray
+    flat_segments: FloatArray
+    flat_discs: FloatArray
+    segment_start: NDArray[np.int64]
+    disc_start: NDArray[np.int64]
 
-@numba.njit(cache=True)
-def _arc_end(th_in, th_out, cx, cy, ex, ey, a, b, r):  # pragma: no cover - numba
-    """Last normal angle with ``h_K <= 0`` between ``th_in`` (<= 0) and ``th_out`` (> 0)."""
-    for _ in range(BISECT_ITERS):
-        mid = 0.5 * (th_in + th_out)
-        if _phi(mid, cx, cy, ex, ey, a, b, r, 1.0, 0.0, 0.0) <= 0.0:
-            th_in = mid
-        else:
-            th_out = mid
-    return th_in
+    @classmethod
+    def from_worlds(cls, worlds: list[tuple[ArrayLike, ArrayLike]]) -> IvoObstacles:
+        """Pad and stack the worlds' ``(segments (S_w, 4), discs (C_w, 3))``, m."""
+        segs = [np.asarray(sg, dtype=float).reshape(-1, 4) for sg, _ in worlds]
+        discs = [np.asarray(dc, dtype=float).reshape(-1, 3) for _, dc in worlds]
+        n_seg = [len(x) for x in segs]
+        n_disc = [len(x) for x in discs]
+        seg_pad = np.full((len(worlds), max(n_seg, default=0), 4), FAR)
+        disc_pad = np.tile([FAR, FAR, 0.0], (len(worlds), max(n_disc, default=0), 1))
+        for w, (sg, dc) in enumerate(zip(segs, discs, strict=True)):
+            seg_pad[w, :len(sg)] = sg
+            disc_pad[w, :len(dc)] = dc
+        return cls(seg_pad, disc_pad, np.concatenate([np.zeros((0, 4)), *segs]),
+                   np.concatenate([np.zeros((0, 3)), *discs]),
+                   np.cumsum([0, *n_seg[:-1]], dtype=np.int64),
+                   np.cumsum([0, *n_disc[:-1]], dtype=np.int64))
 
+    @property
+    def n_worlds(self) -> int:
+        """Number of worlds ``W``."""
+        return len(self.segments)
 
-@numba.njit(cache=True)
-def _pair_line(cx, cy, ex, ey, a, b, r, vx, vy, tau_rule, tau_fixed, tau_min, tau_max, alpha,
-               push_speed, buf, out):  # pragma: no cover - numba
-    """One IVO line (eq 9-10), robot at the origin, ellipse centre ``(cx, cy)`` relative.
+    def rows(self, world: NDArray[np.intp] | None) -> tuple[FloatArray, FloatArray]:
+        """Segments ``(R, S, 4)`` and discs ``(R, C, 3)`` of each row's world, m.
 
-    ``out``: point (2), direction (2), tau, inside flag, u (2), normal (2).
-    """
-    th0, h_min = _argmin(0.0, _TWO_PI, True, cx, cy, ex, ey, a, b, r, 1.0, 0.0, 0.0, buf)
-    if h_min >= 0.0:  # p_A in O' (+) D(r_A): push out along the nearest normal
-        nx, ny = math.cos(th0), math.sin(th0)
-        offset = push_speed
-        tau = 0.0
-        inside = 1.0
-    else:
-        dist = -h_min + (r if tau_rule == TAU_CENTER else 0.0)  # eq 9's dist_{A|O'}
-        tau = eq9_horizon(tau_rule, tau_fixed, dist, vx, vy, tau_min, tau_max)
-        lo = _arc_end(th0, th0 - math.pi, cx, cy, ex, ey, a, b, r)  # the legs
-        hi = _arc_end(th0, th0 + math.pi, cx, cy, ex, ey, a, b, r)
-        th, _ = _argmin(lo, hi, False, cx, cy, ex, ey, a, b, r, 1.0 / tau, vx, vy, buf)
-        nx, ny = math.cos(th), math.sin(th)
-        h = _phi(th, cx, cy, ex, ey, a, b, r, 1.0, 0.0, 0.0)
-        offset = min(h, 0.0) / tau  # h_C(n) = h_K(n) / tau on the arc
-        inside = 0.0
-    gap = offset - (nx * vx + ny * vy)  # u = gap n (eq 10)
-    out[0] = vx + alpha * gap * nx
-    out[1] = vy + alpha * gap * ny
-    out[2] = ny
-    out[3] = -nx
-    out[4] = tau
-    out[5] = inside
-    out[6] = gap * nx
-    out[7] = gap * ny
-    out[8] = nx
-    out[9] = ny
-
-
-@numba.njit(cache=True, parallel=True)
-def _kernel(pos, vel, radius, clearance, seg, discs, order, count, stretch, tau_rule,
-            tau_fixed, tau_min, tau_max, alpha, push_speed, P, D):  # pragma: no cover - numba
-    """Lines of robot ``i`` against items ``order[i, :count[i]]``: segments, then discs."""
-    n_seg = seg.shape[0]
-    for i in numba.prange(pos.shape[0]):
-        buf = np.empty(N_SAMPLES + 1)
-        out = np.empty(10)
-        for k in range(count[i]):
-            s = order[i, k]
-            if s >= n_seg:  # a disc: closed form (ivo_disc)
-                c = s - n_seg
-                disc_pair_line(discs[c, 0] - pos[i, 0], discs[c, 1] - pos[i, 1],
-                               discs[c, 2] + clearance[i], radius[i], vel[i, 0], vel[i, 1],
-                               tau_rule, tau_fixed, tau_min, tau_max, alpha, push_speed, out)
-                P[i, k, 0], P[i, k, 1] = out[0], out[1]
-                D[i, k, 0], D[i, k, 1] = out[2], out[3]
-                continue
-            x0, y0, x1, y1 = seg[s, 0], seg[s, 1], seg[s, 2], seg[s, 3]
-            length = math.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2)
-            ex, ey = (x1 - x0) / length, (y1 - y0) / length
-            a, b = ellipse_axes(0.5 * length, clearance[i], stretch)
-            _pair_line(0.5 * (x0 + x1) - pos[i, 0], 0.5 * (y0 + y1) - pos[i, 1], ex, ey, a, b,
-                       radius[i], vel[i, 0], vel[i, 1], tau_rule, tau_fixed, tau_min, tau_max,
-                       alpha, push_speed, buf, out)
-            P[i, k, 0], P[i, k, 1] = out[0], out[1]
-            D[i, k, 0], D[i, k, 1] = out[2], out[3]
-
-
-# --------------------------------------------------------------------------- public API
+        One world (or ``world`` None) gives its tables as ``(1, S, 4)`` and ``(1, C, 3)``,
+        shared by every row.
+        """
+        if world is None or self.n_worlds == 1:
+            return self.segments[:1], self.discs[:1]
+        return self.segments[world], self.discs[world]
 
 
 def ivo_line(pos: ArrayLike, v_opt: ArrayLike, radius: float, ellipse: Ellipse,
@@ -319,19 +206,19 @@ def ivo_line(pos: ArrayLike, v_opt: ArrayLike, radius: float, ellipse: Ellipse,
     rule, fixed = tau_rule(tau)
     out = np.empty(10)
     c = ellipse.centre - p
-    _pair_line(c[0], c[1], ellipse.axis[0], ellipse.axis[1], ellipse.a, ellipse.b,
-               float(radius), v[0], v[1], rule, fixed, float(tau_min), float(tau_max),
-               float(alpha), float(push_speed), np.empty(N_SAMPLES + 1), out)
+    pair_line(c[0], c[1], ellipse.axis[0], ellipse.axis[1], ellipse.a, ellipse.b,
+              float(radius), v[0], v[1], rule, fixed, float(tau_min), float(tau_max),
+              float(alpha), float(push_speed), np.empty(N_SAMPLES + 1), out)
     return as_line(out)
 
 
 def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
-              polygons: list[ArrayLike] | FloatArray | None,
+              polygons: list[ArrayLike] | FloatArray | IvoObstacles | None,
               max_range: float, tau: float | str = "center", tau_min: float = 0.1,
               tau_max: float = 10.0, clearance: float | ArrayLike | None = None,
               stretch: float = 1.0, max_segment: float | None = None,
               max_lines: int | None = None, alpha: float = 1.0, push_speed: float = 0.0,
-              discs: ArrayLike | None = None
+              discs: ArrayLike | None = None, world: ArrayLike | None = None
               ) -> tuple[FloatArray, FloatArray, NDArray[np.int64]]:
     """IVO half-planes (eq 10) of ``N`` robots against polygons and discs, nearest first.
 
@@ -348,8 +235,9 @@ def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
         radius: ``(N,)`` or scalar robot radii ``r_A``, m.
         polygons: Obstacle vertex arrays ``(M, 2)``, m (see :func:`polygon_segments`),
             or the ``(S, 4)`` array that function returns (computed once by a
-            caller that steps many times; ``max_segment`` is then not used);
-            ``None``: no polygons.
+            caller that steps many times; ``max_segment`` is then not used),
+            or an :class:`IvoObstacles` of one or more worlds (then ``discs`` is
+            None: the table holds them); ``None``: no polygons.
         max_range: Obstacle avoidance range, m.
         tau: Horizon of eq 9: ``"center"``, ``"gap"`` or a fixed value, s (see
             :func:`ivo_line`).
@@ -363,6 +251,9 @@ def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
         push_speed: Outward speed required inside ``O' (+) D(r_A)``, m/s.
         discs: ``(C, 3)`` static discs ``(cx, cy, R)``, m, each treated exactly as the
             ellipse ``O' = D(c, R + m)`` (:mod:`comparisons.orca.ivo.discs`); ``None``: none.
+        world: ``(N,)`` each robot's world in an :class:`IvoObstacles` of several
+            worlds (a batch of runs): a robot sees its own world's obstacles only,
+            and gets the lines it would get alone in that world, bit for bit.
 
     Returns:
         ``(points (N, H, 2) m/s, directions (N, H, 2), count (N,))`` in the
@@ -370,8 +261,9 @@ def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
         (``H = max(count)``).
 
     Raises:
-        ValueError: If ``stretch < 1``, a clearance or disc radius is negative or a
-            fixed ``tau`` is not positive.
+        ValueError: If ``stretch < 1``, a clearance or disc radius is negative, a
+            fixed ``tau`` is not positive, or a table of several worlds comes
+            without ``world``.
     """
     # fresh writable C arrays: one numba signature whatever the callers pass
     p = np.array(np.asarray(pos, dtype=float).reshape(-1, 2))
@@ -379,28 +271,44 @@ def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
     v = np.array(np.asarray(vel_opt, dtype=float).reshape(n, 2))
     r = np.array(np.broadcast_to(np.asarray(radius, dtype=float), (n,)))
     m = np.array(np.broadcast_to(r if clearance is None else np.asarray(clearance, float), (n,)))
-    disc = np.array(np.asarray([] if discs is None else discs, dtype=float).reshape(-1, 3))
-    if stretch < 1.0 or np.any(m < 0.0) or np.any(disc[:, 2] < 0.0):
+    if isinstance(polygons, IvoObstacles):
+        if discs is not None:
+            raise ValueError("an IvoObstacles table holds its discs: give discs=None")
+        table = polygons
+    else:
+        prepared = (isinstance(polygons, np.ndarray) and polygons.ndim == 2
+                    and polygons.shape[1] == 4)
+        seg = polygons if prepared else polygon_segments([] if polygons is None else polygons,
+                                                         max_segment)
+        table = IvoObstacles.from_worlds([(seg, [] if discs is None else discs)])
+    if world is None and table.n_worlds > 1:
+        raise ValueError("an IvoObstacles table of several worlds needs each robot's world")
+    if stretch < 1.0 or np.any(m < 0.0) or np.any(table.discs[..., 2] < 0.0):
         raise ValueError("need stretch >= 1, clearance >= 0 and disc radii >= 0")
     rule, fixed = tau_rule(tau)
-    prepared = isinstance(polygons, np.ndarray) and polygons.ndim == 2 and polygons.shape[1] == 4
-    seg = np.ascontiguousarray(polygons if prepared else polygon_segments(
-        [] if polygons is None else polygons, max_segment), dtype=float)
-    if len(seg) + len(disc) == 0 or n == 0:
+    seg, disc = table.rows(None if world is None else np.asarray(world, dtype=np.intp))
+    n_seg, n_disc = seg.shape[1], disc.shape[1]
+    if n_seg + n_disc == 0 or n == 0:
         return np.zeros((n, 0, 2)), np.zeros((n, 0, 2)), np.zeros(n, np.int64)
-    dist = point_segment_distance(p[:, None, :], seg[None, :, 0:2], seg[None, :, 2:4])
-    if len(disc):
-        dist = np.hstack([dist.reshape(n, len(seg)), disc_distances(p, disc)])
+    dist = point_segment_distance(p[:, None, :], seg[..., 0:2], seg[..., 2:4])
+    if n_disc:
+        dist = np.hstack([dist.reshape(n, n_seg), disc_distances(p, disc)])
     dist[dist > max_range] = np.inf
     order = np.argsort(dist, axis=1, kind="stable")
     count = np.isfinite(dist).sum(axis=1)
     if max_lines is not None:
         count = np.minimum(count, max_lines)
     h = int(count.max())
-    order = np.ascontiguousarray(order[:, :h], dtype=np.int64)
+    order = order[:, :h]
+    if table.n_worlds > 1:  # items of the row's world -> items of the flat tables
+        w = np.asarray(world, dtype=np.intp)[:, None]
+        order = np.where(order < n_seg, order + table.segment_start[w],
+                         len(table.flat_segments) + table.disc_start[w] + (order - n_seg))
+    order = np.ascontiguousarray(order, dtype=np.int64)
     count = count.astype(np.int64)
     P = np.zeros((n, h, 2))
     D = np.zeros((n, h, 2))
-    _kernel(p, v, r, m, seg.reshape(-1, 4), disc, order, count, float(stretch), rule, fixed,
-            float(tau_min), float(tau_max), float(alpha), float(push_speed), P, D)
+    lines_kernel(p, v, r, m, np.ascontiguousarray(table.flat_segments),
+                 np.ascontiguousarray(table.flat_discs), order, count, float(stretch), rule, fixed,
+                 float(tau_min), float(tau_max), float(alpha), float(push_speed), P, D)
     return P, D, count
