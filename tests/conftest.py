@@ -40,10 +40,18 @@ def _one_numba_thread_per_xdist_worker():
 
 
 @pytest.fixture
-def all_numba_threads() -> int:
-    """Every thread numba has (``NUMBA_NUM_THREADS``); skips the test when that is one."""
+def all_numba_threads(monkeypatch) -> int:
+    """Every thread numba has (``NUMBA_NUM_THREADS``); skips the test when that is one.
+
+    The kernels then get every thread they are given, whatever their size and the
+    machine's load (``dfcoa_opt.threads`` would otherwise keep small calls on one).
+    """
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("numba has one thread here: no thread count to compare")
+    from dfcoa_opt import threads
+
+    monkeypatch.setattr(threads, "PARALLEL_MIN_ROWS", 0)
+    monkeypatch.setattr(threads, "free_cores", lambda: numba.config.NUMBA_NUM_THREADS)
     return numba.config.NUMBA_NUM_THREADS
 
 

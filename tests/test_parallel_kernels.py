@@ -65,3 +65,35 @@ def test_large_team_runs_do_not_depend_on_the_thread_count(all_numba_threads, co
         return run_scenario(sc, controller).digest()
 
     assert _on(all_numba_threads, run) == _on(1, run)
+
+
+def test_small_calls_and_a_busy_machine_get_one_thread(monkeypatch):
+    from dfcoa_opt import threads
+
+    monkeypatch.setattr(threads, "PARALLEL_MIN_ROWS", 1000)
+    monkeypatch.setattr(threads, "free_cores", lambda: 8)
+    assert threads.threads_for(999) == 1
+    assert threads.threads_for(1000) == numba.get_num_threads()
+    monkeypatch.setattr(threads, "free_cores", lambda: 1)  # every other core busy
+    assert threads.threads_for(10**6) == 1
+    seen = []
+    monkeypatch.setattr(lp, "_solve_batch", lambda *a: seen.append(numba.get_num_threads()))
+    before = numba.get_num_threads()
+    lp.solve_lines(np.zeros((5, 1, 2)), np.ones((5, 1, 2)), np.zeros(5, int), np.zeros(5, int),
+                   np.zeros((5, 2)), np.ones(5))
+    assert seen == [1] and numba.get_num_threads() == before
+
+
+def test_the_load_average_leaves_the_free_cores(monkeypatch):
+    import os
+
+    from dfcoa_opt import threads
+
+    monkeypatch.setattr(threads, "_load", (-np.inf, 0))
+    monkeypatch.setattr(os, "cpu_count", lambda: 4)
+    monkeypatch.setattr(os, "getloadavg", lambda: (2.2, 0.0, 0.0))
+    assert threads.free_cores() == 2  # 4 cores, 2.2 busy, this process's own thread among them
+    monkeypatch.setattr(os, "getloadavg", lambda: (9.0, 0.0, 0.0))
+    assert threads.free_cores() == 2  # read at most once a second
+    monkeypatch.setattr(threads, "_load", (-np.inf, 0))
+    assert threads.free_cores() == 1

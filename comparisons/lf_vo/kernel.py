@@ -53,6 +53,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from comparisons.lf_vo.choose import _roots, vo_choose
+from dfcoa_opt.threads import kernel_threads
 
 __all__ = ["CHUNK", "SLACK", "vo_choose", "vo_clearance"]
 
@@ -328,6 +329,7 @@ def vo_clearance(pose: ArrayLike, v: ArrayLike, w: ArrayLike, step: float, steps
         np.ascontiguousarray(static_of, dtype=np.int64).reshape(len(p))
     t_mid = np.minimum((np.arange(steps, dtype=float) + 0.5) * step, turn_time)
     clear = np.empty(vv.shape)
-    _batch(p, vv, ww, float(step), t_mid, int(w_stride), static, ptr, world, pos, vel, rch, msk,
-           lim, float(exact_below), clear, min(len(p), numba.get_num_threads()))
+    with kernel_threads(len(p)):
+        _batch(p, vv, ww, float(step), t_mid, int(w_stride), static, ptr, world, pos, vel, rch,
+               msk, lim, float(exact_below), clear, min(len(p), numba.get_num_threads()))
     return clear

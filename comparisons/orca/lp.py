@@ -31,6 +31,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from dfcoa_opt.threads import kernel_threads
+
 #: Parallel-line test of the 1D step (RVO2's ``RVO_EPSILON``), dimensionless.
 EPSILON = 1e-5
 
@@ -202,10 +204,11 @@ def solve_lines(points: FloatArray, directions: FloatArray, count: NDArray[np.in
     vel = np.empty((n, 2))
     status = np.empty(n, np.int8)
     slack = np.empty(n)
-    _solve_batch(P, D, np.ascontiguousarray(count, dtype=np.int64),
-                 np.ascontiguousarray(n_hard, dtype=np.int64),
-                 np.ascontiguousarray(pref, dtype=np.float64),
-                 np.ascontiguousarray(np.broadcast_to(v_max, (n,)), dtype=np.float64),
-                 vel, status, slack)
+    with kernel_threads(n):
+        _solve_batch(P, D, np.ascontiguousarray(count, dtype=np.int64),
+                     np.ascontiguousarray(n_hard, dtype=np.int64),
+                     np.ascontiguousarray(pref, dtype=np.float64),
+                     np.ascontiguousarray(np.broadcast_to(v_max, (n,)), dtype=np.float64),
+                     vel, status, slack)
     return vel, status, slack
 

@@ -21,6 +21,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from dfcoa_opt.threads import kernel_threads
+
 
 @numba.njit(cache=True, inline="always")
 def _bucket(cx, cy, mask):  # pragma: no cover - numba
@@ -106,6 +108,7 @@ def knn_within(pos: NDArray[np.float64], k: int, max_dist: float
     lo = pos.min(axis=0)
     mask = (1 << max(4, math.ceil(math.log2(2 * n)))) - 1  # >= 2 N buckets, a power of 2
     order, start, cxs, cys = _bin(pos, float(max_dist), lo[0], lo[1], mask)
-    _query(pos, k, float(max_dist), mask, order, start, cxs, cys, idx, np.empty((n, k)),
-           count)
+    with kernel_threads(n):
+        _query(pos, k, float(max_dist), mask, order, start, cxs, cys, idx, np.empty((n, k)),
+               count)
     return idx, count

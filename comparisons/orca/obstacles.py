@@ -42,6 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from comparisons.orca.lp import EPSILON, det
 from comparisons.orca.obstacle_set import ObstacleSet, merge_obstacles, prepare_obstacles
+from dfcoa_opt.threads import kernel_threads
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -363,15 +364,16 @@ def obstacle_lines(pos: ArrayLike, vel: ArrayLike, radius: ArrayLike | float,
     scale = 1.0 + reach + np.maximum(np.abs(pos).max(axis=1), np.abs(obs.bbox).max())
     far_sq = np.ascontiguousarray((reach + 1e-4 * scale) ** 2)
     vel = np.ascontiguousarray(vel, dtype=np.float64).reshape(-1, 2)
-    chunk = max(1, -(-n // (4 * numba.get_num_threads())))
     need = np.empty(n, np.int64)
     width = min(obs.n_edges, FIRST_WIDTH)
     while True:
         P = np.zeros((n, width, 2))
         D = np.zeros((n, width, 2))
-        _lines_kernel(pos, vel, radius, range_sq, far_sq, world, 1.0 / time_horizon_obst,
-                      obs.points, obs.next, obs.prev, obs.directions, obs.convex, obs.tree,
-                      obs.boxes, obs.roots, obs.depth, obs.bboxes, chunk, P, D, count, need)
+        with kernel_threads(n):
+            chunk = max(1, -(-n // (4 * numba.get_num_threads())))
+            _lines_kernel(pos, vel, radius, range_sq, far_sq, world, 1.0 / time_horizon_obst,
+                          obs.points, obs.next, obs.prev, obs.directions, obs.convex, obs.tree,
+                          obs.boxes, obs.roots, obs.depth, obs.bboxes, chunk, P, D, count, need)
         if need.max() <= width:
             break
         width = int(need.max())

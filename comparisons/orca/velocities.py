@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from comparisons.orca.lines import agent_lines
 from comparisons.orca.lp import solve_one
+from dfcoa_opt.threads import kernel_threads
 
 FloatArray = NDArray[np.float64]
 
@@ -79,13 +80,14 @@ def orca_velocities(pos: FloatArray, vel: FloatArray, radius: FloatArray, nbr_po
     status = np.empty(n, np.int8)
     slack = np.empty(n)
     f64 = np.float64
-    _kernel(np.ascontiguousarray(pos, f64), np.ascontiguousarray(vel, f64),
-            np.ascontiguousarray(np.broadcast_to(radius, (n,)), f64),
-            np.ascontiguousarray(nbr_pos, f64), np.ascontiguousarray(nbr_vel, f64),
-            np.ascontiguousarray(np.broadcast_to(nbr_r, (n, k)), f64),
-            np.ascontiguousarray(n_nbr, np.int64), np.ascontiguousarray(pref, f64),
-            np.ascontiguousarray(np.broadcast_to(v_max, (n,)), f64), 1.0 / time_horizon,
-            1.0 / dt, np.ascontiguousarray(hard_points, f64),
-            np.ascontiguousarray(hard_directions, f64), np.ascontiguousarray(n_hard, np.int64),
-            P, D, QP, QD, out, status, slack)
+    with kernel_threads(n):
+        _kernel(np.ascontiguousarray(pos, f64), np.ascontiguousarray(vel, f64),
+                np.ascontiguousarray(np.broadcast_to(radius, (n,)), f64),
+                np.ascontiguousarray(nbr_pos, f64), np.ascontiguousarray(nbr_vel, f64),
+                np.ascontiguousarray(np.broadcast_to(nbr_r, (n, k)), f64),
+                np.ascontiguousarray(n_nbr, np.int64), np.ascontiguousarray(pref, f64),
+                np.ascontiguousarray(np.broadcast_to(v_max, (n,)), f64), 1.0 / time_horizon,
+                1.0 / dt, np.ascontiguousarray(hard_points, f64),
+                np.ascontiguousarray(hard_directions, f64),
+                np.ascontiguousarray(n_hard, np.int64), P, D, QP, QD, out, status, slack)
     return out, status, slack

@@ -114,6 +114,7 @@ from comparisons.orca.ivo.kernel import (
     pair_line,
 )
 from dfcoa_opt.geometry import point_segment_distance
+from dfcoa_opt.threads import kernel_threads
 
 FloatArray = NDArray[np.float64]
 
@@ -308,7 +309,8 @@ def ivo_lines(pos: ArrayLike, vel_opt: ArrayLike, radius: ArrayLike,
     count = count.astype(np.int64)
     P = np.zeros((n, h, 2))
     D = np.zeros((n, h, 2))
-    lines_kernel(p, v, r, m, np.ascontiguousarray(table.flat_segments),
-                 np.ascontiguousarray(table.flat_discs), order, count, float(stretch), rule, fixed,
-                 float(tau_min), float(tau_max), float(alpha), float(push_speed), P, D)
+    with kernel_threads(n):
+        lines_kernel(p, v, r, m, np.ascontiguousarray(table.flat_segments),
+                     np.ascontiguousarray(table.flat_discs), order, count, float(stretch), rule,
+                     fixed, float(tau_min), float(tau_max), float(alpha), float(push_speed), P, D)
     return P, D, count
