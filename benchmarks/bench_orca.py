@@ -11,8 +11,8 @@ on PyPI). The preferred velocities are set outside the timed region for both.
 The main rows run ours on one thread too (``numba.set_num_threads(1)``), so
 thread for thread; the "all cores" rows give ours every numba thread that
 :mod:`dfcoa_opt.threads` lets a call of that size use on the machine's load
-(one below 1000 agents or on a busy machine), and say so. The per-step pairs are split into :data:`~benchmarks.timing.REPS` blocks
-for the ratio's spread.
+(one below 1000 agents or on a busy machine), and say so. The per-step pairs
+are split into :data:`~benchmarks.timing.REPS` blocks for the ratio's spread.
 """
 
 from __future__ import annotations
