@@ -103,3 +103,25 @@ def test_infeasible_lines_give_the_least_violation_point():
     # with the first line hard it is kept exactly and the other absorbs all
     vel, status, slack = solve_lines(P, D, [2], [1], np.array([[0.2, 0.4]]), np.array([2.0]))
     assert vel[0, 0] == pytest.approx(0.5, abs=1e-12) and slack[0] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("n", [2, 37, 300])
+def test_the_one_call_step_is_the_step_of_its_parts(n):
+    """The compiled crowd step equals knn_within + orca_velocities + the move, bit for bit."""
+    from comparisons.orca.velocities import orca_velocities
+
+    rng = np.random.default_rng(n)
+    a = OrcaCrowd(rng.uniform(0.0, 3.0 * np.sqrt(n) * 1.5, (n, 2)), max_neighbors=6)
+    a.velocities = rng.normal(0.0, 1.0, (n, 2))
+    for _ in range(5):
+        pref = rng.normal(0.0, 1.5, (n, 2))
+        pos, vel = a.positions.copy(), a.velocities.copy()
+        idx, count = knn_within(pos, a.max_neighbors, a.neighbor_dist)
+        want, status, _ = orca_velocities(
+            pos, vel, np.full(n, a.radius), pos[idx], vel[idx], np.full(idx.shape, a.radius),
+            count, pref, np.full(n, a.max_speed), a.time_horizon, a.dt)
+        a.step(pref)
+        np.testing.assert_array_equal(a.velocities, want)
+        np.testing.assert_array_equal(a.positions, pos + want * a.dt)
+        np.testing.assert_array_equal(a.status, status)
+    assert (a.status == LEAST_VIOLATION).any() or n == 2

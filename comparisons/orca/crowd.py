@@ -19,12 +19,16 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from comparisons.orca.neighbours import knn_within
+from comparisons.orca.lines import agent_lines
+from comparisons.orca.lp import solve_one
+from comparisons.orca.neighbours import bin_points, buckets, knn_one, knn_within
 from comparisons.orca.obstacles import ObstacleSet, obstacle_lines, prepare_obstacles
 from comparisons.orca.velocities import orca_velocities
+from dfcoa_opt.threads import kernel_threads
 
 FloatArray = NDArray[np.float64]
 
@@ -74,8 +78,25 @@ class OrcaCrowd:
         return len(self.positions)
 
     def step(self, pref: ArrayLike) -> None:
-        """Advance one step with preferred velocities ``pref`` ``(N, 2)`` m/s."""
+        """Advance one step with preferred velocities ``pref`` ``(N, 2)`` m/s.
+
+        Without obstacles the whole step (neighbour search, ORCA lines, exact
+        solve, the move) is one compiled call (:func:`_step_kernel`), with the
+        numbers of the functions it is made of.
+        """
         pos, vel = self.positions, self.velocities
+        if not (isinstance(self.obstacles, ObstacleSet) and self.obstacles.n_edges) \
+                and self.n >= 2:
+            pref = np.ascontiguousarray(pref, dtype=np.float64)
+            new_pos, new, self.status = np.empty_like(pos), np.empty_like(pos), \
+                np.empty(self.n, np.int8)
+            with kernel_threads(self.n):
+                _step_kernel(pos, vel, pref, self.max_neighbors, float(self.neighbor_dist),
+                             buckets(self.n), float(self.radius), float(self.max_speed),
+                             1.0 / self.time_horizon, 1.0 / self.dt, float(self.dt),
+                             min(self.n, numba.get_num_threads()), new_pos, new, self.status)
+            self.velocities, self.positions = new, new_pos
+            return
         idx, count = knn_within(pos, self.max_neighbors, self.neighbor_dist)
         hard: tuple = (None, None, None)
         if isinstance(self.obstacles, ObstacleSet) and self.obstacles.n_edges:
@@ -89,6 +110,42 @@ class OrcaCrowd:
             np.full(self.n, self.max_speed), self.time_horizon, self.dt, *hard)
         self.velocities = new
         self.positions = pos + new * self.dt
+
+
+@numba.njit(cache=True, parallel=True)
+def _step_kernel(pos, vel, pref, k, neighbor_dist, mask, radius, max_speed, inv_tau, inv_dt, dt,
+                 chunks, new_pos, new_vel, status):  # pragma: no cover - numba
+    """One crowd step without obstacles: :func:`knn_within`, the ORCA lines, the solve, the move.
+
+    Each robot's row is computed as :func:`~comparisons.orca.neighbours.knn_within`
+    and :func:`~comparisons.orca.velocities.orca_velocities` compute it, from the
+    same compiled functions (:func:`~comparisons.orca.neighbours.knn_one`,
+    :func:`~comparisons.orca.lines.agent_lines`, :func:`~comparisons.orca.lp.solve_one`).
+    """
+    n = pos.shape[0]
+    x0, y0 = pos[0, 0], pos[0, 1]
+    for i in range(1, n):
+        x0 = min(x0, pos[i, 0])
+        y0 = min(y0, pos[i, 1])
+    order, start, cxs, cys = bin_points(pos, neighbor_dist, x0, y0, mask)
+    idx = np.zeros((n, k), np.int64)
+    dist_sq = np.empty((n, k))
+    nbr_r = np.full(k, radius)
+    for c in numba.prange(chunks):  # one scratch set per chunk: it stays in cache
+        nbr_pos, nbr_vel = np.empty((k, 2)), np.empty((k, 2))
+        P, D, QP, QD = np.empty((k, 2)), np.empty((k, 2)), np.empty((k, 2)), np.empty((k, 2))
+        for r in range(c * n // chunks, (c + 1) * n // chunks):
+            m = knn_one(r, pos, k, neighbor_dist, mask, order, start, cxs, cys, idx, dist_sq)
+            for j in range(m):
+                nbr_pos[j, 0], nbr_pos[j, 1] = pos[idx[r, j], 0], pos[idx[r, j], 1]
+                nbr_vel[j, 0], nbr_vel[j, 1] = vel[idx[r, j], 0], vel[idx[r, j], 1]
+            lines = agent_lines(pos[r, 0], pos[r, 1], vel[r, 0], vel[r, 1], radius, nbr_pos,
+                                nbr_vel, nbr_r, m, inv_tau, inv_dt, P, D, 0)
+            st, _worst = solve_one(P, D, lines, 0, pref[r, 0], pref[r, 1], max_speed,
+                                   new_vel[r], QP, QD)
+            status[r] = st
+            new_pos[r, 0] = pos[r, 0] + new_vel[r, 0] * dt
+            new_pos[r, 1] = pos[r, 1] + new_vel[r, 1] * dt
 
 
 def circle_positions(n: int, radius: float) -> FloatArray:

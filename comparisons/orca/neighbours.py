@@ -31,7 +31,7 @@ def _bucket(cx, cy, mask):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def _bin(pos, cell, x0, y0, mask):  # pragma: no cover - numba
+def bin_points(pos, cell, x0, y0, mask):  # pragma: no cover - numba
     """Cells of the points and a counting sort of the points by bucket (stable)."""
     n = pos.shape[0]
     cxs = np.empty(n, np.int64)
@@ -53,38 +53,50 @@ def _bin(pos, cell, x0, y0, mask):  # pragma: no cover - numba
     return order, start, cxs, cys
 
 
+@numba.njit(cache=True)
+def knn_one(i, pos, k, max_dist, mask, order, start, cxs, cys, idx, dist_sq
+            ):  # pragma: no cover - numba
+    """Point ``i``'s row of :func:`knn_within` (``idx[i]``, ``dist_sq[i]``); returns its count."""
+    px, py = pos[i, 0], pos[i, 1]
+    cx, cy = cxs[i], cys[i]
+    range_sq = max_dist * max_dist
+    m = 0
+    for gy in range(cy - 1, cy + 2):
+        for gx in range(cx - 1, cx + 2):
+            b = _bucket(gx, gy, mask)
+            for s in range(start[b], start[b + 1]):
+                j = order[s]
+                if j == i or cxs[j] != gx or cys[j] != gy:
+                    continue
+                dx = px - pos[j, 0]
+                dy = py - pos[j, 1]
+                d = dx * dx + dy * dy
+                if d >= range_sq:
+                    continue
+                if m < k:
+                    m += 1
+                slot = m - 1
+                while slot > 0 and d < dist_sq[i, slot - 1]:
+                    idx[i, slot] = idx[i, slot - 1]
+                    dist_sq[i, slot] = dist_sq[i, slot - 1]
+                    slot -= 1
+                idx[i, slot] = j
+                dist_sq[i, slot] = d
+                if m == k:
+                    range_sq = dist_sq[i, k - 1]
+    return m
+
+
 @numba.njit(cache=True, parallel=True)
 def _query(pos, k, max_dist, mask, order, start, cxs, cys, idx, dist_sq, count
            ):  # pragma: no cover - numba
     for i in numba.prange(pos.shape[0]):
-        px, py = pos[i, 0], pos[i, 1]
-        cx, cy = cxs[i], cys[i]
-        range_sq = max_dist * max_dist
-        m = 0
-        for gy in range(cy - 1, cy + 2):
-            for gx in range(cx - 1, cx + 2):
-                b = _bucket(gx, gy, mask)
-                for s in range(start[b], start[b + 1]):
-                    j = order[s]
-                    if j == i or cxs[j] != gx or cys[j] != gy:
-                        continue
-                    dx = px - pos[j, 0]
-                    dy = py - pos[j, 1]
-                    d = dx * dx + dy * dy
-                    if d >= range_sq:
-                        continue
-                    if m < k:
-                        m += 1
-                    slot = m - 1
-                    while slot > 0 and d < dist_sq[i, slot - 1]:
-                        idx[i, slot] = idx[i, slot - 1]
-                        dist_sq[i, slot] = dist_sq[i, slot - 1]
-                        slot -= 1
-                    idx[i, slot] = j
-                    dist_sq[i, slot] = d
-                    if m == k:
-                        range_sq = dist_sq[i, k - 1]
-        count[i] = m
+        count[i] = knn_one(i, pos, k, max_dist, mask, order, start, cxs, cys, idx, dist_sq)
+
+
+def buckets(n: int) -> int:
+    """The bucket mask of :func:`knn_within` for ``n`` points: >= 2 N buckets, a power of 2."""
+    return (1 << max(4, math.ceil(math.log2(2 * n)))) - 1
 
 
 def knn_within(pos: NDArray[np.float64], k: int, max_dist: float
@@ -106,8 +118,8 @@ def knn_within(pos: NDArray[np.float64], k: int, max_dist: float
     if n < 2:
         return idx, count
     lo = pos.min(axis=0)
-    mask = (1 << max(4, math.ceil(math.log2(2 * n)))) - 1  # >= 2 N buckets, a power of 2
-    order, start, cxs, cys = _bin(pos, float(max_dist), lo[0], lo[1], mask)
+    mask = buckets(n)
+    order, start, cxs, cys = bin_points(pos, float(max_dist), lo[0], lo[1], mask)
     with kernel_threads(n):
         _query(pos, k, float(max_dist), mask, order, start, cxs, cys, idx, np.empty((n, k)),
                count)
