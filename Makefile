@@ -28,8 +28,8 @@ $(VENV)/.bench-installed: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[dev,dask,bench]'
 	touch $(VENV)/.bench-installed
 
-# BENCH_FIGURES=0 leaves out row (f), a whole `dfcoa figures` in a fresh clone (12 min on
-# 2026-11-25, 35 min the day before; the target is 5), and the numba compilation row.
+# BENCH_FIGURES=0 leaves out row (f), a whole `dfcoa figures` in a fresh clone (about 6 min
+# on 2 cores), and the numba compilation row.
 BENCH_FIGURES ?= 1
 
 bench: $(VENV)/.bench-installed
