@@ -37,7 +37,6 @@ from dfcoa_opt import __version__, dispatch
 from dfcoa_opt.control.adapters import convert
 from dfcoa_opt.control.base import Controller, MovingObstacles, Neighbours, Observation
 from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.geometry import wrap_angle
 from dfcoa_opt.localization import TruthEstimator, make_estimator
 from dfcoa_opt.outcome import StallMonitor
 from dfcoa_opt.robots.models import RobotState, make_model
@@ -114,26 +113,6 @@ class BatchSimulator:
                               for kind in ("velocity", "force")}
 
     # ------------------------------------------------------------------ set-up helpers
-    def _start_pose(self, scenario: Scenario, rng: np.random.Generator) -> FloatArray:
-        """Initial poses plus ``team.start_noise`` / ``heading_noise`` (no draw when both are 0).
-
-        A perturbed position that lands on an occupied cell falls back to the
-        nominal one, so the run starts as collision-free as the file.
-        """
-        team = scenario.spec.team
-        pose = scenario.initial_pose.copy()
-        if team.start_noise == 0.0 and team.heading_noise == 0.0:
-            return pose
-        noise = rng.normal(size=(self.n, 3)) * (team.start_noise, team.start_noise,
-                                                team.heading_noise)
-        grid = scenario.world.grid
-        moved = pose[:, :2] + noise[:, :2]
-        free = grid.in_bounds(*grid.world_to_cell(moved)) & ~grid.is_occupied_at(moved)
-        noise[~free, :2] = 0.0
-        pose += noise
-        pose[:, 2] = wrap_angle(pose[:, 2])
-        return pose
-
     def _disturbance(self, kind: str, t: float, runs: int) -> FloatArray | None:
         """``(runs*N, 2)`` disturbances of ``kind`` active at ``t`` (None when there are none)."""
         table = self._disturbances[kind]
@@ -189,7 +168,7 @@ class BatchSimulator:
         steps = int(math.floor(spec.t_max / dt + 1e-9)) + 1
         rngs = [np.random.default_rng(s) for s in self.seeds]
         tracks = [leader_track(sc, dt, steps) for sc in self.group_scenarios]
-        start = [self._start_pose(sc, rng) for sc, rng in zip(self.scenarios, rngs, strict=True)]
+        start = [sc.start_pose(rng) for sc, rng in zip(self.scenarios, rngs, strict=True)]
         estimators = [make_estimator(spec.localization.mode, sc) for sc in self.scenarios]
         for est_e, rng in zip(estimators, rngs, strict=True):
             est_e.reset(rng)

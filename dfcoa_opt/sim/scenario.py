@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.geometry import point_segment_distance, points_in_polygon
+from dfcoa_opt.geometry import point_segment_distance, points_in_polygon, wrap_angle
 from dfcoa_opt.sim.schema import ScenarioSpec
 from dfcoa_opt.world.dynamic import DynamicObstacles
 from dfcoa_opt.world.grid import OccupancyGrid
@@ -150,6 +150,28 @@ class Scenario:
     leader_path: NDArray[np.float64]
     data: Mapping[str, Any] | None = field(default=None, repr=False)
     base_dir: Path = field(default=Path("."), repr=False)
+
+    def start_pose(self, rng: np.random.Generator) -> NDArray[np.float64]:
+        """``(N, 3)`` a run's initial poses: :attr:`initial_pose` plus ``team.start_noise``.
+
+        Positions get ``N(0, start_noise)`` and headings ``N(0, heading_noise)``
+        from ``rng`` (no draw when both are 0). A perturbed position that lands
+        on an occupied cell falls back to the nominal one, so the run starts as
+        collision-free as the file.
+        """
+        team = self.spec.team
+        pose = self.initial_pose.copy()
+        if team.start_noise == 0.0 and team.heading_noise == 0.0:
+            return pose
+        noise = rng.normal(size=(self.n, 3)) * (team.start_noise, team.start_noise,
+                                                team.heading_noise)
+        grid = self.world.grid
+        moved = pose[:, :2] + noise[:, :2]
+        free = grid.in_bounds(*grid.world_to_cell(moved)) & ~grid.is_occupied_at(moved)
+        noise[~free, :2] = 0.0
+        pose += noise
+        pose[:, 2] = wrap_angle(pose[:, 2])
+        return pose
 
     @property
     def seed_dependent(self) -> bool:
