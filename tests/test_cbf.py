@@ -273,7 +273,7 @@ def test_solver_errors_are_counted_and_stop_the_robot(monkeypatch):
         raise RuntimeError("injected")
 
     monkeypatch.setattr(qpsolvers, "solve_qp", broken)
-    sc = swap_scenario(n=6, controllers={"cbf": {"infeasible": "stop"}})
+    sc = swap_scenario(n=6, controllers={"cbf": {"infeasible": "stop", "solver": "osqp"}})
     log = run_scenario(sc, "goto_slot+cbf")
     failed = log.filter_status == STATUS_SOLVER_FAIL
     assert failed.any() and len(log.t) == 251
@@ -306,3 +306,18 @@ def test_pinning_osqps_algebra_keeps_its_default_and_an_explicit_choice():
         assert interface.OSQP_ALGEBRA_BACKEND == "builtin-explicit"
     finally:
         interface.OSQP_ALGEBRA_BACKEND = saved
+
+
+@pytest.mark.parametrize(("mode", "used"), [("distributed", "exact"), ("centralized", "osqp")])
+def test_the_default_solver_is_the_exact_one_where_it_applies(mode, used, monkeypatch):
+    """'auto': the exact 2D solver in distributed mode, osqp for the centralized program."""
+    calls = []
+    real = qpsolvers.solve_qp
+    monkeypatch.setattr(qpsolvers, "solve_qp", lambda *a, **k: calls.append(1) or real(*a, **k))
+    sc = swap_scenario(n=6, controllers={"cbf": {"mode": mode}})
+    log = run_scenario(sc, "goto_slot+cbf")
+    assert (log.filter_status != 0).any()  # the filter did act
+    assert bool(calls) == (used == "osqp")
+    if mode == "distributed":
+        exact = swap_scenario(n=6, controllers={"cbf": {"mode": mode, "solver": "exact"}})
+        assert run_scenario(exact, "goto_slot+cbf").digest() == log.digest()

@@ -103,8 +103,11 @@ class CbfFilter(BatchedController):
                                    ge=0)
         infeasible: Literal["least_violation", "stop", "pass_through"] = param(
             "least_violation", doc="Policy when the barrier rows have no common point.")
-        solver: str = param("osqp", doc="qpsolvers backend; 'exact' (distributed mode "
-                                        "only): ORCA's exact 2D solver, same optimum.")
+        solver: str = param("auto", doc="'auto': 'exact' in distributed mode, 'osqp' in "
+                                        "centralized mode; 'exact' (distributed mode only): "
+                                        "ORCA's exact 2D solver, the QP's optimum, 47-146x "
+                                        "faster than osqp on large_20/large_100; or a "
+                                        "qpsolvers backend (e.g. 'osqp').")
 
     def __init__(self, params: Params, owner: str | None = None) -> None:
         """Build the filter.
@@ -119,6 +122,7 @@ class CbfFilter(BatchedController):
         self._offset = 0.0
         self._v_box = 1.0
         self._gamma = params.gamma
+        self._solver = params.solver  # 'auto' resolved at reset
         self._statics = WorldShapes([StaticObstacles.from_shapes(())])
         self._static_of = np.zeros(1, dtype=np.intp)
 
@@ -130,12 +134,15 @@ class CbfFilter(BatchedController):
         """
         scenario = scenarios[0]
         key = f"controllers.{self._owner}.solver"
-        if self.p.solver == "exact":
+        self._solver = self.p.solver
+        if self._solver == "auto":
+            self._solver = "exact" if self.p.mode == "distributed" else "osqp"
+        if self._solver == "exact":
             if self.p.mode != "distributed":
                 raise ScenarioError(scenario.source, key, "'exact' solves 2D programs: it "
                                                           "needs mode = 'distributed'")
         else:
-            check_solver(self.p.solver, scenario.source, key)
+            check_solver(self._solver, scenario.source, key)
         rob = scenario.spec.robots
         self._radius = rob.radius
         self._offset = rob.nid_distance if rob.model == "unicycle" else 0.0
@@ -209,8 +216,8 @@ class CbfFilter(BatchedController):
         if self.p.mode == "centralized":
             vel, status, slack = self._centralized(obs, nominal, pairs, obstacles)
         else:
-            solve = solve_distributed_exact if self.p.solver == "exact" else solve_distributed
-            vel, status, slack = solve(nominal, pairs, obstacles, self._v_box, self.p.solver,
+            solve = solve_distributed_exact if self._solver == "exact" else solve_distributed
+            vel, status, slack = solve(nominal, pairs, obstacles, self._v_box, self._solver,
                                        self.p.infeasible)
         per_robot = (time.perf_counter() - t0) / max(obs.n, 1)
         return FilterResult(vel, status, slack, np.full(obs.n, per_robot))
@@ -218,7 +225,7 @@ class CbfFilter(BatchedController):
     def _centralized(self, obs: Observation, nominal: np.ndarray, pairs: BarrierRows,
                      obstacles: BarrierRows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """One centralized program per run (a batch's runs are solved apart)."""
-        args = (self._v_box, self.p.solver, self.p.infeasible)
+        args = (self._v_box, self._solver, self.p.infeasible)
         if obs.env is None:
             return solve_centralized(nominal, pairs, obstacles, *args)
         out = []

@@ -16,11 +16,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.optimize import linprog
 
 from comparisons.constraints.solvers import Solver
 from comparisons.orca import lp
@@ -65,12 +64,19 @@ class BarrierRows:
     index: NDArray[np.intp] | None
 
 
+def _csr(*args: Any, **kwargs: Any) -> Any:
+    """``scipy.sparse.csr_matrix`` (imported here: ~0.08 s, needed only by the QP paths)."""
+    import scipy.sparse as sp
+
+    return sp.csr_matrix(*args, **kwargs)
+
+
 @lru_cache(maxsize=8)
 def _solver(name: str) -> Solver:
     return Solver(name)
 
 
-def _solve(name: str, G: sp.csr_matrix, h: FloatArray, u_hat: FloatArray, v_box: float
+def _solve(name: str, G: Any, h: FloatArray, u_hat: FloatArray, v_box: float
            ) -> tuple[FloatArray | None, float]:
     """``argmin ||u - u_hat||^2`` s.t. ``G u <= h`` (barrier rows) and the box.
 
@@ -95,6 +101,8 @@ def _solve(name: str, G: sp.csr_matrix, h: FloatArray, u_hat: FloatArray, v_box:
                feasible=known)
     if x is not None or known:
         return x, 0.0 if x is not None else np.inf
+    from scipy.optimize import linprog  # here: scipy.optimize takes ~0.15 s to import
+
     lp_res = linprog(np.r_[np.zeros(dim), 1.0], A_ub=np.hstack([G, -np.ones((len(h), 1))]),
                      b_ub=h, bounds=[(-v_box, v_box)] * dim + [(0.0, None)], method="highs")
     if not lp_res.success:
@@ -159,7 +167,7 @@ def solve_distributed(nominal: FloatArray, pairs: BarrierRows, obstacles: Barrie
         bound = np.concatenate([0.5 * pairs.bound[i, pm], obstacles.bound[i, om]])
         if _meets(normal, bound, vel[i], v_box):
             continue
-        u, t = _guarded(solver, sp.csr_matrix(-normal.reshape(-1, 2)), -bound, nominal[i],
+        u, t = _guarded(solver, _csr(-normal.reshape(-1, 2)), -bound, nominal[i],
                         v_box)
         vel[i], status[i], slack[i] = _apply(u, t, nominal[i], policy)
     return vel, status, slack
@@ -231,7 +239,7 @@ def solve_centralized(nominal: FloatArray, pairs: BarrierRows, obstacles: Barrie
         cols += [2 * i, 2 * i + 1]
         vals += list(-obstacles.normal[i, k])
         rhs.append(-obstacles.bound[i, k])
-    G = sp.csr_matrix((vals, (rows, cols)), shape=(len(rhs), 2 * n))
+    G = _csr((vals, (rows, cols)), shape=(len(rhs), 2 * n))
     h = np.asarray(rhs, dtype=float)
     u_hat = np.asarray(nominal, dtype=float).reshape(-1)
     if np.all(G @ u_hat <= h + ROW_TOL) and np.all(np.abs(u_hat) <= v_box + ROW_TOL):

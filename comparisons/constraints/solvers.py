@@ -15,8 +15,6 @@ import warnings
 from typing import Any
 
 import numpy as np
-import qpsolvers
-import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from dfcoa_opt.errors import ScenarioError, did_you_mean
@@ -40,6 +38,8 @@ def check_solver(solver: str, source: str, key: str) -> None:
     Raises:
         ScenarioError: ``solver`` is not in ``qpsolvers.available_solvers``.
     """
+    import qpsolvers  # here: qpsolvers and the solvers it loads take ~0.2 s to import
+
     known = list(qpsolvers.available_solvers)
     if solver not in known:
         raise ScenarioError(source, key, f"qpsolvers backend {solver!r} is not installed "
@@ -134,6 +134,8 @@ class Solver:
     """
 
     def __init__(self, solver: str) -> None:
+        import qpsolvers  # here: qpsolvers and the solvers it loads take ~0.2 s to import
+
         self.name = solver
         self.ladder = [solver_options(solver), *retry_options(solver)]
         self.sparse = solver in qpsolvers.sparse_solvers
@@ -158,7 +160,11 @@ class Solver:
         Returns:
             ``(n,)`` the solution, or ``None``.
         """
+        import qpsolvers
+
         if self.sparse:
+            import scipy.sparse as sp
+
             P, G = sp.csc_matrix(P), sp.csc_matrix(G)
         for options in self.ladder if feasible else self.ladder[:1]:
             with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):

@@ -62,16 +62,9 @@ from comparisons.nmpc.geometry import (
     robot_halfplanes,
     slot_reference,
 )
+from comparisons.nmpc.model import rollout
+from comparisons.nmpc.outputs import BatchOutput, SolveOutput
 from comparisons.nmpc.plans import PlanBuffers
-from comparisons.nmpc.problem import (
-    BatchOutput,
-    NmpcProblem,
-    ProblemSpec,
-    SolveOutput,
-    map_lbg,
-    map_multipliers,
-    rollout,
-)
 from dfcoa_opt.control.base import BatchedController, FilterResult, Observation
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.errors import ScenarioError
@@ -79,6 +72,7 @@ from dfcoa_opt.params import param
 from dfcoa_opt.sim.log import STATUS_OK, STATUS_SOLVER_FAIL
 
 if TYPE_CHECKING:
+    from comparisons.nmpc.problem import NmpcProblem, ProblemSpec
     from dfcoa_opt.sim.scenario import Scenario
 
 FloatArray = NDArray[np.float64]
@@ -87,7 +81,13 @@ __all__ = ["SQP_MAX_ITER", "IPOPT_MAX_ITER", "Nmpc", "goto_command", "solve_time
 
 @lru_cache(maxsize=8)
 def _problem(spec: ProblemSpec) -> NmpcProblem:
-    """The casadi problem of a spec (casadi Functions are stateless: shared by runs)."""
+    """The casadi problem of a spec (casadi Functions are stateless: shared by runs).
+
+    casadi is imported here, at the first reset, not with the controller: listing
+    or building controllers stays light.
+    """
+    from comparisons.nmpc.problem import NmpcProblem
+
     return NmpcProblem(spec)
 
 
@@ -199,6 +199,8 @@ class Nmpc(PlanBuffers, BatchedController):
                 seeded clutter field gives each run its own world).
             rngs: One per run (unused: ``nmpc`` draws nothing).
         """
+        from comparisons.nmpc.problem import ProblemSpec  # casadi: at the first reset
+
         scenario = scenarios[0]
         p, rob = self.p, scenario.spec.robots
         self.tau = p.step if p.step is not None else scenario.spec.dt
@@ -288,6 +290,8 @@ class Nmpc(PlanBuffers, BatchedController):
         except RuntimeError:
             return None
         if out.success:
+            from comparisons.nmpc.problem import map_multipliers
+
             self.last_rescued[i] = True
             out.lam_x, out.lam_g = map_multipliers(out.lam_x, out.lam_g, self.rescuer.spec,
                                                    self.spec)
@@ -295,6 +299,8 @@ class Nmpc(PlanBuffers, BatchedController):
 
     def _inputs(self, i: int, step: dict, problem: NmpcProblem) -> tuple[FloatArray, ...]:
         """Row ``i``'s ``(w0, p, lbg, lam_x0, lam_g0)`` of this step in ``problem``'s layout."""
+        from comparisons.nmpc.problem import map_lbg, map_multipliers
+
         u0 = step["u0"][i:i + 1]
         x0 = rollout(step["obs"].pose[i:i + 1], u0, self.tau)
         lbg = map_lbg(step["lbg"][i], self.spec, problem.spec, problem.lbg_template)

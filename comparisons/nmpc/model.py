@@ -8,10 +8,14 @@ without wrapping the heading).
 
 from __future__ import annotations
 
-import casadi as ca
+from typing import TYPE_CHECKING
+
 import numba
 import numpy as np
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    import casadi as ca
 
 FloatArray = NDArray[np.float64]
 #: Below this half turn angle (rad) the arc's sinc uses its Taylor series.
@@ -20,6 +24,8 @@ _SMALL = 1e-4
 
 def _sinc(a: ca.SX) -> ca.SX:
     """``sin(a) / a``, smooth at 0."""
+    import casadi as ca  # here: the rollout below runs without casadi
+
     small = ca.fabs(a) < _SMALL
     return ca.if_else(small, 1.0 - a * a / 6.0, ca.sin(a) / ca.if_else(small, 1.0, a))
 
@@ -30,6 +36,8 @@ def arc_step(x: ca.SX, u: ca.SX, tau: float) -> ca.SX:
     The chord ``v tau sinc(omega tau / 2)`` points along ``theta + omega tau / 2``
     (:func:`dfcoa_opt.robots.models.integrate_unicycle`, without wrapping the heading).
     """
+    import casadi as ca  # here: the rollout below runs without casadi
+
     half = 0.5 * u[1] * tau
     chord = u[0] * tau * _sinc(half)
     return ca.vertcat(x[0] + chord * ca.cos(x[2] + half), x[1] + chord * ca.sin(x[2] + half),

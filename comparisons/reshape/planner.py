@@ -32,7 +32,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import linear_sum_assignment
 
 from comparisons.orca.lp import FEASIBLE, solve_lines
 from comparisons.reshape.region import Region
@@ -154,6 +153,8 @@ def assign(pos: FloatArray, slots: FloatArray, template: str, previous_template:
     if template == "scenario":
         return np.arange(n)
     cost = np.sum((pos[:, None, :] - slots[None]) ** 2, axis=2)
+    from scipy.optimize import linear_sum_assignment  # here: ~0.15 s to import
+
     _, best = linear_sum_assignment(cost)
     if template == previous_template and \
             cost[np.arange(n), previous].sum() <= (1.0 + hysteresis) * \

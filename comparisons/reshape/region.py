@@ -31,7 +31,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import minimize
 
 from dfcoa_opt.geometry import closest_point_on_segment
 from dfcoa_opt.world.shapes import Circle, Shape
@@ -215,6 +214,8 @@ def inscribed_ellipse(A: FloatArray, b: FloatArray, C0: FloatArray, d0: FloatArr
         if np.all(slack(start) >= 0.0):
             break
         start[:3] *= 0.7
+    from scipy.optimize import minimize  # here: scipy.optimize takes ~0.15 s to import
+
     res = minimize(cost, start, jac=cost_grad, method="SLSQP",
                    constraints=[{"type": "ineq", "fun": slack, "jac": slack_jac}],
                    options={"maxiter": 60, "ftol": 1e-6})

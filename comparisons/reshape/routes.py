@@ -34,7 +34,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from dfcoa_opt.planning.astar import search
 from dfcoa_opt.world.grid import OccupancyGrid
@@ -218,6 +217,8 @@ class ConfigurationSpace:
         if not blocked[row, col]:
             return row, col
         if key not in self._nearest:
+            from scipy import ndimage  # here: ~0.2 s to import, only for replanning
+
             self._nearest[key] = ndimage.distance_transform_edt(
                 blocked, return_distances=False, return_indices=True)
         near = self._nearest[key]
@@ -227,6 +228,8 @@ class ConfigurationSpace:
                     blocked: NDArray[np.bool_]) -> tuple[NDArray[np.int32], int]:
         """The 4-connected components of the cells not ``blocked``, and how many (cached)."""
         if key not in self._labels:
+            from scipy import ndimage
+
             labels, count = ndimage.label(~blocked)  # the default structure: 4-connected
             self._labels[key] = labels, int(count)
         return self._labels[key]

@@ -18,7 +18,6 @@ from pathlib import Path
 import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import ndimage
 
 from dfcoa_opt.world.shapes import Shape
 
@@ -209,6 +208,8 @@ class OccupancyGrid:
         if not self.occupied.any():
             d = np.full(self.shape, np.inf)
         else:
+            from scipy import ndimage  # here: ~0.2 s to import, needed once a grid is built
+
             d = ndimage.distance_transform_edt(~self.occupied) * self.cell_size
         d.setflags(write=False)
         return d
