@@ -8,7 +8,8 @@ scenario picks one with ``[localization] mode``. An estimator with options
 has a ``Params`` dataclass; the scenario's ``[localization.options]`` table is
 validated against it at load time (:func:`estimator_options`) and the
 estimator reads it the same way. An estimator that never reads the scan says
-so with ``uses_scan = False`` (the simulator then may skip the LiDAR).
+so with ``uses_scan = False`` (the simulator then may skip the LiDAR). A batch of
+runs makes one estimator per run, or one for the batch (:func:`make_estimators`).
 Modules that register estimators are listed in :data:`ESTIMATOR_MODULES`.
 """
 
@@ -63,6 +64,25 @@ def make_estimator(name: str, scenario: Any) -> Any:
     """Instantiate the estimator ``name`` for ``scenario``."""
     _load()
     return _ESTIMATORS[name](scenario)
+
+
+def make_estimators(name: str, scenarios: list[Any]) -> list[Any]:
+    """The estimators of a batch of runs (one scenario per run, in run order).
+
+    A batched estimator (``batched = True``) is one object for the whole batch,
+    made by its ``for_batch(scenarios)``, reset by ``reset_batch(rngs)`` and
+    asked ``estimate_batch(true_pose, twist, scan, dt, env)`` with every row of
+    every active run (``env``: the run of each row), each run's numbers and
+    draws those of the run alone. Any other estimator is one object per run.
+
+    Returns:
+        ``[the batched estimator]``, or one estimator per scenario.
+    """
+    _load()
+    cls = _ESTIMATORS[name]
+    if getattr(cls, "batched", False):
+        return [cls.for_batch(scenarios)]
+    return [cls(sc) for sc in scenarios]
 
 
 @register_estimator("truth")

@@ -37,7 +37,7 @@ from dfcoa_opt import __version__, dispatch
 from dfcoa_opt.control.adapters import convert
 from dfcoa_opt.control.base import Controller, MovingObstacles, Neighbours, Observation
 from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.localization import TruthEstimator, make_estimator
+from dfcoa_opt.localization import TruthEstimator, make_estimators
 from dfcoa_opt.outcome import StallMonitor
 from dfcoa_opt.robots.models import RobotState, make_model
 from dfcoa_opt.sim.leader import LeaderTrack, leader_track
@@ -169,9 +169,12 @@ class BatchSimulator:
         rngs = [np.random.default_rng(s) for s in self.seeds]
         tracks = [leader_track(sc, dt, steps) for sc in self.group_scenarios]
         start = [sc.start_pose(rng) for sc, rng in zip(self.scenarios, rngs, strict=True)]
-        estimators = [make_estimator(spec.localization.mode, sc) for sc in self.scenarios]
-        for est_e, rng in zip(estimators, rngs, strict=True):
-            est_e.reset(rng)
+        estimators = make_estimators(spec.localization.mode, self.scenarios)
+        if is_batched(estimators[0]):
+            estimators[0].reset_batch(rngs)
+        else:
+            for est_e, rng in zip(estimators, rngs, strict=True):
+                est_e.reset(rng)
         ctrls = self.controllers
         if self.batched:
             ctrls[0].reset_batch(self.scenarios, rngs)
@@ -232,6 +235,12 @@ class BatchSimulator:
                         rngs[e])
             if truth:
                 est = state.pose
+            elif is_batched(estimators[0]):
+                every = scan_all if scan_all is not None or not scanning else LaserScan(
+                    scans[0].angle_min, scans[0].angle_increment, scans[0].range_min,
+                    scans[0].range_max, np.concatenate([s.ranges for s in scans]))
+                est = estimators[0].estimate_batch(state.pose, state.twist, every, dt,
+                                                   np.repeat(active, n))
             else:
                 est = np.concatenate([estimators[e].estimate(
                     state.pose[j * n:(j + 1) * n], state.twist[j * n:(j + 1) * n], scans[j], dt)
