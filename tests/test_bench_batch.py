@@ -86,3 +86,19 @@ def test_serial_sweeps_of_any_batch_size_give_the_same_rows(n, monkeypatch, tmp_
             for s in range(4)]
     rows = {o.row["key"]: o.row for o in run_all(runs, ExecutorConfig("serial"))}
     assert all(same(rows[r.key], execute(r).row) for r in runs)
+
+
+def test_a_dask_worker_sends_each_row_when_its_run_ends(monkeypatch):
+    """The same batch on a local Dask cluster: rows arrive as runs end, equal to serial ones."""
+    from distributed import Client, LocalCluster
+
+    runs = [RunSpec(CLUTTER, "clutter", "lf_vo", s, STOPS) for s in (2, 1)]  # 274, 996 steps
+    monkeypatch.setattr(executors, "batches", lambda todo, jobs=1: [list(todo)])  # one batch
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        client.submit(sum, [1]).result()  # the worker is up
+        t0 = time.perf_counter()
+        got = [(time.perf_counter() - t0, o.row) for o in executors._dask_stream(client, runs)]
+    assert [row["seed"] for _, row in got] == [2, 1]
+    assert got[1][0] - got[0][0] > 0.3 * got[1][1]["provenance"]["wall_time"]
+    assert all(same(row, execute(r).row) for (_, row), r in zip(got, runs, strict=True))

@@ -11,8 +11,8 @@ order; the store does not care about order):
 - ``process``: a local process pool (``concurrent.futures``), the default; each
   worker sends a run's row back as soon as the run ends;
 - ``dask``: a Dask distributed cluster, given by its scheduler address or
-  started locally (``LocalCluster``) -- needs the ``dask`` extra; a batch's
-  rows come back when the batch ends.
+  started locally (``LocalCluster``) -- needs the ``dask`` extra; each run's
+  row comes back when the run ends too (through a Dask ``Queue``).
 
 Workers only compute; the caller's process writes every file, so no two
 processes ever write the same file and a remote cluster needs no shared disk
@@ -33,7 +33,7 @@ from queue import SimpleQueue
 from typing import Any
 
 from dfcoa_opt.bench.lifecycle import deferred, forkserver_context, init_worker, terminate
-from dfcoa_opt.bench.runner import Outcome, execute_batch, execute_batch_list
+from dfcoa_opt.bench.runner import Outcome, execute_batch
 from dfcoa_opt.bench.sweep import RunSpec
 from dfcoa_opt.control.registry import BUILTIN_MODULES
 from dfcoa_opt.errors import DfcoaError
@@ -236,7 +236,6 @@ WORKER_PRELOAD = ("dfcoa_opt.bench.runner", "dfcoa_opt.sim.simulator", "dfcoa_op
 def _dask(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome]:
     try:
         from distributed import Client, LocalCluster
-        from distributed import as_completed as dask_completed
     except ImportError:
         raise DfcoaError("the dask executor needs the 'dask' extra: "
                          "pip install 'dfcoa-opt[dask]'") from None
@@ -251,13 +250,52 @@ def _dask(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome]:
             raise DfcoaError(f"--scheduler: cannot reach Dask scheduler "
                              f"'{config.scheduler}': {exc}") from None
         with client:
-            workers = sum(client.nthreads().values()) or 1
-            done = dask_completed([client.submit(execute_batch_list, b, key=f"batch-{b[0].key}",
-                                                 pure=False) for b in batches(runs, workers)])
-            for fut in done:
-                outcomes = fut.result()
-                fut.release()  # the cluster may forget the finished logs
-                yield from outcomes
+            yield from _dask_stream(client, runs)
     finally:
         if cluster is not None:
             cluster.close()
+
+
+def _dask_stream(client: Any, runs: Sequence[RunSpec]) -> Iterator[Outcome]:
+    """Each run's outcome as it ends, from batches on a Dask cluster.
+
+    A batch's task scatters each outcome on its worker as its run ends and puts
+    the future in a Dask ``Queue``; this process takes them in order of arrival.
+    A batch that Dask runs again (its worker died) sends its runs again: a run
+    already received is skipped. A task that raised raises here.
+    """
+    import uuid
+
+    from distributed import Queue
+
+    queue = Queue(f"dfcoa-{uuid.uuid4().hex}", client=client)
+    workers = sum(client.nthreads().values()) or 1
+    tasks = [client.submit(_execute_to_queue, b, queue.name, key=f"batch-{b[0].key}",
+                           pure=False) for b in batches(runs, workers)]
+    seen: set[str] = set()
+    while len(seen) < len(runs):
+        try:
+            item = queue.get(timeout=1.0)
+        except TimeoutError:
+            for task in tasks:
+                if task.status == "error":
+                    task.result()  # raises the task's exception here
+            continue
+        outcome = item.result()
+        item.release()  # the cluster may forget the finished log
+        if outcome.row["key"] not in seen:
+            seen.add(outcome.row["key"])
+            yield outcome
+    for task in tasks:
+        task.release()
+
+
+def _execute_to_queue(runs: Sequence[RunSpec], queue: str) -> int:
+    """On a Dask worker: execute one batch, putting each outcome (scattered) in ``queue``."""
+    from distributed import Queue, get_client
+
+    client, out, n = get_client(), Queue(queue), 0
+    for outcome in execute_batch(runs):
+        out.put(client.scatter(outcome, direct=True))
+        n += 1
+    return n

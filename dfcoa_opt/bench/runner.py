@@ -171,8 +171,3 @@ def execute_batch(runs: Sequence[RunSpec]) -> Iterator[Outcome]:
         for e, run in enumerate(runs):
             if e not in done:
                 yield execute(run)
-
-
-def execute_batch_list(runs: Sequence[RunSpec]) -> list[Outcome]:
-    """:func:`execute_batch` as a list (for executors that return a batch's rows at once)."""
-    return list(execute_batch(runs))
