@@ -186,13 +186,13 @@ class Lidar:
         Args:
             poses: ``(T*n, 3)`` robot poses, team after team.
             n: Robots per team.
-            extra_xy: ``(M, 2)`` discs every team sees, m.
+            extra_xy: ``(M, 2)`` discs every team sees, or ``(T, M, 2)`` each team's, m.
             extra_r: ``(M,)`` their radii, m.
             robot_r: Robot radius, m.
             rngs: One generator per team (used when ``spec.noise_std > 0``).
         """
         p = np.ascontiguousarray(poses, dtype=np.float64)
-        teams, m = len(p) // n, len(extra_xy)
+        teams, m = len(p) // n, np.shape(extra_xy)[-2]
         per = n + m
         xy = np.empty((teams, per, 2))
         xy[:, :n] = p[:, :2].reshape(teams, n, 2)

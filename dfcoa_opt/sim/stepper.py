@@ -1,0 +1,339 @@
+"""One step of a batch, split where the controller acts: :meth:`Stepper.sense`, then :meth:`apply`.
+
+A batch has ``S`` slots; a slot holds one run at a time, with its own seed,
+generator, world, estimator, stall monitor, clock (its step index ``k``) and log
+rows. :class:`~dfcoa_opt.sim.batch.BatchSimulator` fills the slots with its runs
+and calls its controller between the two halves; the environments of
+:mod:`dfcoa_opt.envs` put a policy's actions there, and start a new run in a
+slot whose run ended (:meth:`Stepper.restart`). Rows are the robots of the
+active slots, slot after slot in increasing order.
+
+Every per-run value keeps the single run's order of operations (elementwise
+arithmetic on all rows, reductions per run along the robot axis, each run's
+draws from its own generator in its own order), so a run's log is the log of
+the run simulated alone, bit for bit, wherever its clock stands against the
+others'.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dfcoa_opt.control.adapters import convert
+from dfcoa_opt.control.base import MovingObstacles, Neighbours, Observation
+from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.localization import TruthEstimator, make_estimators
+from dfcoa_opt.outcome import StallMonitor
+from dfcoa_opt.robots.models import CommandKind, RobotState
+from dfcoa_opt.sim.leader import leader_track
+from dfcoa_opt.sim.log import BatchLog
+from dfcoa_opt.sim.neighbours import batch_proximity, gather, new_contacts
+from dfcoa_opt.world.lidar import LaserScan
+
+if TYPE_CHECKING:
+    from dfcoa_opt.sim.batch import BatchSimulator
+
+FloatArray = NDArray[np.float64]
+
+
+def is_batched(obj: Any) -> bool:
+    """Whether ``obj`` serves every run of a batch in one call (``batched = True``)."""
+    return bool(getattr(obj, "batched", False))
+
+
+@dataclass(frozen=True)
+class Ended:
+    """A run that ended at the last :meth:`Stepper.apply`.
+
+    Attributes:
+        slot: Its slot.
+        steps: Instants it logged.
+        reached: Whether it reached the goal (with the formation settled).
+        t_goal: When, s (NaN when not reached).
+    """
+
+    slot: int
+    steps: int
+    reached: bool
+    t_goal: float
+
+
+class Stepper:
+    """The state of a batch's runs, stepped in two halves (module docstring).
+
+    Args:
+        sim: The batch: scenario(s), seeds, robot model, LiDARs.
+        scan_wanted: Whether the controller reads the scan (the LiDAR then
+            runs; so it does when the estimator reads it).
+    """
+
+    def __init__(self, sim: BatchSimulator, scan_wanted: bool) -> None:
+        self.sim = sim
+        spec, n = sim.spec, sim.n
+        self.spec, self.n, self.dt = spec, n, spec.dt
+        self.steps = int(math.floor(spec.t_max / self.dt + 1e-9)) + 1
+        slots = len(sim.seeds)
+        self.rngs = [np.random.default_rng(s) for s in sim.seeds]
+        self.tracks = [leader_track(sc, self.dt, self.steps) for sc in sim.group_scenarios]
+        start = [sc.start_pose(rng) for sc, rng in zip(sim.scenarios, self.rngs, strict=True)]
+        self.estimators = make_estimators(spec.localization.mode, sim.scenarios)
+        if is_batched(self.estimators[0]):
+            self.estimators[0].reset_batch(self.rngs)
+        else:
+            for est, rng in zip(self.estimators, self.rngs, strict=True):
+                est.reset(rng)
+        self.truth = all(type(x) is TruthEstimator for x in self.estimators)
+        self.scanning = sim.lidars[0] is not None and (
+            scan_wanted or getattr(self.estimators[0], "uses_scan", True))
+        self.state = RobotState.at_rest(np.concatenate(start))
+        dyn = sim.scenarios[0].world.dynamic
+        self.dyn, self.m = dyn, len(dyn)
+        self.dyn_pos_all, self.dyn_vel_all = dyn.state(np.arange(self.steps) * self.dt)
+        self.goal = np.asarray(spec.leader.goal, dtype=float)
+        self.robot_ids = np.arange(n)
+        self.robot_ids.flags.writeable = False  # the same rows every step
+        self.monitors = [self._monitor(sc) for sc in sim.scenarios]
+        self.active = np.arange(slots)  # the slots with a run, in row order
+        self.k = np.zeros(slots, dtype=np.int64)  # each slot's step index
+        self.prev_static = np.zeros(slots * n, dtype=bool)
+        self.prev_dyn = np.zeros((slots * n, self.m), dtype=bool)
+        self.prev_keys = np.zeros(0, dtype=np.int64)
+        self.prev_ptr = np.zeros(slots + 1, dtype=np.int64)
+        self.leaders = np.zeros((slots, 5))  # each slot's broadcast leader state
+        self.log: BatchLog | None = None
+        self.wall = np.zeros(slots)
+        self._tick = time.perf_counter()  # run wall times count from start_clock()
+        self._s: dict[str, Any] = {}  # what sense() saw, for apply()
+
+    def start_clock(self) -> None:
+        """Start counting the runs' wall times (after the controllers' resets)."""
+        self._tick = time.perf_counter()
+
+    def _monitor(self, scenario: Any) -> StallMonitor | None:
+        spec = self.spec
+        return (StallMonitor(scenario.leader_path, self.steps, self.dt,
+                             spec.leader.settle_tolerance, spec.metrics)
+                if spec.stop_on_deadlock else None)
+
+    # ------------------------------------------------------------------ sense
+    def sense(self) -> None:
+        """Sense every active run from the same snapshot (LiDAR, estimate, neighbours, ...)."""
+        sim, n, st = self.sim, self.n, self.state
+        active, kk = self.active, self.k[self.active]
+        a, m = len(active), self.m
+        pos = st.pose[:, :2]
+        dyn_pos, dyn_vel = self.dyn_pos_all[kk], self.dyn_vel_all[kk]  # (A, M, 2)
+        # centre distances robot -> moving obstacle, (rows, M); sensing and contacts
+        dyn_dist = (np.linalg.norm(pos.reshape(a, n, 1, 2) - dyn_pos[:, None], axis=3)
+                    .reshape(a * n, m) if m else np.zeros((a * n, 0)))
+        lead, slots, at_goal = self._leader(active, kk)
+        scans: list[LaserScan | None] = [None] * a
+        scan_all: LaserScan | None = None  # every row's scan, when made in one call
+        one_group = len(self.tracks) == 1
+        if self.scanning and one_group and a > 1:
+            scan_all = sim.lidars[0].scan_teams(st.pose, n, dyn_pos, self.dyn.radii,
+                                                sim.radius, [self.rngs[e] for e in active])
+            scans = [scan_all.take(slice(j * n, (j + 1) * n)) for j in range(a)]
+        elif self.scanning:
+            owners = np.concatenate((np.arange(n), np.full(m, -1)))
+            disc_r = np.concatenate((np.full(n, sim.radius), self.dyn.radii))
+            for j, e in enumerate(active):
+                rows = slice(j * n, (j + 1) * n)
+                scans[j] = sim.lidars[sim.group[e]].scan(
+                    st.pose[rows], np.vstack((pos[rows], dyn_pos[j])), disc_r, owners,
+                    self.rngs[e])
+        if self.scanning and scan_all is None:
+            scan_all = scans[0] if a == 1 else LaserScan(
+                scans[0].angle_min, scans[0].angle_increment, scans[0].range_min,
+                scans[0].range_max, np.concatenate([s.ranges for s in scans]))
+        est = self._estimate(scans, scan_all, active)
+        sensors = self.spec.sensors
+        prox = batch_proximity(pos, n, sensors.comm_radius, sensors.max_neighbors,
+                               2.0 * sim.radius)
+        base = (np.arange(a * n) // n * n)[:, None]
+        row_index = np.where(prox.index >= 0, prox.index + base, -1)
+        nb_pos, nb_vel, nb_heading = gather(row_index, est, st.velocity)
+        mask = dyn_dist - self.dyn.radii[None, :] <= sim.obstacle_range
+        w = mask[..., None]
+        rows_pos, rows_vel = np.repeat(dyn_pos, n, axis=0), np.repeat(dyn_vel, n, axis=0)
+        moving = MovingObstacles(np.where(w, rows_pos, 0.0), np.where(w, rows_vel, 0.0),
+                                 np.where(mask, self.dyn.radii[None, :], 0.0), mask)
+        self.leaders[active] = lead
+        self._s = dict(pos=pos, dyn_pos=dyn_pos, dyn_dist=dyn_dist, lead=lead, slots=slots,
+                       at_goal=at_goal, scans=scans, scan_all=scan_all, est=est, prox=prox,
+                       row_index=row_index, nb=(nb_pos, nb_vel, nb_heading), moving=moving)
+
+    def _estimate(self, scans: list[LaserScan | None], scan_all: LaserScan | None,
+                  active: NDArray[np.intp]) -> FloatArray:
+        st, n, est0 = self.state, self.n, self.estimators[0]
+        if self.truth:
+            return st.pose
+        if is_batched(est0):
+            return est0.estimate_batch(st.pose, st.twist, scan_all, self.dt,
+                                       np.repeat(active, n))
+        return np.concatenate([self.estimators[e].estimate(
+            st.pose[j * n:(j + 1) * n], st.twist[j * n:(j + 1) * n], scans[j], self.dt)
+            for j, e in enumerate(active)])
+
+    def _leader(self, active: NDArray[np.intp],
+                kk: NDArray[np.int64]) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        """Each active run's leader state ``(A, 5)``, slots ``(A, N, 2)``, at-goal flag ``(A,)``."""
+        if len(self.tracks) == 1:
+            tr = self.tracks[0]
+            return tr.state[kk], tr.slots[kk], tr.at_goal[kk]
+        runs = [self.tracks[self.sim.group[e]] for e in active]
+        return (np.stack([tr.state[k] for tr, k in zip(runs, kk, strict=True)]),
+                np.stack([tr.slots[k] for tr, k in zip(runs, kk, strict=True)]),
+                np.array([bool(tr.at_goal[k]) for tr, k in zip(runs, kk, strict=True)]))
+
+    @property
+    def t(self) -> FloatArray:
+        """``(A,)`` each active run's time, s."""
+        return self.k[self.active] * self.dt
+
+    # ------------------------------------------------------------ observations
+    def batch_observation(self) -> Observation:
+        """The observation of every active run (``env`` = slot; ``leader`` one state a slot).
+
+        Raises:
+            DfcoaError: The runs' clocks differ (a batched controller sees one ``t``).
+        """
+        s, n, a = self._s, self.n, len(self.active)
+        kk = self.k[self.active]
+        if np.any(kk != kk[0]):
+            raise DfcoaError("a batched controller needs the runs of a batch on one clock")
+        nb_pos, nb_vel, nb_heading = s["nb"]
+        return Observation(
+            float(kk[0] * self.dt), self.dt, np.tile(self.robot_ids, a), s["est"],
+            self.state.velocity, self.state.twist, s["scan_all"],
+            Neighbours(s["row_index"], nb_pos, nb_vel, s["prox"].distance, nb_heading),
+            s["moving"], self.leaders, self.goal, np.tile(self.sim.scenarios[0].offsets, (a, 1)),
+            np.ascontiguousarray(s["slots"]).reshape(a * n, 2), env=np.repeat(self.active, n))
+
+    def run_observation(self, j: int) -> Observation:
+        """The observation of the ``j``-th active run alone (today's single-run Observation)."""
+        s, n, e = self._s, self.n, int(self.active[j])
+        rows = slice(j * n, (j + 1) * n)
+        nb_pos, nb_vel, nb_heading = s["nb"]
+        prox, st = s["prox"], self.state
+        nb = Neighbours(prox.index[rows], nb_pos[rows], nb_vel[rows], prox.distance[rows],
+                        nb_heading[rows])
+        return Observation(float(self.k[e] * self.dt), self.dt, self.robot_ids, s["est"][rows],
+                           st.velocity[rows], st.twist[rows], s["scans"][j], nb,
+                           s["moving"].take(rows), s["lead"][j], self.goal,
+                           self.sim.scenarios[e].offsets, s["slots"][j])
+
+    # ------------------------------------------------------------------ apply
+    def apply(self, cmd: FloatArray, kind: CommandKind, extras: Any = None) -> list[Ended]:
+        """Apply the active rows' commands: move, count contacts, log, stop, drop ended runs.
+
+        Args:
+            cmd: ``(R, k)`` commands of ``kind``, one row per active robot.
+            kind: Their kind (converted to the robot model's).
+            extras: Called as ``extras(log, active, k)`` to log a controller's own
+                arrays (steering, filter results) before a run's log is final.
+
+        Returns:
+            The runs that ended (their log rows stay until their slot restarts).
+        """
+        sim, n, spec, s, st = self.sim, self.n, self.spec, self._s, self.state
+        active = self.active
+        kk, a, m, dt = self.k[active], len(active), self.m, self.dt
+        if self.log is None:
+            self.log = BatchLog.allocate(len(self.k), self.steps, n, m, cmd.shape[1])
+            self.log.t[:] = np.arange(self.steps) * dt
+        log, pos, prox = self.log, s["pos"], s["prox"]
+        native = convert(cmd, kind, sim.model.native, s["est"], st.velocity, dt,
+                         spec.robots.nid_distance)
+        new_state = sim.model.step(st, native, dt, self._disturbance("velocity", kk),
+                                   self._disturbance("force", kk))
+        # -- contacts at t_k
+        clearance = self._clearance(pos, active)
+        static_hit = clearance < sim.radius
+        dyn_hit = s["dyn_dist"] < sim.radius + self.dyn.radii[None, :]
+        pairs = np.diff(prox.key_ptr)
+        events = (new_contacts(self.prev_keys, self.prev_ptr, prox.contact_keys, prox.key_ptr)
+                  + (static_hit & ~self.prev_static).reshape(a, n).sum(axis=1)
+                  + (dyn_hit & ~self.prev_dyn).reshape(a, n * m).sum(axis=1))
+        # -- log
+        log.pose[active, kk] = st.pose.reshape(a, n, 3)
+        log.pose_est[active, kk] = s["est"].reshape(a, n, 3)
+        log.velocity[active, kk] = st.velocity.reshape(a, n, 2)
+        log.twist[active, kk] = new_state.twist.reshape(a, n, 2)
+        log.leader[active, kk] = s["lead"]
+        log.slots[active, kk] = s["slots"]
+        log.clearance[active, kk] = clearance.reshape(a, n)
+        log.min_inter_robot[active, kk] = prox.min_distance
+        log.robot_contacts[active, kk] = pairs
+        log.obstacle_contacts[active, kk] = static_hit.reshape(a, n).sum(axis=1)
+        log.dynamic_contacts[active, kk] = (dyn_hit.any(axis=1).reshape(a, n).sum(axis=1)
+                                            if m else 0)
+        log.collision_events[active, kk] = events
+        log.dyn_pos[active, kk] = s["dyn_pos"]
+        log.command[active, kk] = cmd.reshape(a, n, -1)
+        if extras is not None:
+            extras(log, active, kk)
+        # -- stop conditions
+        reached = np.array(s["at_goal"], dtype=bool)
+        leader = spec.leader
+        if leader.wait_for_formation and reached.any():
+            gap = np.hypot(*(pos.reshape(a, n, 2) - s["slots"]).transpose(2, 0, 1))
+            reached &= np.all(gap <= leader.settle_tolerance, axis=1)
+        ended = reached.copy()
+        if spec.stop_on_collision:
+            ended |= events > 0
+        for j, e in enumerate(active):
+            mon = self.monitors[e]
+            if not ended[j] and mon is not None and mon.update(int(kk[j]), log.pose[e, ..., :2],
+                                                               log.slots[e]):
+                ended[j] = True
+        now = time.perf_counter()
+        self.wall[active] += (now - self._tick) / a
+        self._tick = now
+        ended |= kk == self.steps - 1
+        out = [Ended(int(e), int(k) + 1, bool(r), float(k * dt) if r else math.nan)
+               for e, k, r in zip(active[ended], kk[ended], reached[ended], strict=True)]
+        self.k[active] += 1
+        keep = ~ended
+        if ended.any():
+            rows = np.repeat(keep, n)
+            new_state = RobotState(new_state.pose[rows], new_state.velocity[rows],
+                                   new_state.twist[rows])
+            static_hit, dyn_hit = static_hit[rows], dyn_hit[rows]
+            keys = prox.contact_keys[np.repeat(keep, pairs)]
+            ptr = np.zeros(int(keep.sum()) + 1, dtype=np.int64)
+            np.cumsum(pairs[keep], out=ptr[1:])
+            self.active = active[keep]
+        else:
+            keys, ptr = prox.contact_keys, prox.key_ptr
+        self.prev_keys, self.prev_ptr = keys, ptr
+        self.prev_static, self.prev_dyn, self.state = static_hit, dyn_hit, new_state
+        return out
+
+    def _disturbance(self, kind: str, kk: NDArray[np.int64]) -> FloatArray | None:
+        """``(A*N, 2)`` disturbances of ``kind`` at each active run's time (None without any)."""
+        table = self.sim.disturbances[kind]
+        if not table:
+            return None
+        clocks = np.unique(kk)
+        out = np.zeros((len(clocks), self.n, 2))
+        for c, k in enumerate(clocks):
+            t = int(k) * self.dt
+            for robot, t0, t1, value in table:
+                if t0 <= t < t1:
+                    out[c, robot] += value
+        return out[np.searchsorted(clocks, kk)].reshape(-1, 2)
+
+    def _clearance(self, pos: FloatArray, active: NDArray[np.intp]) -> FloatArray:
+        """Every row's clearance to the static obstacles of its own run's world, m."""
+        sim, n, cap = self.sim, self.n, self.spec.metrics.clearance_cap
+        if len(sim.group_scenarios) == 1:
+            return sim.group_scenarios[0].world.clearance(pos, cap)
+        return np.concatenate([sim.group_scenarios[sim.group[e]].world.clearance(
+            pos[j * n:(j + 1) * n], cap) for j, e in enumerate(active)])
