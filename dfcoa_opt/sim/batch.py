@@ -69,6 +69,8 @@ class BatchSimulator:
         self.seeds = [scenario.spec.seed if s is None else int(s) for s in seeds]
         if not self.seeds:
             raise DfcoaError("a batch needs at least one seed")
+        #: The scenario as given; each run's is ``template.for_seed(seed)``.
+        self.template = scenario
         self.scenarios = [scenario.for_seed(s) for s in self.seeds]
         if isinstance(controller, Sequence):
             self.controllers = list(controller)
@@ -104,6 +106,18 @@ class BatchSimulator:
         self.disturbances = {kind: [(spec.robot_index(d.robot), d.t_start, d.t_end, d.value)
                                      for d in spec.disturbances if d.kind == kind]
                               for kind in ("velocity", "force")}
+
+    def place(self, slot: int, seed: int, scenario: Scenario) -> None:
+        """Make ``scenario`` (drawn for ``seed``) the run of ``slot``, with its world's group."""
+        self.seeds[slot], self.scenarios[slot] = seed, scenario
+        for g, sc in enumerate(self.group_scenarios):
+            if sc is scenario:
+                self.group[slot] = g
+                return
+        self.group[slot] = len(self.group_scenarios)
+        self.group_scenarios.append(scenario)
+        self.lidars.append(Lidar(self.spec.sensors.lidar, scenario.world.grid)
+                           if self.spec.sensors.lidar.enabled else None)
 
     # ------------------------------------------------------------------ helpers
     def _checked(self, controller: Any, cmd: object, t: float, rows: int) -> FloatArray:

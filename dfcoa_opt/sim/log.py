@@ -229,6 +229,12 @@ class BatchLog:
                   for name, arr in one.arrays().items() if name not in ("offsets", "dyn_radius")}
         return cls(arrays)
 
+    def clear(self, e: int) -> None:
+        """Run ``e``'s rows as :meth:`allocate` left them (a new run in that slot)."""
+        for name in self._names:
+            if name != "t":
+                getattr(self, name)[e] = np.nan if name == "steering" else 0
+
     def run(self, e: int, end: int, offsets: FloatArray, dyn_radius: FloatArray) -> RunLog:
         """Run ``e``'s first ``end`` instants as a :class:`RunLog` (copies)."""
         arrays = {name: (getattr(self, name)[:end] if name == "t" else

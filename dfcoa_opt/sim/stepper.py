@@ -121,6 +121,47 @@ class Stepper:
                              spec.leader.settle_tolerance, spec.metrics)
                 if spec.stop_on_deadlock else None)
 
+    # ------------------------------------------------------------------ restart
+    def restart(self, slot: int, seed: int) -> None:
+        """Start a new run with ``seed`` in ``slot``, whose run has ended, at its step 0.
+
+        The run is the one a batch (or :class:`~dfcoa_opt.sim.simulator.Simulator`)
+        gives for ``seed``: its world drawn for the seed, its own generator,
+        start noise, estimator and monitor, its log rows cleared. Its rows join
+        the others in slot order; its clock starts while the others' go on.
+
+        Raises:
+            DfcoaError: ``slot`` still has a run, or the estimator is batched
+                (it cannot start one run alone).
+        """
+        sim, n = self.sim, self.n
+        if slot in self.active:
+            raise DfcoaError(f"slot {slot} still has a run")
+        if is_batched(self.estimators[0]):
+            raise DfcoaError("a batched estimator cannot restart one run of its batch")
+        sc = sim.template.for_seed(seed)
+        sim.place(slot, seed, sc)
+        if sim.group[slot] == len(self.tracks):  # a world of its own: its leader track too
+            self.tracks.append(leader_track(sc, self.dt, self.steps))
+        rng = self.rngs[slot] = np.random.default_rng(seed)
+        start = sc.start_pose(rng)
+        self.estimators[slot] = make_estimators(self.spec.localization.mode, [sc])[0]
+        self.estimators[slot].reset(rng)
+        self.monitors[slot] = self._monitor(sc)
+        self.k[slot], self.wall[slot] = 0, 0.0
+        if self.log is not None:
+            self.log.clear(slot)
+        j = int(np.searchsorted(self.active, slot))
+        at = j * n
+        st = self.state
+        self.state = RobotState(np.insert(st.pose, at, start, axis=0),
+                                np.insert(st.velocity, at, np.zeros((n, 2)), axis=0),
+                                np.insert(st.twist, at, np.zeros((n, 2)), axis=0))
+        self.prev_static = np.insert(self.prev_static, at, np.zeros(n, dtype=bool))
+        self.prev_dyn = np.insert(self.prev_dyn, at, np.zeros((n, self.m), dtype=bool), axis=0)
+        self.prev_ptr = np.insert(self.prev_ptr, j + 1, self.prev_ptr[j])
+        self.active = np.insert(self.active, j, slot)
+
     # ------------------------------------------------------------------ sense
     def sense(self) -> None:
         """Sense every active run from the same snapshot (LiDAR, estimate, neighbours, ...)."""
