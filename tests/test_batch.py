@@ -163,3 +163,18 @@ def test_a_batched_centralized_cbf_solves_each_run_apart():
     overrides = {"t_max": 1.5, "controllers.cbf.mode": "centralized", "team.start_noise": 0.2}
     batch = run_batch_logs(load_scenario(path, 0, overrides), "goto_slot+cbf", SEEDS)
     assert [log.digest() for log in batch] == singles(path, "goto_slot+cbf", overrides)
+
+
+@pytest.mark.parametrize("path", [COMMON[0], ROOT / "scenarios" / "bench" / "clutter.toml"],
+                         ids=lambda p: p.stem)
+def test_one_batched_mcl_estimator_gives_each_run_its_single_run_estimates(path):
+    """dfcoa with MCL, 3 runs: one estimator for the batch (clutter: a map per run)."""
+    from dfcoa_opt.localization import make_estimators
+
+    overrides = {"t_max": 3.0, "localization": "mcl"}
+    sc = load_scenario(path, 0, overrides)
+    (est,) = make_estimators("mcl", [sc.for_seed(s) for s in SEEDS])
+    assert est.n_runs == len(SEEDS)
+    batch = run_batch_logs(sc, "dfcoa", SEEDS)
+    assert [log.digest() for log in batch] == singles(path, "dfcoa", overrides)
+    assert len({log.pose_est.tobytes() for log in batch}) == len(SEEDS)

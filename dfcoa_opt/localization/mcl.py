@@ -27,14 +27,18 @@ Between updates the estimate follows the odometry (last estimate composed with
 the odometry change since that update), so it moves smoothly every step.
 The first call initialises the clouds (``particle_limits[1]`` particles from
 ``N(true pose, diag(initial_covariance))``) and runs a sensor update, as AMCL
-does on its first scan. See docs/methods/mcl.md.
+does on its first scan.
+
+One object also steps a batch of runs (``for_batch``, ``reset_batch``,
+``estimate_batch``): robot ``r`` of run ``e`` is robot ``e*N + r`` of the same arrays
+and kernels, and each run draws from its own generator in the order and sizes of the
+run alone, so its numbers are the single run's, bit for bit. See docs/methods/mcl.md.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-from typing import Any, Literal
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,7 +47,8 @@ from dfcoa_opt.errors import DfcoaError, ScenarioError
 from dfcoa_opt.geometry import wrap_angle
 from dfcoa_opt.localization import estimator_options, register_estimator
 from dfcoa_opt.localization import mcl_models as mm
-from dfcoa_opt.params import param
+from dfcoa_opt.localization.mcl_setup import Maps
+from dfcoa_opt.localization.mcl_setup import Params as MclParams
 from dfcoa_opt.world.lidar import LaserScan
 
 FloatArray = NDArray[np.float64]
@@ -51,7 +56,7 @@ FloatArray = NDArray[np.float64]
 
 @register_estimator("mcl")
 class MonteCarloLocalization:
-    """Batched Monte Carlo localization (one particle filter per robot).
+    """Monte Carlo localization, one particle filter per robot, of one run or a batch.
 
     Args:
         scenario: The loaded scenario (map, team size, LiDAR settings and
@@ -63,85 +68,10 @@ class MonteCarloLocalization:
         ScenarioError: The scenario's LiDAR is disabled.
     """
 
-    @dataclass(frozen=True)
-    class Params:
-        """Options of ``mcl`` (``[localization.options]``); defaults = paper 000 Algorithm 3."""
+    Params = MclParams  # the options (dfcoa_opt.localization.mcl_setup.Params)
+    batched = True  # one object may hold every run of a batch (make_estimators)
 
-        particle_limits: tuple[int, int] = param(
-            (50, 5000), doc="Smallest and largest particle count per robot (paper; MATLAB "
-                            "ParticleLimits default [500, 5000]).", ge=1)
-        initial_covariance: tuple[float, float, float] = param(
-            (0.05, 0.05, 0.05), doc="Diagonal of the initial pose covariance (x, y, theta) "
-                                    "around the start pose (paper; MATLAB default eye(3)).",
-            unit="m^2, m^2, rad^2", ge=0.0)
-        update_thresholds: tuple[float, float, float] = param(
-            (0.01, 0.01, 0.1), doc="The filter updates when the odometry moved more than one of "
-                                   "these in x, y or theta since the last update (paper; MATLAB "
-                                   "default [0.2 0.2 0.2]).", unit="m, m, rad", ge=0.0)
-        resampling_interval: int = param(1, doc="Resample every this many filter updates "
-                                                "(paper and MATLAB default).", ge=1)
-        odometry_noise: tuple[float, float, float, float] = param(
-            (0.25, 0.25, 0.2, 0.2), doc="Odometry noise alpha1..alpha4 in MATLAB Noise order: "
-                                        "rotation from rotation, rotation from translation, "
-                                        "translation from translation, translation from "
-                                        "rotation (variance coefficients; paper; MATLAB default "
-                                        "0.2 each). Used both to simulate the odometry and in "
-                                        "the filter's motion model.", ge=0.0)
-        rotation_noise: Literal["heading_change", "decomposition"] = param(
-            "heading_change", doc="Rotations that scale the odometry noise: half the heading "
-                                  "change each, or AMCL's folded rot1 and rot2. Equal for any "
-                                  "differential-drive motion; 'decomposition' takes a sideways "
-                                  "push for a 90 deg turn and back.")
-        sensor_limits: tuple[float, float] = param(
-            (0.0, 200.0), doc="Ranges outside [min, max] are ignored; max also divides z_rand "
-                              "(paper; MATLAB default [0 12]).", unit="m", ge=0.0)
-        num_beams: int = param(120, doc="Beams used per scan, evenly spaced over the scan "
-                                        "(paper; MATLAB default 60).", ge=1)
-        measurement_noise: float = param(0.25, doc="sigma_hit of the likelihood field (paper; "
-                                                   "MATLAB default 0.2).", unit="m", gt=0.0)
-        expected_measurement_weight: float = param(
-            0.97, doc="z_hit, weight of the Gaussian term (paper; MATLAB default 0.95).", ge=0.0)
-        random_measurement_weight: float = param(
-            0.03, doc="z_rand, weight of the uniform term; absorbs returns from objects not in "
-                      "the map such as other robots (paper; MATLAB default 0.05).", ge=0.0)
-        max_likelihood_distance: float = param(
-            3.5, doc="End-point distances to the map are capped here (paper; MATLAB default 2).",
-            unit="m", gt=0.0)
-        likelihood_field: Literal["boundary", "occupied"] = param(
-            "boundary", doc="Distances are taken to the occupied cells that border free space "
-                            "('boundary', what a LiDAR can hit and what a SLAM map holds) or to "
-                            "every occupied cell ('occupied', MATLAB/AMCL on a filled map).")
-        beam_combination: Literal["product", "amcl"] = param(
-            "product", doc="'product': particle likelihood = product of the beam likelihoods "
-                           "(Thrun 6.4); 'amcl': AMCL's 1 + sum of cubes.")
-        kld_error: float = param(0.05, doc="KLD sampling error bound epsilon (MATLAB/AMCL).",
-                                 gt=0.0, lt=1.0)
-        kld_z: float = param(0.99, doc="KLD normal quantile z, used as given (MATLAB/AMCL pass "
-                                       "0.99).", gt=0.0)
-        kld_bin_size: tuple[float, float, float] = param(
-            (0.5, 0.5, math.pi / 18.0), doc="KLD histogram bin size (x, y, theta) (AMCL "
-                                            "defaults; MATLAB does not expose it).",
-            unit="m, m, rad", gt=0.0)
-
-        def check(self, src: str, key: str) -> None:
-            """Ordered limits, a usable sensor model and KLD bins."""
-            if self.particle_limits[0] > self.particle_limits[1]:
-                raise ScenarioError(src, f"{key}.particle_limits", "min must be <= max, got "
-                                                                   f"{list(self.particle_limits)}")
-            if self.sensor_limits[0] >= self.sensor_limits[1]:
-                raise ScenarioError(src, f"{key}.sensor_limits", "min must be < max, got "
-                                                                 f"{list(self.sensor_limits)}")
-            if self.expected_measurement_weight + self.random_measurement_weight <= 0.0:
-                raise ScenarioError(src, f"{key}.expected_measurement_weight",
-                                    "z_hit + z_rand must be > 0")
-            if not 1e-3 <= self.kld_bin_size[2] <= 2.0 * math.pi:
-                raise ScenarioError(src, f"{key}.kld_bin_size", "the angular bin must be in "
-                                                                "[0.001, 2 pi] rad")
-            if min(self.kld_bin_size[:2]) < 1e-3:
-                raise ScenarioError(src, f"{key}.kld_bin_size", "the x and y bins must be "
-                                                                ">= 0.001 m")
-
-    def __init__(self, scenario: Any, params: Params | None = None) -> None:
+    def __init__(self, scenario: Any, params: MclParams | None = None) -> None:
         spec = scenario.spec
         if not spec.sensors.lidar.enabled:
             raise ScenarioError(scenario.source, "sensors.lidar.enabled",
@@ -150,28 +80,47 @@ class MonteCarloLocalization:
         if params is None:
             opts = spec.localization.options if spec.localization.mode == "mcl" else {}
             params = estimator_options("mcl", opts, scenario.source)
-        self.params: MonteCarloLocalization.Params = params
+        self.params: MclParams = params
         self.n: int = spec.team.n
-        p = params
-        grid = scenario.world.grid
-        self._table, self._outside = mm.likelihood_table(
-            grid, p.measurement_noise, p.expected_measurement_weight,
-            p.random_measurement_weight, p.sensor_limits[1], p.max_likelihood_distance,
-            p.beam_combination, p.likelihood_field)
+        self._alphas = np.asarray(params.odometry_noise, dtype=float)
+        self._thresholds = np.asarray(params.update_thresholds, dtype=float)
+        self._bins = np.asarray(params.kld_bin_size, dtype=float)
+        self._beam_idx: NDArray[np.intp] | None = None
+        self._rngs: list[np.random.Generator] | None = None
+        self._one_run = np.zeros(self.n, dtype=np.int64)  # env of a batch of one
+        self._set_worlds([scenario])
+
+    @classmethod
+    def for_batch(cls, scenarios: Sequence[Any], params: MclParams | None = None
+                  ) -> MonteCarloLocalization:
+        """One estimator for a batch of runs; reset it with :meth:`reset_batch`.
+
+        Args:
+            scenarios: One scenario per run, in run order (one file and overrides:
+                the options are the first one's). Runs that share a grid share its
+                likelihood field; a run with its own map (a seeded clutter field)
+                gets its own.
+            params: Options; default: as :class:`MonteCarloLocalization`.
+        """
+        est = cls(scenarios[0], params)
+        if len(scenarios) > 1:
+            est._set_worlds(list(scenarios))
+        return est
+
+    def _set_worlds(self, scenarios: list[Any]) -> None:
+        """Each run's map and likelihood field (:class:`Maps`); clears the state."""
+        self._maps = Maps(scenarios, self.n, self.params, getattr(self, "_maps", None))
+        self._table, self._outside = self._maps.fields[0]
+        grid = self._maps.grids[0]
         self._ox, self._oy = grid.origin
         self._inv_h = grid.resolution
         self._half_cell = 0.5 * grid.cell_size
-        self._alphas = np.asarray(p.odometry_noise, dtype=float)
-        self._thresholds = np.asarray(p.update_thresholds, dtype=float)
-        self._bins = np.asarray(p.kld_bin_size, dtype=float)
-        self._beam_idx: NDArray[np.intp] | None = None
-        self._rng: np.random.Generator | None = None
-        self._parts = np.zeros((0, 3))
+        self.n_runs = len(scenarios)
         self._clear()
 
     # ------------------------------------------------------------------ state
     def _clear(self) -> None:
-        n = self.n
+        n = self.n_runs * self.n  # robot r of run e is robot e*N + r here
         self._parts = np.zeros((0, 3))
         self._w = np.zeros(0)
         self._ptr = np.zeros(n + 1, dtype=np.int64)
@@ -181,20 +130,30 @@ class MonteCarloLocalization:
         self._prev_true = np.zeros((n, 3))
         self._updates = np.zeros(n, dtype=np.int64)
         self._updated = np.zeros(n, dtype=bool)
-        self._started = False
+        self._started = np.zeros(self.n_runs, dtype=bool)
 
     def reset(self, rng: np.random.Generator) -> None:
-        """Forget everything; ``rng`` becomes the only source of randomness.
+        """Forget everything; ``rng`` becomes the only source of randomness (a batch of one).
 
         The particle clouds are drawn at the next :meth:`estimate` call, around
         the pose it is given.
         """
-        self._rng = rng
+        self.reset_batch([rng])
+
+    def reset_batch(self, rngs: Sequence[np.random.Generator]) -> None:
+        """Forget everything; run ``e`` draws only from ``rngs[e]``.
+
+        Raises:
+            ValueError: Not one generator per run.
+        """
+        if len(rngs) != self.n_runs:
+            raise ValueError(f"{len(rngs)} generators for a batch of {self.n_runs} runs")
+        self._rngs = list(rngs)
         self._clear()
 
     @property
     def particle_counts(self) -> NDArray[np.int64]:
-        """``(N,)`` current number of particles of each robot."""
+        """``(N,)`` current number of particles of each robot (``(E*N,)`` in a batch)."""
         return np.diff(self._ptr)
 
     @property
@@ -213,19 +172,21 @@ class MonteCarloLocalization:
         return self._updates.copy()
 
     def particles(self, robot: int) -> tuple[FloatArray, FloatArray]:
-        """Robot ``robot``'s particles ``(M, 3)`` (m, m, rad) and weights ``(M,)`` (sum 1)."""
+        """Robot ``robot``'s (run ``e``'s ``r``: ``e*N + r``) particles ``(M, 3)`` and weights.
+
+        The particles are in m, m, rad; the ``(M,)`` weights sum to 1.
+        """
         a, b = self._ptr[robot], self._ptr[robot + 1]
         return self._parts[a:b].copy(), self._w[a:b].copy()
 
     # ---------------------------------------------------------------- helpers
-    def _draw(self) -> np.random.Generator:
-        if self._rng is None:
-            raise RuntimeError("call reset(rng) before estimate()")
-        return self._rng
+    def _beams(self, scan: LaserScan, rows: int | None = None
+               ) -> tuple[FloatArray, FloatArray, NDArray[np.int64]]:
+        """End points ``(rows, B)`` x, y (m, robot frame; usable beams first), beam counts.
 
-    def _beams(self, scan: LaserScan) -> tuple[FloatArray, FloatArray, NDArray[np.int64]]:
-        """Robot-frame end points ``(N, B)`` x, y of the usable beams (packed first), counts."""
-        ranges = np.asarray(scan.ranges, dtype=float).reshape(self.n, -1)
+        ``scan`` holds ``rows`` scans (default ``N``), ranges in m.
+        """
+        ranges = np.asarray(scan.ranges, dtype=float).reshape(rows or self.n, -1)
         if self._beam_idx is None:
             total = ranges.shape[1]
             used = min(self.params.num_beams, total)
@@ -244,45 +205,107 @@ class MonteCarloLocalization:
         ey = np.ascontiguousarray(rr * self._sin[order])
         return ex, ey, valid.sum(axis=1).astype(np.int64)
 
-    def _sensor_and_resample(self, upd: NDArray[np.bool_], scan: LaserScan) -> None:
-        """Sensor update, estimate and (every ``resampling_interval``) resampling of ``upd``."""
-        p = self.params
-        ex, ey, nvalid = self._beams(scan)
+    def _start(self, true: FloatArray, robots: NDArray[np.integer], normals: FloatArray) -> None:
+        """Initial clouds ``N(true pose, diag(initial_covariance))`` of ``robots`` (not started).
+
+        Args:
+            true: ``(K, 3)`` their true poses (m, m, rad).
+            robots: ``(K,)`` their indices, ascending.
+            normals: ``(K*M, 3)`` standard normal draws, ``M = particle_limits[1]``.
+        """
+        m = self.params.particle_limits[1]
+        std = np.sqrt(np.asarray(self.params.initial_covariance, dtype=float))
+        parts = np.repeat(true, m, axis=0) + normals * std
+        parts[:, 2] = mm.wrap(parts[:, 2])
+        counts = np.diff(self._ptr)
+        counts[robots] = m
+        ptr = np.zeros_like(self._ptr)
+        np.cumsum(counts, out=ptr[1:])
+        mine = np.repeat(np.isin(np.arange(counts.size), robots), counts)  # others keep theirs
+        all_parts, w = np.empty((ptr[-1], 3)), np.empty(ptr[-1])
+        all_parts[mine], w[mine] = parts, 1.0 / m
+        all_parts[~mine], w[~mine] = self._parts, self._w
+        self._parts, self._w, self._ptr = all_parts, w, ptr
+        self._odom[robots] = self._odom_u[robots] = self._prev_true[robots] = true
+        self._est_u[robots] = 0.0  # every such robot is written by the sensor update
+        self._started[robots[::self.n] // self.n] = True
+
+    def _odometry(self, true: FloatArray, robots: slice | NDArray[np.integer],
+                  normals: FloatArray) -> NDArray[np.bool_]:
+        """Steps 1-2 for ``robots``: their simulated odometry; which of them update.
+
+        Args:
+            true: ``(K, 3)`` their true poses (m, m, rad).
+            robots: ``(K,)`` their indices (or a slice).
+            normals: ``(K, 3)`` standard normal draws.
+
+        Returns:
+            ``(K,)`` whether each moved past an update threshold since its last update.
+        """
+        motion = mm.decompose_motion(self._prev_true[robots], true, self.params.rotation_noise)
+        odom = mm.sample_motion(self._odom[robots], motion, self._alphas, normals)
+        self._odom[robots] = odom
+        self._prev_true[robots] = true
+        delta = np.abs(odom - self._odom_u[robots])
+        delta[:, 2] = np.abs(mm.wrap(delta[:, 2]))
+        return np.asarray((delta > self._thresholds).any(axis=1))
+
+    def _filter(self, sense: NDArray[np.bool_], move: NDArray[np.bool_],
+                runs: NDArray[np.integer], rows: slice | NDArray[np.integer], n_rows: int,
+                scan: LaserScan) -> None:
+        """Steps 3-6: motion update of ``move``, sensor update and resampling of ``sense``.
+
+        Args:
+            sense: ``(E*N,)`` robots whose filter runs.
+            move: ``(E*N,)`` those of them whose particles move first (not starting).
+            runs: ``(A,)`` this call's runs, ascending.
+            rows: This call's robots (``(A*N,)``, or every robot), row after row of the scan.
+            n_rows: ``A*N``.
+            scan: The scans of ``rows`` (ranges in m).
+        """
+        p, n, rngs = self.params, self.n, self._generators()
+        counts = np.diff(self._ptr)
+        self._updates[sense] += 1
+        do = sense & (self._updates % p.resampling_interval == 0)
+        # each run's own draws, in its own order: motion noise, then resampling offsets
+        n_move = np.where(move, counts, 0).reshape(-1, n).sum(axis=1).tolist()
+        n_do = do.reshape(-1, n).sum(axis=1).tolist()
+        normals, offsets = [], []
+        for e in runs.tolist():
+            if n_move[e]:
+                normals.append(rngs[e].standard_normal((n_move[e], 3)))
+            if n_do[e]:
+                offsets.append(rngs[e].random((n_do[e], 2)))
+        if normals:
+            sel = np.repeat(move, counts)
+            step = mm.decompose_motion(self._odom_u[move], self._odom[move], p.rotation_noise)
+            which = np.repeat(np.arange(int(move.sum())), counts[move])
+            self._parts[sel] = mm.sample_motion(self._parts[sel], tuple(s[which] for s in step),
+                                                self._alphas, _joined(normals))
+        ex, ey, nvalid = self._beams(scan, n_rows)
+        if n_rows != sense.size:  # some runs have ended: their rows are absent
+            ex, ey, nvalid = (_scatter(a, rows, sense.size) for a in (ex, ey, nvalid))
         est = self._est_u.copy()
-        mm.sensor_update(self._parts, self._w, self._ptr, upd, ex, ey, nvalid, self._table,
-                         self._outside, self._ox, self._oy, self._inv_h,
-                         p.beam_combination == "amcl", est)
-        self._est_u[upd] = est[upd]
-        self._updates[upd] += 1
-        do = upd & (self._updates % p.resampling_interval == 0)
-        if do.any():
-            u = np.zeros((self.n, 2))
-            u[do] = self._draw().random((int(do.sum()), 2))
+        self._maps.sensor_update(self._parts, self._w, self._ptr, sense, ex, ey, nvalid,
+                                 p.beam_combination == "amcl", est)
+        self._est_u[sense] = est[sense]
+        if offsets:
+            u = np.zeros((sense.size, 2))
+            u[do] = _joined(offsets)  # the runs' robots in order, as drawn
             self._parts, self._w, self._ptr = mm.resample(
                 self._parts, self._w, self._ptr, do, u, p.particle_limits[0],
                 p.particle_limits[1], self._bins, p.kld_error, p.kld_z)
+        self._odom_u[sense] = self._odom[sense]
 
-    def _start(self, true: FloatArray, scan: LaserScan) -> None:
-        """Initial clouds ``N(true pose, diag(initial_covariance))`` and a first sensor update."""
-        rng, n, m = self._draw(), self.n, self.params.particle_limits[1]
-        std = np.sqrt(np.asarray(self.params.initial_covariance, dtype=float))
-        parts = np.repeat(true, m, axis=0) + rng.standard_normal((n * m, 3)) * std
-        parts[:, 2] = mm.wrap(parts[:, 2])
-        self._parts = parts
-        self._w = np.full(n * m, 1.0 / m)
-        self._ptr = np.arange(n + 1, dtype=np.int64) * m
-        self._odom = true.copy()
-        self._odom_u = true.copy()
-        self._prev_true = true.copy()
-        self._est_u = np.zeros((n, 3))  # every robot is written by the sensor update
-        self._updated = np.ones(n, dtype=bool)
-        self._started = True
-        self._sensor_and_resample(self._updated, scan)
+    def _generators(self) -> list[np.random.Generator]:
+        if self._rngs is None:
+            raise RuntimeError("call reset(rng) before estimate()")
+        return self._rngs
 
     # ---------------------------------------------------------------- estimate
     def estimate(self, true_pose: FloatArray, twist: FloatArray, scan: LaserScan | None,
                  dt: float) -> FloatArray:
-        """Pose estimates of all robots after this step's odometry and scan.
+        """Pose estimates of all robots after this step's odometry and scan (a batch of one).
 
         Args:
             true_pose: ``(N, 3)`` true poses (m, m, rad); used only to simulate the
@@ -299,38 +322,75 @@ class MonteCarloLocalization:
             DfcoaError: ``scan`` is None (the LiDAR is off).
             RuntimeError: :meth:`reset` was not called.
         """
+        return self.estimate_batch(true_pose, twist, scan, dt, self._one_run)
+
+    def estimate_batch(self, true_pose: FloatArray, twist: FloatArray, scan: LaserScan | None,
+                       dt: float, env: NDArray[np.integer]) -> FloatArray:
+        """:meth:`estimate` of every active run of the batch at once, each as if alone.
+
+        Args:
+            true_pose: ``(A*N, 3)`` true poses (m, m, rad), run after run.
+            twist: ``(A*N, 2)`` body twists; unused.
+            scan: The scans of those rows, ranges ``(A*N, B)`` in m.
+            dt: Step, s; unused.
+            env: ``(A*N,)`` the run of each row; runs ascending, N rows each.
+
+        Returns:
+            ``(A*N, 3)`` estimated poses (m, m, rad in ``(-pi, pi]``).
+
+        Raises:
+            DfcoaError: ``scan`` is None (the LiDAR is off).
+            RuntimeError: :meth:`reset_batch` was not called.
+            ValueError: The rows are not whole runs in ascending run order.
+        """
         if scan is None:
             raise DfcoaError("localization 'mcl' needs a LiDAR scan every step")
-        rng = self._draw()
-        true = np.array(true_pose, dtype=float).reshape(self.n, 3)
-        if not self._started:
-            self._start(true, scan)
-            upd = np.zeros(self.n, dtype=bool)
+        rngs, n = self._generators(), self.n
+        true = np.array(true_pose, dtype=float).reshape(-1, 3)
+        env = np.asarray(env, dtype=np.int64)
+        runs = env[::n]
+        if env.size != runs.size * n or (runs.size > 1 and np.any(np.diff(runs) <= 0)):
+            raise ValueError("estimate_batch: rows must be whole runs in ascending run order")
+        # this call's robots: every robot (a slice) unless some runs have ended
+        rows: slice | NDArray[np.integer] = slice(None) if runs.size == self.n_runs else \
+            env * n + np.tile(np.arange(n), runs.size)
+        fresh = ~self._started[runs]
+        init, odo = [], []  # each run's first draws: its initial cloud, or its odometry noise
+        for e, new in zip(runs.tolist(), fresh.tolist(), strict=True):
+            if new:
+                init.append(rngs[e].standard_normal((n * self.params.particle_limits[1], 3)))
+            else:
+                odo.append(rngs[e].standard_normal((n, 3)))
+        move = np.zeros(self._updated.size, dtype=bool)
+        if not init:  # every run steps (the usual call): the moved robots are those that sense
+            move[rows] = self._odometry(true, rows, _joined(odo))
+            sense = move
         else:
-            # 1. simulated odometry: the true motion with alpha1..alpha4 noise
-            motion = mm.decompose_motion(self._prev_true, true, self.params.rotation_noise)
-            self._odom = mm.sample_motion(self._odom, motion, self._alphas,
-                                          rng.standard_normal((self.n, 3)))
-            self._prev_true = true
-            # 2. update test against MATLAB's UpdateThresholds [x y theta]
-            delta = np.abs(self._odom - self._odom_u)
-            delta[:, 2] = np.abs(mm.wrap(delta[:, 2]))
-            upd = (delta > self._thresholds).any(axis=1)
-            self._updated = upd
-        if upd.any():
-            # 3. motion update of the updating robots' particles
-            counts = np.diff(self._ptr)
-            sel = np.repeat(upd, counts)
-            step = mm.decompose_motion(self._odom_u[upd], self._odom[upd],
-                                       self.params.rotation_noise)
-            rows = np.repeat(np.arange(int(upd.sum())), counts[upd])
-            moved = mm.sample_motion(self._parts[sel], tuple(s[rows] for s in step),
-                                     self._alphas, rng.standard_normal((rows.size, 3)))
-            self._parts[sel] = moved
-            # 4-6. sensor update, estimate, resampling
-            self._sensor_and_resample(upd, scan)
-            self._odom_u[upd] = self._odom[upd]
-        return _wrap_rows(mm.compose_relative(self._est_u, self._odom_u, self._odom))
+            first = np.repeat(fresh, n)
+            robots = np.arange(move.size)[rows]
+            self._start(true[first], robots[first], _joined(init))
+            if odo:
+                going = robots[~first]
+                move[going[self._odometry(true[~first], going, _joined(odo))]] = True
+            sense = move.copy()
+            sense[robots[first]] = True
+        self._updated[rows] = sense[rows]
+        if sense.any():
+            self._filter(sense, move, runs, rows, len(true), scan)
+        return _wrap_rows(mm.compose_relative(self._est_u[rows], self._odom_u[rows],
+                                              self._odom[rows]))
+
+
+def _joined(draws: list[FloatArray]) -> FloatArray:
+    """The runs' draws one after the other (the array itself when there is one)."""
+    return draws[0] if len(draws) == 1 else np.concatenate(draws)
+
+
+def _scatter(a: NDArray[Any], rows: slice | NDArray[np.integer], size: int) -> NDArray[Any]:
+    """``a`` (one entry per row) placed at ``rows`` of a zeroed array of ``size`` entries."""
+    out = np.zeros((size, *a.shape[1:]), dtype=a.dtype)
+    out[rows] = a
+    return out
 
 
 def _wrap_rows(pose: FloatArray) -> FloatArray:

@@ -240,6 +240,47 @@ def _lowvar(w, a, b, u, out):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
+def _weigh(parts, w, a, b, ex, ey, r, nb, table, n_rows, n_cols, outside, ox, oy, inv_h, amcl,
+           est):  # pragma: no cover - numba
+    """Sensor update of one robot: particles ``a:b``, beams ``ex[r, :nb]``; writes ``est[r]``."""
+    lw = np.empty(b - a)
+    best = -np.inf
+    for j in range(a, b):
+        x, y = parts[j, 0], parts[j, 1]
+        c, s = math.cos(parts[j, 2]), math.sin(parts[j, 2])
+        acc = 0.0
+        for k in range(nb):
+            fx = (x + c * ex[r, k] - s * ey[r, k] - ox) * inv_h
+            fy = (y + s * ex[r, k] + c * ey[r, k] - oy) * inv_h
+            if fx >= 0.0 and fx < n_cols and fy >= 0.0 and fy < n_rows:
+                acc += table[int(fy), int(fx)]
+            else:
+                acc += outside
+        if amcl:
+            acc = math.log1p(acc)
+        v = (math.log(w[j]) if w[j] > 0.0 else -np.inf) + acc
+        lw[j - a] = v
+        if v > best:
+            best = v
+    total = 0.0
+    for j in range(a, b):
+        e = math.exp(lw[j - a] - best)
+        w[j] = e
+        total += e
+    sx = sy = sc = ss = 0.0
+    for j in range(a, b):
+        wj = w[j] / total
+        w[j] = wj
+        sx += wj * parts[j, 0]
+        sy += wj * parts[j, 1]
+        sc += wj * math.cos(parts[j, 2])
+        ss += wj * math.sin(parts[j, 2])
+    est[r, 0] = sx
+    est[r, 1] = sy
+    est[r, 2] = math.atan2(ss, sc)
+
+
+@numba.njit(cache=True)
 def sensor_update(parts, w, ptr, upd, ex, ey, nvalid, table, outside, ox, oy, inv_h, amcl,
                   est):  # pragma: no cover - numba
     """Weight the particles of robots ``upd`` by their scans; write their weighted means.
@@ -262,45 +303,26 @@ def sensor_update(parts, w, ptr, upd, ex, ey, nvalid, table, outside, ox, oy, in
     """
     n_rows, n_cols = table.shape
     for r in range(ptr.shape[0] - 1):
-        if not upd[r]:
-            continue
-        a, b = ptr[r], ptr[r + 1]
-        nb = nvalid[r]
-        lw = np.empty(b - a)
-        best = -np.inf
-        for j in range(a, b):
-            x, y = parts[j, 0], parts[j, 1]
-            c, s = math.cos(parts[j, 2]), math.sin(parts[j, 2])
-            acc = 0.0
-            for k in range(nb):
-                fx = (x + c * ex[r, k] - s * ey[r, k] - ox) * inv_h
-                fy = (y + s * ex[r, k] + c * ey[r, k] - oy) * inv_h
-                if fx >= 0.0 and fx < n_cols and fy >= 0.0 and fy < n_rows:
-                    acc += table[int(fy), int(fx)]
-                else:
-                    acc += outside
-            if amcl:
-                acc = math.log1p(acc)
-            v = (math.log(w[j]) if w[j] > 0.0 else -np.inf) + acc
-            lw[j - a] = v
-            if v > best:
-                best = v
-        total = 0.0
-        for j in range(a, b):
-            e = math.exp(lw[j - a] - best)
-            w[j] = e
-            total += e
-        sx = sy = sc = ss = 0.0
-        for j in range(a, b):
-            wj = w[j] / total
-            w[j] = wj
-            sx += wj * parts[j, 0]
-            sy += wj * parts[j, 1]
-            sc += wj * math.cos(parts[j, 2])
-            ss += wj * math.sin(parts[j, 2])
-        est[r, 0] = sx
-        est[r, 1] = sy
-        est[r, 2] = math.atan2(ss, sc)
+        if upd[r]:
+            _weigh(parts, w, ptr[r], ptr[r + 1], ex, ey, r, nvalid[r], table, n_rows, n_cols,
+                   outside, ox, oy, inv_h, amcl, est)
+
+
+@numba.njit(cache=True)
+def sensor_update_worlds(parts, w, ptr, upd, ex, ey, nvalid, world, tables, shapes, outside,
+                         ox, oy, inv_h, amcl, est):  # pragma: no cover - numba
+    """:func:`sensor_update` with each robot on its own map (a batch of runs whose maps differ).
+
+    Robot ``r`` uses map ``world[r]``; map ``k`` is ``tables[k, :shapes[k, 0], :shapes[k, 1]]``
+    (``tables`` ``(K, H, W)``, padded), scores ``outside[k]`` outside itself, has its origin at
+    ``(ox[k], oy[k])`` m and ``inv_h[k]`` cells per metre. Each robot's numbers are those of
+    :func:`sensor_update` on its own map.
+    """
+    for r in range(ptr.shape[0] - 1):
+        if upd[r]:
+            k = world[r]
+            _weigh(parts, w, ptr[r], ptr[r + 1], ex, ey, r, nvalid[r], tables[k], shapes[k, 0],
+                   shapes[k, 1], outside[k], ox[k], oy[k], inv_h[k], amcl, est)
 
 
 @numba.njit(cache=True)
