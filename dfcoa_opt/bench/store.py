@@ -17,8 +17,9 @@ duplicating a row: the rerun skips every run that has a row.
 
 A row counts as done only if it was produced by the same code, the same
 scenario file and the same overrides: each row records ``code`` (the
-fingerprint of its controller, :func:`code_fingerprint`), ``scenario_sha256``
-and ``overrides``; other rows are run again.
+fingerprint of its controller, :func:`run_fingerprint`: :func:`code_fingerprint`
+and, for a policy file ``policy:PATH``, the bytes of its spec and weights),
+``scenario_sha256`` and ``overrides``; other rows are run again.
 
 The fingerprint of a controller hashes, without docstrings and comments
 (:func:`executable_source`), the sources its runs execute:
@@ -211,11 +212,10 @@ def _sources() -> _Sources:
 def _controller_modules(controller: str) -> set[str] | None:
     """The modules of the classes of a registry id (controller, and filter); None if unknown."""
     from dfcoa_opt.control import registry
-    from dfcoa_opt.errors import UnknownNameError
 
     try:
         classes = registry.component_classes(controller)
-    except UnknownNameError:
+    except DfcoaError:  # an unknown id, or a policy file gone or broken
         return None
     return {getattr(c, "__module__", "") for c in classes}
 
@@ -266,6 +266,20 @@ def code_fingerprint(controller: str | None = None) -> str:
     return h.hexdigest()[:16]
 
 
+def run_fingerprint(controller: str) -> str:
+    """What a row's ``code`` records: :func:`code_fingerprint`, and the data its runs read.
+
+    For a policy file (``policy:PATH``) the SHA-256 of its spec's and weights'
+    bytes joins the code's (:func:`dfcoa_opt.control.registry.data_digest`, read
+    anew at every call), so a changed file re-simulates its runs; any other id
+    gives :func:`code_fingerprint` itself.
+    """
+    from dfcoa_opt.control.registry import data_digest
+
+    code, data = code_fingerprint(controller), data_digest(controller)
+    return hashlib.sha256(f"{code} {data}".encode()).hexdigest()[:16] if data else code
+
+
 def file_sha256(path: str) -> str:
     """First 16 hex digits of the SHA-256 of a file's bytes (rows record scenario files so)."""
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
@@ -313,10 +327,10 @@ class ResultsStore:
         """A row exists for ``run`` from this code, this scenario file and these overrides.
 
         This code: the row's ``code`` is the fingerprint of ``run``'s controller
-        (:func:`code_fingerprint`).
+        (:func:`run_fingerprint`: its code, and a policy file's bytes).
         """
         row = self.read_row(run.key)
-        return (row is not None and row.get("code") == code_fingerprint(run.controller)
+        return (row is not None and row.get("code") == run_fingerprint(run.controller)
                 and row.get("scenario_sha256") == file_sha256(run.scenario_file)
                 and row.get("overrides") == run.overrides_dict)
 
@@ -357,10 +371,11 @@ class ResultsStore:
     def write(self, outcome: Outcome) -> Path:
         """Store one finished run: its log first, then its row (both atomic).
 
-        The row gets ``code``, the fingerprint of its controller, and ``scenario_sha256``.
+        The row gets ``code``, the fingerprint of its controller (:func:`run_fingerprint`),
+        and ``scenario_sha256``.
         """
         row = dict(outcome.row)
-        row["code"] = code_fingerprint(row["controller"])
+        row["code"] = run_fingerprint(row["controller"])
         row["scenario_sha256"] = file_sha256(row["scenario_file"])
         if outcome.npz is not None:
             atomic_write(self.root / row["log"], outcome.npz)
@@ -370,10 +385,10 @@ class ResultsStore:
     def write_manifest(self, sweep: Sweep) -> None:
         """Record the sweep (file copy, hash, run keys).
 
-        ``code`` maps each controller id of the sweep to its :func:`code_fingerprint`.
+        ``code`` maps each controller id of the sweep to its :func:`run_fingerprint`.
         """
         atomic_write(self.root / "sweep.toml", sweep.text)
-        code = {c: code_fingerprint(c) for c in sorted({r.controller for r in sweep.runs})}
+        code = {c: run_fingerprint(c) for c in sorted({r.controller for r in sweep.runs})}
         manifest = {
             "name": sweep.name, "sweep_file": _display_path(sweep.source),
             "sweep_sha256": sweep.sha256, "code": code,

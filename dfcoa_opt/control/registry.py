@@ -17,6 +17,13 @@ Safety filters register the same way with ``@register_filter("my_filter")``
 names a controller whose output passes through the filter
 (:class:`~dfcoa_opt.control.base.Filtered`); each part takes its parameters
 from its own ``[controllers.<id>]`` table.
+
+``"policy:PATH"`` (``+filter`` too) names a policy file, a network in a JSON
+spec and an ``.npz`` (:mod:`dfcoa_opt.control.policy`, ``docs/policies.md``):
+any process builds it from the file, so it is not listed by :func:`available`
+and takes no ``[controllers.*]`` table; a relative PATH is relative to the
+working folder. :func:`data_digest` hashes its files, which the results store
+adds to the run's identity.
 """
 
 from __future__ import annotations
@@ -30,22 +37,29 @@ from dfcoa_opt.errors import ScenarioError, UnknownNameError, did_you_mean
 from dfcoa_opt.params import build
 
 ENTRY_POINT_GROUP = "dfcoa_opt.controllers"
-#: Modules of this distribution that register controllers when imported.
+#: Controller ids ``policy:PATH`` name a policy file; its classes come from this module.
+POLICY_PREFIX, POLICY_MODULE = "policy:", "dfcoa_opt.control.policy"
+#: Modules of this distribution that register controllers when imported (or, the policy
+#: module, build them from files).
 BUILTIN_MODULES = ("dfcoa_opt.control.goto_slot", "dfcoa_opt.control.dfcoa",
                    "comparisons.orca.filter", "comparisons.consensus", "comparisons.lf_vo",
                    "comparisons.virtual_spring", "comparisons.cbf", "comparisons.nmpc",
-                   "comparisons.reshape")
+                   "comparisons.reshape", POLICY_MODULE)
 
 _REGISTRY: dict[str, type] = {}
 _FILTERS: dict[str, type] = {}
 _loaded = False
 C = TypeVar("C", bound=type)
+T = TypeVar("T")
 
 
 def _registrar(table: dict[str, type], kind: str, key: str) -> Callable[[C], C]:
     """Class decorator putting a class with ``Params`` into ``table`` under ``key``."""
 
     def deco(cls: C) -> C:
+        if table is _REGISTRY and (key.startswith(POLICY_PREFIX) or "+" in key):
+            raise ValueError(f"controller id {key!r}: '+' and the prefix {POLICY_PREFIX!r} "
+                             "are reserved (filters, policy files)")
         if key in table and table[key] is not cls:
             raise ValueError(f"{kind} id {key!r} is already registered")
         if not hasattr(cls, "Params"):
@@ -57,10 +71,15 @@ def _registrar(table: dict[str, type], kind: str, key: str) -> Callable[[C], C]:
     return deco
 
 
-def register(controller_id: str) -> Callable[[C], C]:
-    """Class decorator registering a controller under ``controller_id``.
+def register(controller_id: str, *, command: str | None = None, spec: Any = None,
+             frame: str = "world", batched: bool = True) -> Callable[[T], T]:
+    """Decorator registering a controller class, or a policy function, under ``controller_id``.
 
-    Example (README, "Add your own controller", for the whole interface)::
+    A class (README, "Add your own controller") is registered as it is. A
+    function is a *policy* (``docs/policies.md``): ``fn(x)`` gets ``x`` ``(R, D)``,
+    one observation vector per row (:func:`dfcoa_opt.envs.observation.flatten`
+    with ``spec``), every row of every run of a batch, and returns ``(R, 2)``
+    actions of kind ``command``. The decorator returns what it was given::
 
         import dfcoa_opt as d
 
@@ -69,9 +88,41 @@ def register(controller_id: str) -> Callable[[C], C]:
             command = "velocity"
             ...
 
-        d.run("scenarios/example_empty.toml", "my_goto")
+        @d.register("my_pol", command="velocity", spec=ObservationSpec(beams=8))
+        def my_pol(x):
+            return net(x)
+
+        d.run("scenarios/example_empty.toml", "my_pol")
+
+    Args:
+        controller_id: The id (no ``+``, not ``policy:...``).
+        command: A function's action kind, required for one: ``unicycle``
+            (v m/s, omega rad/s), ``velocity`` (m/s) or ``acceleration`` (m/s^2).
+        spec: A function's :class:`~dfcoa_opt.envs.observation.ObservationSpec`
+            (default ``ObservationSpec()``).
+        frame: A velocity or acceleration action in the ``world`` frame (as the
+            learning environments apply actions) or in the robot's ``body``
+            frame (x forward, y left; rotated by its heading).
+        batched: False: ``fn`` gets one run's rows at a time (when its rows depend
+            on how many rows it gets, so that a batch still equals single runs).
+
+    Raises:
+        TypeError: A function without ``command``, or a class with policy keywords.
+        ValueError: A taken or reserved id, a bad command kind or frame.
     """
-    return _registrar(_REGISTRY, "controller", controller_id)
+
+    def deco(obj: T) -> T:
+        if isinstance(obj, type):
+            if command is not None or spec is not None:
+                raise TypeError(f"register('{controller_id}'): command and spec are for "
+                                f"policy functions; {obj.__name__} is a class")
+            _registrar(_REGISTRY, "controller", controller_id)(obj)
+        else:
+            cls = _policy().callable_policy_class(obj, command, spec, frame, batched)
+            _registrar(_REGISTRY, "controller", controller_id)(cls)
+        return obj
+
+    return deco
 
 
 def register_filter(filter_id: str) -> Callable[[C], C]:
@@ -91,6 +142,32 @@ def _parts(controller_id: str) -> tuple[str, str | None]:
     return base, (filt if sep else None)
 
 
+def _policy() -> Any:
+    """The policy module (:mod:`dfcoa_opt.control.policy`), imported by name like the built-ins.
+
+    Named, not imported by an ``import`` statement, so that the registry (which
+    every run executes) does not make it part of every run's code fingerprint.
+    """
+    return importlib.import_module(POLICY_MODULE)
+
+
+def is_policy(controller_id: str) -> bool:
+    """Whether ``controller_id`` (``+filter`` too) names a policy file (``policy:PATH``)."""
+    return _parts(controller_id)[0].startswith(POLICY_PREFIX)
+
+
+def data_digest(controller_id: str) -> str:
+    """SHA-256 of the data a run of ``controller_id`` reads: a policy's spec and weights.
+
+    Empty for every other id. The results store adds it to the run's identity,
+    so a changed policy file re-simulates its runs
+    (:func:`dfcoa_opt.control.policy.policy_digest`).
+    """
+    if not is_policy(controller_id):
+        return ""
+    return str(_policy().policy_digest(_parts(controller_id)[0][len(POLICY_PREFIX):]))
+
+
 def _load_all() -> None:
     global _loaded
     if _loaded:
@@ -107,14 +184,17 @@ def _load_all() -> None:
 def known_to_workers(controller_id: str) -> bool:
     """Whether a fresh process finds ``controller_id`` (and its filter) in the registry.
 
-    True for classes of :data:`BUILTIN_MODULES` and of the entry-point group; a
-    class registered with :func:`register` in a notebook or a script is known
-    only to the process that ran it, so a sweep's worker processes cannot build it.
+    True for classes of :data:`BUILTIN_MODULES` and of the entry-point group,
+    and for policy files (``policy:PATH``; workers share the working folder);
+    a class registered with :func:`register` in a notebook or a script (a
+    callable policy too) is known only to the process that ran it, so a sweep's
+    worker processes cannot build it.
     """
     _load_all()
     points = {ep.name for ep in entry_points(group=ENTRY_POINT_GROUP)}
     for part, table in zip(_parts(controller_id), (_REGISTRY, _FILTERS), strict=True):
-        if part is None or part in points:
+        if part is None or part in points or (table is _REGISTRY
+                                              and part.startswith(POLICY_PREFIX)):
             continue
         module = getattr(table.get(part), "__module__", "")
         if not any(module == m or module.startswith(m + ".") for m in BUILTIN_MODULES):
@@ -123,7 +203,10 @@ def known_to_workers(controller_id: str) -> bool:
 
 
 def available() -> list[str]:
-    """Sorted ids of all registered controllers (built-in and entry points)."""
+    """Sorted ids of all registered controllers (built-in and entry points).
+
+    Policy files (``policy:PATH``) are not listed: any path names one.
+    """
     _load_all()
     return sorted(_REGISTRY)
 
@@ -131,8 +214,12 @@ def available() -> list[str]:
 def controller_class(controller_id: str) -> type:
     """The class registered under ``controller_id`` (the controller part of ``a+filter``).
 
+    For ``policy:PATH``, a class made for that file, which is read and checked
+    (:func:`dfcoa_opt.control.policy.file_policy_class`).
+
     Raises:
         UnknownNameError: Unknown controller or filter, with a "did you mean" hint.
+        ScenarioError: A policy file that does not fit, naming the file.
     """
     _load_all()
     base, filt = _parts(controller_id)
@@ -140,6 +227,8 @@ def controller_class(controller_id: str) -> type:
         raise UnknownNameError(
             f"unknown safety filter '{filt}' in '{controller_id}'{did_you_mean(filt, _FILTERS)}; "
             f"available filters: {', '.join(sorted(_FILTERS))}")
+    if base.startswith(POLICY_PREFIX):
+        return _policy().file_policy_class(base)
     try:
         return _REGISTRY[base]
     except KeyError:
@@ -212,10 +301,14 @@ def check_overrides(controllers: Mapping[str, Mapping[str, Any]], source: str) -
     """Validate every ``[controllers.<id>]`` table of a file.
 
     Raises:
-        ScenarioError: Unknown controller id or a bad key.
+        ScenarioError: Unknown controller id or a bad key; a table of a policy
+            file (its parameters are in its spec).
     """
     _load_all()
     for cid, table in controllers.items():
+        if cid.startswith(POLICY_PREFIX):
+            raise ScenarioError(source, f"controllers.{cid}", "a policy file takes no "
+                                "parameters here: they are in its JSON spec")
         cls = _REGISTRY.get(cid, _FILTERS.get(cid))
         if cls is None:
             raise ScenarioError(source, f"controllers.{cid}", "unknown controller or filter"
