@@ -174,6 +174,7 @@ def seed_list(text: str) -> list[int]:
 def _cmd_run(a: argparse.Namespace) -> int:
     from dfcoa_opt import metrics
     from dfcoa_opt.bench.runner import jsonable
+    from dfcoa_opt.bench.sweep import safe_name
     from dfcoa_opt.sim.batch import BatchSimulator
     from dfcoa_opt.sim.loader import load_scenario
     from dfcoa_opt.sim.simulator import ControllerError, batch_controllers
@@ -193,17 +194,17 @@ def _cmd_run(a: argparse.Namespace) -> int:
     for sc, log in zip(sim.scenarios, logs, strict=True):
         summary = metrics.summary(log, sc.spec.metrics)
         seed = log.meta["seed"]
-        stem = Path(a.out) / f"{sc.name}-{a.controller}-s{seed}"
-        log.save(stem.with_suffix(".npz"))
+        stem = Path(a.out) / safe_name(f"{sc.name}-{a.controller}-s{seed}")
+        log.save(f"{stem}.npz")
         result = {"scenario": sc.name, "controller": a.controller, "seed": seed,
                   "metrics": jsonable(summary)}
-        stem.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
+        Path(f"{stem}.json").write_text(json.dumps(result, indent=2) + "\n")
         if a.plot or a.animate:
             from dfcoa_opt import plotting
 
             goal, start = sc.spec.leader.goal, sc.spec.leader.start
             if a.plot:
-                plotting.plot_run(log, sc.world.grid, stem.with_suffix(".png"), goal=goal,
+                plotting.plot_run(log, sc.world.grid, Path(f"{stem}.png"), goal=goal,
                                   start=start, shapes=sc.world.shapes)
             if a.animate:
                 plotting.animate_run(log, sc.world.grid, a.animate, goal=goal, start=start,
@@ -217,7 +218,7 @@ def _cmd_run(a: argparse.Namespace) -> int:
         if len(seeds) == 1:
             for k, v in summary.items():
                 print(f"  {k:28s} {v}")
-        print(f"  log: {stem.with_suffix('.npz')}")
+        print(f"  log: {stem}.npz")
     return 0
 
 

@@ -105,6 +105,16 @@ def test_dfcoa_run_with_a_relative_policy_path(tmp_path):
     assert obj["metrics"]["fce_rms"] == pytest.approx(ref["fce_rms"], abs=1e-12)
 
 
+def test_dfcoa_run_seeds_with_a_dotted_id_write_one_log_per_seed(tmp_path):
+    """``policy:pol.json`` has a dot and a colon: every seed's files keep their own name."""
+    linear_policy(tmp_path)
+    assert main(["run", str(TINY), "--controller", f"policy:{tmp_path / 'pol.json'}",
+                 "--seeds", "0-1", "--out", str(tmp_path / "out"), "--json"]) == 0
+    logs = sorted(p.name for p in (tmp_path / "out").glob("*.npz"))
+    assert len(logs) == 2 and logs[0].endswith("-s0.npz") and logs[1].endswith("-s1.npz")
+    assert all(":" not in name and "/" not in name for name in logs)
+
+
 @pytest.mark.parametrize("filtered", ["", "+cbf"])
 def test_a_batch_is_its_runs_alone_bit_for_bit(tmp_path, filtered):
     cid = f"policy:{mlp_policy(tmp_path)}{filtered}"
