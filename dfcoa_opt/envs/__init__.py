@@ -1,6 +1,49 @@
 """Learning environments over the batched simulator, and the observation that policies share.
 
+- :func:`parallel_env` (:mod:`dfcoa_opt.envs.parallel`): a PettingZoo
+  ``ParallelEnv`` of one run, one agent per robot (``robot_0`` ...).
+- :func:`vector_env` (:mod:`dfcoa_opt.envs.vector`): a gymnasium ``VectorEnv``
+  whose E sub-environments are the E slots of one batched
+  :class:`~dfcoa_opt.sim.stepper.Stepper`, each a team with an ``(N, D)``
+  observation and an ``(N, 2)`` action, reset in its slot when its run ends.
+- :class:`RewardSpec` (:mod:`dfcoa_opt.envs.rewards`): the reward's weights;
+  the reward comes from the toolkit's metrics (paper 000 eq 6-7, progress
+  along the leader's path) and outcomes (collision, success, deadlock).
 - :mod:`dfcoa_opt.envs.observation`: one robot's observation as a flat vector
   (:class:`~dfcoa_opt.envs.observation.ObservationSpec`, ``flatten``), shared by
   the environments and the ``policy:PATH`` controllers.
+- :mod:`dfcoa_opt.envs.core`: the engine both environments share (numpy only).
+
+Both environments need the ``envs`` extra (``pip install -e '.[envs]'``:
+pettingzoo and gymnasium); they are imported on first use, so neither
+``import dfcoa_opt`` nor ``import dfcoa_opt.envs`` imports them. Observation
+layout, action, reward, episode ends, seeds and speed: ``docs/envs.md``.
 """
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from dfcoa_opt.envs.parallel import FormationParallelEnv, parallel_env
+    from dfcoa_opt.envs.rewards import RewardSpec
+    from dfcoa_opt.envs.vector import FormationVectorEnv, vector_env
+
+__all__ = ["FormationParallelEnv", "FormationVectorEnv", "RewardSpec", "parallel_env",
+           "vector_env"]
+
+_LAZY = {"parallel_env": "parallel", "FormationParallelEnv": "parallel",
+         "vector_env": "vector", "FormationVectorEnv": "vector", "RewardSpec": "rewards"}
+
+
+def __getattr__(name: str) -> Any:
+    """Import an environment's module on first use (pettingzoo, gymnasium only then)."""
+    if name not in _LAZY:
+        raise AttributeError(f"module 'dfcoa_opt.envs' has no attribute {name!r}")
+    from importlib import import_module
+
+    return getattr(import_module(f"dfcoa_opt.envs.{_LAZY[name]}"), name)
+
+
+def __dir__() -> list[str]:
+    return sorted(list(globals()) + __all__)

@@ -107,17 +107,30 @@ class BatchSimulator:
                                      for d in spec.disturbances if d.kind == kind]
                               for kind in ("velocity", "force")}
 
-    def place(self, slot: int, seed: int, scenario: Scenario) -> None:
-        """Make ``scenario`` (drawn for ``seed``) the run of ``slot``, with its world's group."""
+    def place(self, slot: int, seed: int, scenario: Scenario) -> bool:
+        """Make ``scenario`` (drawn for ``seed``) the run of ``slot``, with its world's group.
+
+        A world no other slot uses any more gives its group to the new one, so a
+        long series of runs with seeded worlds keeps at most one world per slot.
+
+        Returns:
+            Whether the world is new to the batch (the caller builds its leader track).
+        """
         self.seeds[slot], self.scenarios[slot] = seed, scenario
         for g, sc in enumerate(self.group_scenarios):
             if sc is scenario:
                 self.group[slot] = g
-                return
+                return False
+        lidar = (Lidar(self.spec.sensors.lidar, scenario.world.grid)
+                 if self.spec.sensors.lidar.enabled else None)
+        old = int(self.group[slot])
+        if np.count_nonzero(self.group == old) == 1:  # only this slot used it: reuse it
+            self.group_scenarios[old], self.lidars[old] = scenario, lidar
+            return True
         self.group[slot] = len(self.group_scenarios)
         self.group_scenarios.append(scenario)
-        self.lidars.append(Lidar(self.spec.sensors.lidar, scenario.world.grid)
-                           if self.spec.sensors.lidar.enabled else None)
+        self.lidars.append(lidar)
+        return True
 
     # ------------------------------------------------------------------ helpers
     def _checked(self, controller: Any, cmd: object, t: float, rows: int) -> FloatArray:

@@ -140,9 +140,13 @@ class Stepper:
         if is_batched(self.estimators[0]):
             raise DfcoaError("a batched estimator cannot restart one run of its batch")
         sc = sim.template.for_seed(seed)
-        sim.place(slot, seed, sc)
-        if sim.group[slot] == len(self.tracks):  # a world of its own: its leader track too
-            self.tracks.append(leader_track(sc, self.dt, self.steps))
+        fresh = sim.place(slot, seed, sc)
+        if fresh:  # a world of its own: its leader track too
+            track, g = leader_track(sc, self.dt, self.steps), int(sim.group[slot])
+            if g < len(self.tracks):  # the freed world's group, reused
+                self.tracks[g] = track
+            else:
+                self.tracks.append(track)
         rng = self.rngs[slot] = np.random.default_rng(seed)
         start = sc.start_pose(rng)
         self.estimators[slot] = make_estimators(self.spec.localization.mode, [sc])[0]
@@ -174,13 +178,12 @@ class Stepper:
         dyn_dist = (np.linalg.norm(pos.reshape(a, n, 1, 2) - dyn_pos[:, None], axis=3)
                     .reshape(a * n, m) if m else np.zeros((a * n, 0)))
         lead, slots, at_goal = self._leader(active, kk)
-        scans: list[LaserScan | None] = [None] * a
+        scans: list[LaserScan | None] = [None] * a  # per run; views of scan_all made on demand
         scan_all: LaserScan | None = None  # every row's scan, when made in one call
         one_group = len(self.tracks) == 1
         if self.scanning and one_group and a > 1:
             scan_all = sim.lidars[0].scan_teams(st.pose, n, dyn_pos, self.dyn.radii,
                                                 sim.radius, [self.rngs[e] for e in active])
-            scans = [scan_all.take(slice(j * n, (j + 1) * n)) for j in range(a)]
         elif self.scanning:
             owners = np.concatenate((np.arange(n), np.full(m, -1)))
             disc_r = np.concatenate((np.full(n, sim.radius), self.dyn.radii))
@@ -189,7 +192,7 @@ class Stepper:
                 scans[j] = sim.lidars[sim.group[e]].scan(
                     st.pose[rows], np.vstack((pos[rows], dyn_pos[j])), disc_r, owners,
                     self.rngs[e])
-        if self.scanning and scan_all is None:
+        if self.scanning and scan_all is None:  # (one call per run: seeded worlds, or one run)
             scan_all = scans[0] if a == 1 else LaserScan(
                 scans[0].angle_min, scans[0].angle_increment, scans[0].range_min,
                 scans[0].range_max, np.concatenate([s.ranges for s in scans]))
@@ -219,8 +222,15 @@ class Stepper:
             return est0.estimate_batch(st.pose, st.twist, scan_all, self.dt,
                                        np.repeat(active, n))
         return np.concatenate([self.estimators[e].estimate(
-            st.pose[j * n:(j + 1) * n], st.twist[j * n:(j + 1) * n], scans[j], self.dt)
-            for j, e in enumerate(active)])
+            st.pose[j * n:(j + 1) * n], st.twist[j * n:(j + 1) * n],
+            self._scan(scans, scan_all, j), self.dt) for j, e in enumerate(active)])
+
+    def _scan(self, scans: list[LaserScan | None], scan_all: LaserScan | None,
+              j: int) -> LaserScan | None:
+        """The ``j``-th active run's scan (a view of ``scan_all`` when made in one call)."""
+        if scans[j] is None and scan_all is not None:
+            scans[j] = scan_all.take(slice(j * self.n, (j + 1) * self.n))
+        return scans[j]
 
     def _leader(self, active: NDArray[np.intp],
                 kk: NDArray[np.int64]) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
@@ -239,19 +249,25 @@ class Stepper:
         return self.k[self.active] * self.dt
 
     # ------------------------------------------------------------ observations
-    def batch_observation(self) -> Observation:
+    def batch_observation(self, one_clock: bool = True) -> Observation:
         """The observation of every active run (``env`` = slot; ``leader`` one state a slot).
 
+        Args:
+            one_clock: Require the runs to share one clock (a batched controller sees
+                one ``t``). With False, runs restarted at different steps give ``t`` NaN.
+
         Raises:
-            DfcoaError: The runs' clocks differ (a batched controller sees one ``t``).
+            DfcoaError: ``one_clock`` and the runs' clocks differ.
         """
         s, n, a = self._s, self.n, len(self.active)
         kk = self.k[self.active]
-        if np.any(kk != kk[0]):
+        same = bool(np.all(kk == kk[0]))
+        if one_clock and not same:
             raise DfcoaError("a batched controller needs the runs of a batch on one clock")
         nb_pos, nb_vel, nb_heading = s["nb"]
         return Observation(
-            float(kk[0] * self.dt), self.dt, np.tile(self.robot_ids, a), s["est"],
+            float(kk[0] * self.dt) if same else math.nan, self.dt,
+            np.tile(self.robot_ids, a), s["est"],
             self.state.velocity, self.state.twist, s["scan_all"],
             Neighbours(s["row_index"], nb_pos, nb_vel, s["prox"].distance, nb_heading),
             s["moving"], self.leaders, self.goal, np.tile(self.sim.scenarios[0].offsets, (a, 1)),
@@ -266,7 +282,8 @@ class Stepper:
         nb = Neighbours(prox.index[rows], nb_pos[rows], nb_vel[rows], prox.distance[rows],
                         nb_heading[rows])
         return Observation(float(self.k[e] * self.dt), self.dt, self.robot_ids, s["est"][rows],
-                           st.velocity[rows], st.twist[rows], s["scans"][j], nb,
+                           st.velocity[rows], st.twist[rows],
+                           self._scan(s["scans"], s["scan_all"], j), nb,
                            s["moving"].take(rows), s["lead"][j], self.goal,
                            self.sim.scenarios[e].offsets, s["slots"][j])
 

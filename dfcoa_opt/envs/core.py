@@ -1,0 +1,348 @@
+"""The engine of both environments: E runs of one scenario as E episodes (numpy only).
+
+:class:`TeamBatch` owns one :class:`~dfcoa_opt.sim.stepper.Stepper` whose E
+slots are the E episodes: one :meth:`~dfcoa_opt.sim.stepper.Stepper.sense` and
+one :meth:`~dfcoa_opt.sim.stepper.Stepper.apply` per step for all of them, the
+observation of every robot of every slot flattened in one call
+(:func:`~dfcoa_opt.envs.observation.flatten`) and the rewards computed as
+arrays (:mod:`dfcoa_opt.envs.rewards`). Python loops run only over the runs
+that end. A slot's episode is the run :func:`dfcoa_opt.run` gives for its seed
+with the same commands, bit for bit; its log stays in the Stepper until the
+slot starts its next episode (:meth:`TeamBatch.episode_log`).
+
+The environments change three settings of the scenario they are given
+(:func:`env_scenario`): ``stop_on_collision = true`` (a contact ends the
+episode), ``leader.wait_for_formation = true`` (success needs the formation
+settled at the goal) and ``stop_on_deadlock`` (the environment's option,
+default true: a stalled run ends as a deadlock). The stall test is
+:class:`~dfcoa_opt.outcome.StallMonitor`'s, computed for every run at once
+(:class:`~dfcoa_opt.envs.rewards.BatchStall`, put in ``Stepper.monitors``):
+the per-run monitors would cost a Python loop over the runs at every step
+(about half of a step at E = 1024).
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dfcoa_opt import dispatch
+from dfcoa_opt.control.base import Observation
+from dfcoa_opt.envs.observation import ObservationSpec, flatten
+from dfcoa_opt.envs.rewards import (
+    BatchStall,
+    RewardSpec,
+    dense_reward,
+    end_bonus,
+    end_of_episode,
+    formation_errors,
+    path_arc_length,
+)
+from dfcoa_opt.envs.spaces import action_bounds, observation_bounds
+from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.robots.models import CommandKind, make_model
+from dfcoa_opt.sim.batch import BatchSimulator
+from dfcoa_opt.sim.log import RunLog
+from dfcoa_opt.sim.scenario import Scenario
+from dfcoa_opt.sim.stepper import Ended, Stepper, is_batched
+
+if TYPE_CHECKING:
+    from dfcoa_opt.outcome import StallMonitor
+
+FloatArray = NDArray[np.float64]
+
+
+class _ActionSource:
+    """What :class:`BatchSimulator` takes as the controller: the actions come from ``step``."""
+
+    batched = True
+    name = "env"
+
+    def __init__(self, command: CommandKind, uses_scan: bool) -> None:
+        self.command = command
+        self.uses_scan = uses_scan
+
+    def reset_batch(self, scenarios: list[Scenario], rngs: list[np.random.Generator]) -> None:
+        """Nothing to prepare."""
+
+    def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
+        """Nothing to prepare."""
+
+    def act(self, obs: Observation) -> FloatArray:
+        """Never called: the environment applies its actions itself."""
+        raise DfcoaError("an environment's actions come from its step()")
+
+
+def env_scenario(scenario: Scenario | str | Path, stop_on_deadlock: bool = True,
+                 overrides: Mapping[str, Any] | None = None) -> Scenario:
+    """The scenario an environment runs: ``scenario`` with the episode-end settings.
+
+    Args:
+        scenario: A loaded scenario or the path of a scenario file.
+        stop_on_deadlock: End a stalled run (outcome ``deadlock``).
+        overrides: More scenario keys, dotted (``{"t_max": 20.0}``) or with ``__``
+            for the dot (``leader__speed``), applied first.
+
+    Returns:
+        The scenario with ``stop_on_collision = true``,
+        ``leader.wait_for_formation = true`` and ``stop_on_deadlock``.
+
+    Raises:
+        ScenarioError: A bad file or key.
+        DfcoaError: Overrides for a scenario built without its file's data.
+    """
+    from dfcoa_opt.sim.loader import apply_overrides, load_scenario, scenario_from_dict
+
+    keys = {k.replace("__", "."): v for k, v in (overrides or {}).items()}
+    keys.update({"stop_on_collision": True, "leader.wait_for_formation": True,
+                 "stop_on_deadlock": bool(stop_on_deadlock)})
+    if isinstance(scenario, str | Path):
+        return load_scenario(scenario, None, keys)
+    spec = scenario.spec
+    if (len(keys) == 3 and spec.stop_on_collision and spec.leader.wait_for_formation
+            and spec.stop_on_deadlock == bool(stop_on_deadlock)):
+        return scenario
+    if scenario.data is not None:
+        data = copy.deepcopy(dict(scenario.data))
+        apply_overrides(data, keys, scenario.source)
+        return scenario_from_dict(data, scenario.source, scenario.base_dir)
+    if len(keys) > 3:
+        raise DfcoaError(f"{scenario.source}: built without its file's data, so it takes no "
+                         f"overrides ({sorted(keys)[:3]}...); load it from its file")
+    return replace(scenario, spec=replace(spec, stop_on_collision=True,
+                                          stop_on_deadlock=bool(stop_on_deadlock),
+                                          leader=replace(spec.leader, wait_for_formation=True)))
+
+
+def team_observation(stepper: Stepper) -> Observation:
+    """The observation of every active run of ``stepper``, whatever their clocks.
+
+    :meth:`Stepper.batch_observation` without the one-clock requirement: runs
+    restarted at different steps have no common time, so ``t`` is NaN then
+    (:func:`flatten` does not read it). Call after ``sense()``.
+    """
+    return stepper.batch_observation(one_clock=False)
+
+
+@dataclass
+class StepResult:
+    """What one step of every slot gave.
+
+    Attributes:
+        reward: ``(E,)`` rewards (0 for a slot without a run).
+        terminated: ``(E,)`` episodes that ended in success, collision or deadlock.
+        truncated: ``(E,)`` episodes that ran out of time (``t_max``).
+        outcomes: The outcome of every slot whose episode ended, by slot.
+    """
+
+    reward: FloatArray
+    terminated: NDArray[np.bool_]
+    truncated: NDArray[np.bool_]
+    outcomes: dict[int, str] = field(default_factory=dict)
+
+
+class TeamBatch:
+    """E episodes of one scenario stepped as one batch (module docstring).
+
+    Args:
+        scenario: A loaded scenario or a scenario file.
+        reward: The reward's weights.
+        observation: The observation vector's layout and scales.
+        stop_on_deadlock: End a stalled run as a deadlock.
+        overrides: More scenario keys (:func:`env_scenario`).
+
+    Attributes:
+        scenario: The scenario the episodes run (:func:`env_scenario`).
+        kind: The robots' command kind, the action's.
+        n: Robots per episode.
+        size: Length of one robot's observation vector.
+        observation: The toolkit :class:`Observation` of the latest :meth:`observe`
+            (None before); e.g. for an expert controller's ``act``.
+    """
+
+    def __init__(self, scenario: Scenario | str | Path, *, reward: RewardSpec | None = None,
+                 observation: ObservationSpec | None = None, stop_on_deadlock: bool = True,
+                 overrides: Mapping[str, Any] | None = None) -> None:
+        self.scenario = env_scenario(scenario, stop_on_deadlock, overrides)
+        self.reward_spec = reward if reward is not None else RewardSpec()
+        self.obs_spec = observation if observation is not None else ObservationSpec()
+        spec = self.scenario.spec
+        self.kind: CommandKind = make_model(spec.robots).native
+        self.n, self.dt, self.size = spec.team.n, spec.dt, self.obs_spec.size
+        self.action_low, self.action_high = action_bounds(spec.robots, self.kind)
+        self.obs_low, self.obs_high = observation_bounds(self.obs_spec)
+        self.observation: Observation | None = None
+        self._stepper: Stepper | None = None
+        self._ended: dict[int, Ended] = {}
+        self._arc_prev = np.zeros(0)
+        self._stall: BatchStall | None = None
+        self._scored: tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]] = (
+            np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool))
+
+    @property
+    def stepper(self) -> Stepper:
+        """The batch's Stepper (after :meth:`start`)."""
+        if self._stepper is None:
+            raise DfcoaError("the environment has not been reset")
+        return self._stepper
+
+    @property
+    def seeds(self) -> list[int]:
+        """The seed of each slot's current (or last) episode."""
+        return list(self.stepper.sim.seeds)
+
+    def start(self, seeds: Sequence[int]) -> None:
+        """New episodes in every slot, one per seed (a new Stepper), sensed: call :meth:`observe`.
+
+        Raises:
+            ValueError: A negative seed.
+        """
+        if any(int(s) < 0 for s in seeds):
+            raise ValueError(f"seeds must be >= 0, got {list(seeds)}")
+        dispatch.check()
+        source = _ActionSource(self.kind, self.obs_spec.beams > 0)
+        sim = BatchSimulator(self.scenario, source, [int(s) for s in seeds])
+        st = self._stepper = Stepper(sim, scan_wanted=source.uses_scan)
+        spec = self.scenario.spec
+        self._stall = (BatchStall(len(seeds), st.steps, self.dt, spec.leader.settle_tolerance,
+                                  spec.metrics) if spec.stop_on_deadlock else None)
+        if self._stall is not None:
+            st.monitors = [cast("StallMonitor", self._stall.monitor(e))
+                           for e in range(len(seeds))]
+        st.start_clock()
+        self._ended = {}
+        self._arc_prev = np.zeros(len(seeds))
+
+    def restart(self, slot: int, seed: int) -> None:
+        """A new episode with ``seed`` in ``slot``, whose episode has ended.
+
+        Raises:
+            DfcoaError: The slot's episode is still running, or the pose
+                estimator is batched (e.g. ``mcl``: it cannot start one run alone).
+        """
+        if int(seed) < 0:
+            raise ValueError(f"seeds must be >= 0, got {seed}")
+        st = self.stepper
+        st.restart(slot, int(seed))
+        if self._stall is not None:
+            st.monitors[slot] = cast("StallMonitor", self._stall.monitor(slot))
+        self._ended.pop(slot, None)
+
+    @property
+    def restartable(self) -> bool:
+        """Whether a slot can start a new episode while the others go on (not ``mcl``)."""
+        return not is_batched(self.stepper.estimators[0])
+
+    def observe(self) -> tuple[NDArray[np.intp], FloatArray]:
+        """Sense every running episode once and flatten every robot's observation.
+
+        Returns:
+            The slots with a running episode ``(A,)``, in increasing order, and
+            their observations ``(A, N, size)``.
+        """
+        st = self.stepper
+        active = st.active.copy()
+        if not len(active):
+            self.observation = None
+            return active, np.zeros((0, self.n, self.size))
+        st.sense()
+        self.observation = team_observation(st)
+        return active, flatten(self.observation, self.obs_spec).reshape(len(active), self.n,
+                                                                          self.size)
+
+    def step(self, actions: FloatArray) -> StepResult:
+        """Apply every running episode's actions, score the instant, end what ended.
+
+        Args:
+            actions: ``(E, N, 2)`` one action per robot of every slot (rows of
+                slots without a running episode are ignored).
+
+        Returns:
+            The rewards, ends and outcomes (:mod:`dfcoa_opt.envs.rewards`).
+
+        Raises:
+            ValueError: A NaN or infinite action of a running episode.
+        """
+        st, spec = self.stepper, self.reward_spec
+        slots = len(st.k)
+        out = StepResult(np.zeros(slots), np.zeros(slots, dtype=bool),
+                         np.zeros(slots, dtype=bool))
+        act = st.active
+        if not len(act):
+            return out
+        kk = st.k[act]
+        cmd = actions[act].reshape(len(act) * self.n, -1)
+        if not np.all(np.isfinite(cmd)):
+            bad = sorted(set((act[np.nonzero(~np.isfinite(actions[act]))[0]]).tolist()))
+            raise ValueError(f"NaN or infinite action in sub-environment(s) {bad}")
+        ended = st.apply(cmd, self.kind, self._score)
+        e_c, e_s, arc, contact = self._scored
+        advance = np.where(kk == 0, 0.0, arc - self._arc_prev[act])
+        self._arc_prev[act] = arc
+        out.reward[act] = dense_reward(spec, self.dt, e_c, e_s, advance, contact)
+        if ended:
+            rows = np.searchsorted(act, [end.slot for end in ended])
+            for end, j in zip(ended, rows, strict=True):
+                outcome, terminal = end_of_episode(bool(contact[j]), end.reached,
+                                                   end.steps == st.steps)
+                out.outcomes[end.slot] = outcome
+                out.terminated[end.slot], out.truncated[end.slot] = terminal, not terminal
+                out.reward[end.slot] += end_bonus(spec, outcome)
+                self._ended[end.slot] = end
+        return out
+
+    def _score(self, log: Any, active: NDArray[np.intp], kk: NDArray[np.int64]) -> None:
+        """Inside ``apply``, the instant's rows logged, before the stop tests: score every run.
+
+        ``log`` is the Stepper's :class:`~dfcoa_opt.sim.log.BatchLog`.
+
+        The formation errors, the centroid's arc length and the contacts of
+        every active run at its instant; the stall flags
+        (:class:`~dfcoa_opt.envs.rewards.BatchStall`) that the stop test reads.
+        """
+        pose = log.pose[active, kk]
+        e_c, e_s = formation_errors(pose, log.slots[active, kk])
+        arc = self._arc(pose[..., :2].mean(axis=1), active)
+        contact = ((log.robot_contacts[active, kk] > 0) | (log.obstacle_contacts[active, kk] > 0)
+                   | (log.dynamic_contacts[active, kk] > 0))
+        if self._stall is not None:
+            self._stall.update(arc, active, kk, log.pose, log.slots)
+        self._scored = (e_c, e_s, arc, contact)
+
+    def _arc(self, centroid: FloatArray, act: NDArray[np.intp]) -> FloatArray:
+        """``(A,)`` arc length along each run's leader path of its centroid, m."""
+        sim = self.stepper.sim
+        if len(sim.group_scenarios) == 1:
+            return path_arc_length(sim.group_scenarios[0].leader_path, centroid)
+        out = np.empty(len(act))
+        group = sim.group[act]
+        for g in np.unique(group):  # one world per seed (clutter): one path per group
+            rows = group == g
+            out[rows] = path_arc_length(sim.group_scenarios[g].leader_path, centroid[rows])
+        return out
+
+    def time(self, slot: int) -> float:
+        """The time of ``slot``'s next instant, s."""
+        return float(self.stepper.k[slot] * self.dt)
+
+    def episode_log(self, slot: int) -> RunLog:
+        """The log of ``slot``'s episode that ended, until the slot starts its next one.
+
+        The :class:`RunLog` :func:`dfcoa_opt.run` gives (``meta`` with the
+        seed, ``reached_goal``, ...; ``command`` holds the actions), for the
+        metrics of :mod:`dfcoa_opt.metrics`.
+
+        Raises:
+            DfcoaError: The slot's episode has not ended.
+        """
+        end = self._ended.get(slot)
+        if end is None:
+            raise DfcoaError(f"the episode of sub-environment {slot} has not ended")
+        st = self.stepper
+        return st.sim._finish(st, end, _ActionSource(self.kind, False))

@@ -1,0 +1,269 @@
+"""The environments' reward and episode ends, from the toolkit's own metrics and outcomes.
+
+Every weight and unit is one field of :class:`RewardSpec`. The reward of a step
+scores the *instant* at which the action is taken, the instant ``t_k`` that the
+run logs (``dfcoa_opt.sim.log``: index ``k`` is the state the robots sensed and
+the command they then applied), so its terms are the run log's own numbers::
+
+    r_k = - (formation * E_c(t_k) + shape * E_s(t_k)) * dt
+          + progress * (s(t_k) - s(t_{k-1}))
+          - contact  * [a contact at t_k]
+          + success  * [the goal reached with the formation settled at t_k]
+          - deadlock * [the run stalled at t_k]
+
+- ``E_c``: the formation centroid error, paper 000 eq 6
+  (:func:`dfcoa_opt.metrics.formation_centroid_error`), m;
+- ``E_s``: the formation shape error, paper 000 eq 7
+  (:func:`dfcoa_opt.metrics.formation_shape_error`), m;
+- ``s``: the arc length along the leader's planned path of the point nearest
+  the robots' centroid (:func:`dfcoa_opt.outcome.formation_progress`), m, with
+  ``s(t_{-1}) = s(t_0)``;
+- a contact is any of :func:`dfcoa_opt.outcome.contact_steps` (robot-robot,
+  robot-static, robot-moving), the outcome ``collision``.
+
+Summed over an episode, the first term is ``-formation * dt * sum_k E_c(t_k)``:
+the run's ``fce_mean`` times its duration. The action of step ``k`` acts on the
+instants after ``t_k``, so it is scored from step ``k + 1`` on; with a discount
+``gamma`` that is the same objective as scoring ``t_{k+1}`` at step ``k``, up
+to the factor ``gamma`` and the constant first term.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING, cast
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dfcoa_opt.metrics import formation_centroid_error, formation_shape_error
+from dfcoa_opt.params import param
+from dfcoa_opt.sim.schema import MetricSpec
+
+if TYPE_CHECKING:
+    from dfcoa_opt.sim.log import RunLog
+
+FloatArray = NDArray[np.float64]
+
+#: How an episode ended: the outcome classes of :mod:`dfcoa_opt.outcome`.
+TERMINAL_OUTCOMES = ("success", "collision", "deadlock")
+
+
+@dataclass(frozen=True)
+class RewardSpec:
+    """Weights of the reward (module docstring); every weight is >= 0, its sign fixed there."""
+
+    formation: float = param(1.0, doc="Weight of the formation centroid error E_c (paper 000 "
+                                      "eq 6), per metre of error and second.",
+                             unit="1/(m s)", ge=0.0)
+    shape: float = param(1.0, doc="Weight of the formation shape error E_s (paper 000 eq 7), "
+                                  "per metre of error and second.", unit="1/(m s)", ge=0.0)
+    progress: float = param(1.0, doc="Reward per metre the robots' centroid advances along the "
+                                     "leader's path.", unit="1/m", ge=0.0)
+    contact: float = param(10.0, doc="Penalty at a contact (a collision, which ends the "
+                                     "episode).", ge=0.0)
+    success: float = param(10.0, doc="Bonus when the leader is at its goal with the formation "
+                                     "settled (which ends the episode).", ge=0.0)
+    deadlock: float = param(0.0, doc="Penalty when the run stalls (deadlock, which ends the "
+                                     "episode with stop_on_deadlock).", ge=0.0)
+
+    def __post_init__(self) -> None:
+        """Every weight a finite number >= 0.
+
+        Raises:
+            ValueError: A weight is negative, NaN or infinite.
+        """
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, int | float) or not math.isfinite(value) or value < 0:
+                raise ValueError(f"RewardSpec.{f.name} must be a finite number >= 0, got "
+                                 f"{value!r}")
+
+
+@dataclass(frozen=True)
+class _Instants:
+    """Poses and slots of A instants, shaped as a log's, for the metric functions."""
+
+    pose: FloatArray
+    slots: FloatArray
+
+
+def formation_errors(pose: FloatArray, slots: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Paper 000 eq 6 and eq 7 at A instants (of A runs), with the metrics' own functions.
+
+    Args:
+        pose: ``(A, N, 3)`` true poses (m, m, rad).
+        slots: ``(A, N, 2)`` the formation slots, m.
+
+    Returns:
+        ``E_c`` and ``E_s``, each ``(A,)`` in m.
+    """
+    snap = cast("RunLog", _Instants(pose, slots))
+    return formation_centroid_error(snap), formation_shape_error(snap)
+
+
+def path_arc_length(path: FloatArray, points: FloatArray) -> FloatArray:
+    """Arc length of the nearest point of ``path`` to each point, vectorised over the points.
+
+    The arithmetic of ``PurePursuit.arc_length`` (the measure of
+    :func:`dfcoa_opt.outcome.formation_progress`) in numpy, for every point in
+    one call: for each segment the clipped projection ``t``, its distance, and
+    the first nearest segment wins.
+
+    Args:
+        path: ``(P, 2)`` the leader's path, m (repeated points are dropped).
+        points: ``(A, 2)`` points, m.
+
+    Returns:
+        ``(A,)`` arc lengths from the path's start, m (0 for a one-point path).
+    """
+    path = np.asarray(path, dtype=float).reshape(-1, 2)
+    keep = np.concatenate(([True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-12))
+    path = path[keep]
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    if len(path) == 1:
+        return np.zeros(len(pts))
+    seg_len = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    cum = np.concatenate(([0.0], np.cumsum(seg_len)))
+    ax, ay = path[:-1, 0], path[:-1, 1]
+    abx, aby = path[1:, 0] - ax, path[1:, 1] - ay
+    px, py = pts[:, 0:1], pts[:, 1:2]
+    t = ((px - ax) * abx + (py - ay) * aby) / (seg_len * seg_len)
+    t = np.minimum(np.maximum(t, 0.0), 1.0)
+    dx, dy = ax + t * abx - px, ay + t * aby - py
+    best = np.argmin(np.sqrt(dx * dx + dy * dy), axis=1)
+    return cum[best] + t[np.arange(len(pts)), best] * seg_len[best]
+
+
+def dense_reward(spec: RewardSpec, dt: float, e_c: FloatArray, e_s: FloatArray,
+                 advance: FloatArray, contact: NDArray[np.bool_]) -> FloatArray:
+    """The terms of every step: formation, shape, progress and contact (module docstring).
+
+    Args:
+        spec: The weights.
+        dt: Step, s.
+        e_c: ``(A,)`` centroid errors, m.
+        e_s: ``(A,)`` shape errors, m.
+        advance: ``(A,)`` the centroid's advance along the path since the last instant, m.
+        contact: ``(A,)`` whether a contact exists at the instant.
+
+    Returns:
+        ``(A,)`` rewards.
+    """
+    return (-(spec.formation * e_c + spec.shape * e_s) * dt + spec.progress * advance
+            - spec.contact * contact)
+
+
+def end_of_episode(contact: bool, reached: bool, last_instant: bool) -> tuple[str, bool]:
+    """The outcome of a run that ended at this instant, and whether that is a termination.
+
+    The order of :func:`dfcoa_opt.outcome.classify`: a contact is a ``collision``
+    (the run stops at its first contact), else reaching the goal with the
+    formation settled a ``success``; a run that stopped for neither before its
+    last instant was stopped by the stall monitor (``stop_on_deadlock``), a
+    ``deadlock``. Running out of time (``t_max``) is a ``timeout``: a
+    truncation, not a termination.
+
+    Args:
+        contact: A contact at the run's last instant.
+        reached: The goal condition held at it.
+        last_instant: It was the last instant ``t_max`` allows.
+
+    Returns:
+        The outcome (one of :data:`dfcoa_opt.outcome.OUTCOMES`) and True when
+        the episode terminated (False: truncated).
+    """
+    if contact:
+        return "collision", True
+    if reached:
+        return "success", True
+    if not last_instant:
+        return "deadlock", True
+    return "timeout", False
+
+
+def end_bonus(spec: RewardSpec, outcome: str) -> float:
+    """The reward an episode's outcome adds at its last step (contacts are in :func:`dense_reward`).
+
+    Args:
+        spec: The weights.
+        outcome: One of :data:`dfcoa_opt.outcome.OUTCOMES`.
+    """
+    if outcome == "success":
+        return spec.success
+    if outcome == "deadlock":
+        return -spec.deadlock
+    return 0.0
+
+
+class BatchStall:
+    """:class:`~dfcoa_opt.outcome.StallMonitor`'s test for every run of a batch at once.
+
+    The Stepper asks each run's monitor ``update(k, positions, slots)`` in a
+    Python loop; this object computes the answer of every run in one
+    vectorised pass (:meth:`update`, from the arc lengths the reward already
+    needs) and each slot's :meth:`monitor` only reads its flag. The rule and
+    its arithmetic are the monitor's, so a run stops at the same instant, bit
+    for bit: instant ``k >= lag`` is stalled when the centroid advanced less
+    than ``metrics.deadlock_advance`` along the path since ``k - lag`` and every
+    robot farther than ``settle_tolerance`` from its slot moved less than
+    ``metrics.deadlock_displacement`` (:func:`dfcoa_opt.outcome.stalled`).
+
+    Args:
+        slots: E, the batch's slots.
+        steps: Instants a run can have.
+        dt: Step, s.
+        settle_tolerance: The leader's ``settle_tolerance``, m.
+        cfg: The scenario's ``[metrics]`` (window and thresholds).
+    """
+
+    def __init__(self, slots: int, steps: int, dt: float, settle_tolerance: float,
+                 cfg: MetricSpec) -> None:
+        self.progress = np.zeros((slots, steps))
+        self.flags = np.zeros(slots, dtype=bool)
+        self.lag = max(1, int(round(cfg.deadlock_window / dt)))
+        self.settle = settle_tolerance
+        self.advance, self.displacement = cfg.deadlock_advance, cfg.deadlock_displacement
+
+    def update(self, arc: FloatArray, active: NDArray[np.intp], k: NDArray[np.int64],
+               pose: FloatArray, slots: FloatArray) -> None:
+        """Record instant ``k`` of the active runs and decide which are stalled.
+
+        Args:
+            arc: ``(A,)`` each run's centroid arc length at its instant, m.
+            active: ``(A,)`` their slots.
+            k: ``(A,)`` their instants.
+            pose: The log's ``(E, T, N, 3)`` poses (rows up to ``k`` written), m.
+            slots: The log's ``(E, T, N, 2)`` slots, m.
+        """
+        self.progress[active, k] = arc
+        self.flags[active] = False
+        lo = k - self.lag
+        cand = lo >= 0
+        cand[cand] = (self.progress[active[cand], k[cand]]
+                      - self.progress[active[cand], lo[cand]] < self.advance)
+        if not cand.any():
+            return
+        e, kc, lc = active[cand], k[cand], lo[cand]
+        now = pose[e, kc, :, :2]
+        away = np.linalg.norm(now - slots[e, kc], axis=-1) > self.settle
+        moved = np.linalg.norm(now - pose[e, lc, :, :2], axis=-1)
+        self.flags[e] = np.all(~away | (moved < self.displacement), axis=1)
+
+    def monitor(self, slot: int) -> _SlotStall:
+        """The monitor to put in ``Stepper.monitors[slot]``: it reads ``slot``'s flag."""
+        return _SlotStall(self.flags, slot)
+
+
+class _SlotStall:
+    """One slot's stall monitor for the Stepper: the flag :meth:`BatchStall.update` set."""
+
+    __slots__ = ("flags", "slot")
+
+    def __init__(self, flags: NDArray[np.bool_], slot: int) -> None:
+        self.flags, self.slot = flags, slot
+
+    def update(self, k: int, positions: FloatArray, slots: FloatArray) -> bool:
+        """Whether the slot's run is stalled at ``k`` (decided by :meth:`BatchStall.update`)."""
+        return bool(self.flags[self.slot])
