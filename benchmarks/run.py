@@ -22,6 +22,7 @@ from benchmarks import (
     bench_reshape,
     bench_sim,
     bench_startup,
+    bench_vmas,
 )
 from benchmarks.timing import ratio_text
 from dfcoa_opt.environment import machine, versions
@@ -54,6 +55,10 @@ RATIO_TARGETS = {
     # issue 21: JPS vs pyastar2d; matched by prefix, it applies to the JPS row against
     # our A* too (JPS must beat A* to be worth having)
     "JPS search 1024x1024": 1.0,
+    # the vector environment against VMAS navigation, one thread each
+    "vector env step, 4 robots, 12-beam LiDAR, E=1,": 10.0,
+    "vector env step, 4 robots, 12-beam LiDAR, E=64,": 2.0,
+    "vector env step, 4 robots, 12-beam LiDAR, E=1024,": 1.0,
     # batched simulation: a run-step in a batch of 20 against one run alone
     **{bench_batch.title(c, s): ratio for c, s, ratio in bench_batch.CASES},
 }
@@ -73,6 +78,7 @@ def main() -> None:
     """Run every benchmark module, print the table, write results.md."""
     rows = (bench_lidar.run() + bench_sim.run() + bench_mcl.run() + bench_astar.run()
             + bench_orca.run() + bench_reshape.run() + bench_batch.run() + bench_startup.run()
+            + bench_vmas.run()
             + bench_figures.run())
     head = [f"# Benchmarks ({datetime.date.today().isoformat()})", "",
             f"CPU: {machine()}; {versions()}.", "",
