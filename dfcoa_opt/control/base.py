@@ -105,8 +105,9 @@ class Observation:
             this observation.
 
     The simulator shares some of these arrays between steps and runs
-    (``robot_ids``, ``leader``, ``slot``): they are read-only, and a controller
-    that wants to change one works on a copy.
+    (``robot_ids``, ``leader``, ``slot``, and in a batch ``env`` and
+    ``slot_offset``): they are read-only, and a controller that wants to change
+    one works on a copy.
     """
 
     t: float

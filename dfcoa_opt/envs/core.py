@@ -1,11 +1,13 @@
-"""The engine of both environments: E runs of one scenario as E episodes (numpy only).
+"""The engine of both environments: E runs of one scenario as E episodes (numpy and numba).
 
 :class:`TeamBatch` owns one :class:`~dfcoa_opt.sim.stepper.Stepper` whose E
 slots are the E episodes: one :meth:`~dfcoa_opt.sim.stepper.Stepper.sense` and
 one :meth:`~dfcoa_opt.sim.stepper.Stepper.apply` per step for all of them, the
-observation of every robot of every slot flattened in one call
-(:func:`~dfcoa_opt.envs.observation.flatten`) and the rewards computed as
-arrays (:mod:`dfcoa_opt.envs.rewards`). Python loops run only over the runs
+observation of every robot of every slot flattened in one compiled call
+(:func:`~dfcoa_opt.envs.observation.flatten`) and every run scored (formation
+errors, arc length, contacts, reward, stall test) in another
+(:func:`~dfcoa_opt.envs.kernels.score_runs`; :mod:`dfcoa_opt.envs.rewards` has
+the definitions and numpy references). Python loops run only over the runs
 that end. A slot's episode is the run :func:`dfcoa_opt.run` gives for its seed
 with the same commands, bit for bit; its log stays in the Stepper until the
 slot starts its next episode (:meth:`TeamBatch.episode_log`).
@@ -16,9 +18,9 @@ episode), ``leader.wait_for_formation = true`` (success needs the formation
 settled at the goal) and ``stop_on_deadlock`` (the environment's option,
 default true: a stalled run ends as a deadlock). The stall test is
 :class:`~dfcoa_opt.outcome.StallMonitor`'s, computed for every run at once
-(:class:`~dfcoa_opt.envs.rewards.BatchStall`, put in ``Stepper.monitors``):
-the per-run monitors would cost a Python loop over the runs at every step
-(about half of a step at E = 1024).
+(:class:`~dfcoa_opt.envs.rewards.BatchStall`, whose flags are the Stepper's
+``stall_flags``): the per-run monitors would cost a Python loop over the runs
+at every step (about half of a step at E = 1024).
 """
 
 from __future__ import annotations
@@ -27,35 +29,29 @@ import copy
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt import dispatch
 from dfcoa_opt.control.base import Observation
+from dfcoa_opt.envs.kernels import score_runs
 from dfcoa_opt.envs.observation import ObservationSpec, flatten
-from dfcoa_opt.envs.rewards import (
-    BatchStall,
-    RewardSpec,
-    dense_reward,
-    end_bonus,
-    end_of_episode,
-    formation_errors,
-    path_arc_length,
-)
+from dfcoa_opt.envs.rewards import BatchStall, PathTable, RewardSpec, end_bonus, end_of_episode
 from dfcoa_opt.envs.spaces import action_bounds, observation_bounds
 from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.robots.models import CommandKind, make_model
 from dfcoa_opt.sim.batch import BatchSimulator
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.sim.scenario import Scenario
+from dfcoa_opt.sim.schema import MetricSpec
 from dfcoa_opt.sim.stepper import Ended, Stepper, is_batched
 
-if TYPE_CHECKING:
-    from dfcoa_opt.outcome import StallMonitor
-
 FloatArray = NDArray[np.float64]
+
+#: What :func:`~dfcoa_opt.envs.kernels.score_runs` gets without a stall test.
+_NO_STALL = BatchStall(0, 0, 1.0, 0.0, MetricSpec())
 
 
 class _ActionSource:
@@ -182,8 +178,12 @@ class TeamBatch:
         self._ended: dict[int, Ended] = {}
         self._arc_prev = np.zeros(0)
         self._stall: BatchStall | None = None
-        self._scored: tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]] = (
-            np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool))
+        self._paths = PathTable()
+        spec_r = self.reward_spec
+        self._weights = np.array([spec_r.formation, spec_r.shape, spec_r.progress,
+                                  spec_r.contact], dtype=float)
+        self._scored: tuple[FloatArray, NDArray[np.bool_]] = (np.zeros(0),
+                                                              np.zeros(0, dtype=bool))
 
     @property
     def stepper(self) -> Stepper:
@@ -212,9 +212,12 @@ class TeamBatch:
         spec = self.scenario.spec
         self._stall = (BatchStall(len(seeds), st.steps, self.dt, spec.leader.settle_tolerance,
                                   spec.metrics) if spec.stop_on_deadlock else None)
-        if self._stall is not None:
-            st.monitors = [cast("StallMonitor", self._stall.monitor(e))
-                           for e in range(len(seeds))]
+        if self._stall is not None:  # one compiled pass for every run, no monitor per run
+            st.stall_flags = self._stall.flags
+            st.monitors = [None] * len(seeds)
+        self._paths = PathTable()
+        for g, sc in enumerate(sim.group_scenarios):
+            self._paths.set(g, sc.leader_path)
         st.start_clock()
         self._ended = {}
         self._arc_prev = np.zeros(len(seeds))
@@ -230,8 +233,8 @@ class TeamBatch:
             raise ValueError(f"seeds must be >= 0, got {seed}")
         st = self.stepper
         st.restart(slot, int(seed))
-        if self._stall is not None:
-            st.monitors[slot] = cast("StallMonitor", self._stall.monitor(slot))
+        g = int(st.sim.group[slot])
+        self._paths.set(g, st.sim.group_scenarios[g].leader_path)
         self._ended.pop(slot, None)
 
     @property
@@ -276,16 +279,13 @@ class TeamBatch:
         act = st.active
         if not len(act):
             return out
-        kk = st.k[act]
         cmd = actions[act].reshape(len(act) * self.n, -1)
-        if not np.all(np.isfinite(cmd)):
+        if not np.isfinite(cmd).all():
             bad = sorted(set((act[np.nonzero(~np.isfinite(actions[act]))[0]]).tolist()))
             raise ValueError(f"NaN or infinite action in sub-environment(s) {bad}")
         ended = st.apply(cmd, self.kind, self._score)
-        e_c, e_s, arc, contact = self._scored
-        advance = np.where(kk == 0, 0.0, arc - self._arc_prev[act])
-        self._arc_prev[act] = arc
-        out.reward[act] = dense_reward(spec, self.dt, e_c, e_s, advance, contact)
+        reward, contact = self._scored
+        out.reward[act] = reward
         if ended:
             rows = np.searchsorted(act, [end.slot for end in ended])
             for end, j in zip(ended, rows, strict=True):
@@ -300,32 +300,21 @@ class TeamBatch:
     def _score(self, log: Any, active: NDArray[np.intp], kk: NDArray[np.int64]) -> None:
         """Inside ``apply``, the instant's rows logged, before the stop tests: score every run.
 
-        ``log`` is the Stepper's :class:`~dfcoa_opt.sim.log.BatchLog`.
-
-        The formation errors, the centroid's arc length and the contacts of
-        every active run at its instant; the stall flags
-        (:class:`~dfcoa_opt.envs.rewards.BatchStall`) that the stop test reads.
+        ``log`` is the Stepper's :class:`~dfcoa_opt.sim.log.BatchLog`. One
+        compiled pass (:func:`~dfcoa_opt.envs.kernels.score_runs`): the
+        formation errors, the centroid's arc length along its world's path and
+        the contacts of every active run at its instant, its reward (without
+        the end bonus), and the stall flags the stop test reads
+        (:class:`~dfcoa_opt.envs.rewards.BatchStall`).
         """
-        pose = log.pose[active, kk]
-        e_c, e_s = formation_errors(pose, log.slots[active, kk])
-        arc = self._arc(pose[..., :2].mean(axis=1), active)
-        contact = ((log.robot_contacts[active, kk] > 0) | (log.obstacle_contacts[active, kk] > 0)
-                   | (log.dynamic_contacts[active, kk] > 0))
-        if self._stall is not None:
-            self._stall.update(arc, active, kk, log.pose, log.slots)
-        self._scored = (e_c, e_s, arc, contact)
-
-    def _arc(self, centroid: FloatArray, act: NDArray[np.intp]) -> FloatArray:
-        """``(A,)`` arc length along each run's leader path of its centroid, m."""
-        sim = self.stepper.sim
-        if len(sim.group_scenarios) == 1:
-            return path_arc_length(sim.group_scenarios[0].leader_path, centroid)
-        out = np.empty(len(act))
-        group = sim.group[act]
-        for g in np.unique(group):  # one world per seed (clutter): one path per group
-            rows = group == g
-            out[rows] = path_arc_length(sim.group_scenarios[g].leader_path, centroid[rows])
-        return out
+        st, paths = self.stepper, self._paths
+        stall = _NO_STALL if self._stall is None else self._stall
+        reward, contact, *_ = score_runs(
+            log.pose, log.slots, log.robot_contacts, log.obstacle_contacts, log.dynamic_contacts,
+            active, kk, st.sim.group, paths.start, paths.count, paths.data, self._arc_prev,
+            self._weights, self.dt, stall.progress, stall.flags, self._stall is not None,
+            stall.lag, stall.advance, stall.settle, stall.displacement)
+        self._scored = (reward, contact)
 
     def time(self, slot: int) -> float:
         """The time of ``slot``'s next instant, s."""

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.control.base import Observation, slot_velocity
+from dfcoa_opt.envs.kernels import flatten_rows
 from dfcoa_opt.params import param
 
 FloatArray = NDArray[np.float64]
@@ -74,8 +75,44 @@ def _to_body(vec: FloatArray, heading: FloatArray) -> FloatArray:
                     axis=-1)
 
 
+_NO_ENV = np.zeros(0, dtype=np.intp)
+_NO_RANGES = np.zeros((0, 0))
+
+
+def _f64(x: object) -> FloatArray:
+    """``x`` as a C-contiguous float64 array (itself when it is one)."""
+    return np.ascontiguousarray(x, dtype=np.float64)
+
+
 def flatten(obs: Observation, spec: ObservationSpec) -> FloatArray:
     """Every row of ``obs`` as the vector of :class:`ObservationSpec` (module docstring).
+
+    One compiled pass (:func:`~dfcoa_opt.envs.kernels.flatten_rows`) with the
+    bits of :func:`flatten_reference`.
+
+    Args:
+        obs: The observation of one run, or of a batch (``obs.env`` set).
+        spec: What to keep and the scales.
+
+    Returns:
+        ``(R, spec.size)`` float64, one row per robot.
+    """
+    scan, nb, mv = obs.scan, obs.neighbours, obs.obstacles
+    r = len(obs.pose)
+    ranges = _NO_RANGES if scan is None else _f64(scan.ranges).reshape(r, -1)
+    return flatten_rows(
+        _f64(obs.pose), _f64(obs.velocity), _f64(obs.leader).reshape(-1, 5),
+        _NO_ENV if obs.env is None else np.ascontiguousarray(obs.env, dtype=np.intp),
+        _f64(obs.slot), ranges, scan is not None,
+        1.0 if scan is None else float(scan.range_max),
+        np.ascontiguousarray(nb.index, dtype=np.intp), _f64(nb.position), _f64(nb.velocity),
+        _f64(mv.position), _f64(mv.velocity), _f64(mv.radius),
+        np.ascontiguousarray(mv.mask, dtype=np.bool_), int(spec.beams), int(spec.neighbours),
+        int(spec.obstacles), float(spec.range), float(spec.v_max))
+
+
+def flatten_reference(obs: Observation, spec: ObservationSpec) -> FloatArray:
+    """:func:`flatten` in vectorised numpy: the reference its compiled pass gives bit for bit.
 
     Args:
         obs: The observation of one run, or of a batch (``obs.env`` set).

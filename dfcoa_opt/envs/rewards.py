@@ -103,13 +103,34 @@ def formation_errors(pose: FloatArray, slots: FloatArray) -> tuple[FloatArray, F
     return formation_centroid_error(snap), formation_shape_error(snap)
 
 
+def path_segments(path: FloatArray) -> tuple[FloatArray, ...]:
+    """The segments of a path as :func:`path_arc_length` measures along them.
+
+    Args:
+        path: ``(P, 2)`` the leader's path, m (repeated points are dropped).
+
+    Returns:
+        ``(ax, ay, abx, aby, seg_len, cum)``, each ``(P' - 1,)`` but ``cum``
+        ``(P',)``: each segment's start, direction (end minus start) and length,
+        and the arc length at each kept point, m.
+    """
+    path = np.asarray(path, dtype=float).reshape(-1, 2)
+    keep = np.concatenate(([True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-12))
+    path = path[keep]
+    seg_len = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    cum = np.concatenate(([0.0], np.cumsum(seg_len)))
+    ax, ay = path[:-1, 0], path[:-1, 1]
+    return ax, ay, path[1:, 0] - ax, path[1:, 1] - ay, seg_len, cum
+
+
 def path_arc_length(path: FloatArray, points: FloatArray) -> FloatArray:
     """Arc length of the nearest point of ``path`` to each point, vectorised over the points.
 
     The arithmetic of ``PurePursuit.arc_length`` (the measure of
     :func:`dfcoa_opt.outcome.formation_progress`) in numpy, for every point in
     one call: for each segment the clipped projection ``t``, its distance, and
-    the first nearest segment wins.
+    the first nearest segment wins. (The environments' step computes it in
+    :func:`~dfcoa_opt.envs.kernels.score_runs`, with these bits.)
 
     Args:
         path: ``(P, 2)`` the leader's path, m (repeated points are dropped).
@@ -118,16 +139,10 @@ def path_arc_length(path: FloatArray, points: FloatArray) -> FloatArray:
     Returns:
         ``(A,)`` arc lengths from the path's start, m (0 for a one-point path).
     """
-    path = np.asarray(path, dtype=float).reshape(-1, 2)
-    keep = np.concatenate(([True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-12))
-    path = path[keep]
+    ax, ay, abx, aby, seg_len, cum = path_segments(path)
     pts = np.asarray(points, dtype=float).reshape(-1, 2)
-    if len(path) == 1:
+    if len(cum) == 1:
         return np.zeros(len(pts))
-    seg_len = np.linalg.norm(np.diff(path, axis=0), axis=1)
-    cum = np.concatenate(([0.0], np.cumsum(seg_len)))
-    ax, ay = path[:-1, 0], path[:-1, 1]
-    abx, aby = path[1:, 0] - ax, path[1:, 1] - ay
     px, py = pts[:, 0:1], pts[:, 1:2]
     t = ((px - ax) * abx + (py - ay) * aby) / (seg_len * seg_len)
     t = np.minimum(np.maximum(t, 0.0), 1.0)
@@ -201,11 +216,12 @@ class BatchStall:
     """:class:`~dfcoa_opt.outcome.StallMonitor`'s test for every run of a batch at once.
 
     The Stepper asks each run's monitor ``update(k, positions, slots)`` in a
-    Python loop; this object computes the answer of every run in one
-    vectorised pass (:meth:`update`, from the arc lengths the reward already
-    needs) and each slot's :meth:`monitor` only reads its flag. The rule and
-    its arithmetic are the monitor's, so a run stops at the same instant, bit
-    for bit: instant ``k >= lag`` is stalled when the centroid advanced less
+    Python loop; this object holds the answer of every run (:attr:`flags`,
+    the Stepper's ``stall_flags``), set in the compiled pass that scores the
+    step (:func:`~dfcoa_opt.envs.kernels.score_runs`, from the arc lengths the
+    reward already needs; :meth:`update_reference` is its numpy reference).
+    The rule and its arithmetic are the monitor's, so a run stops at the same
+    instant, bit for bit: instant ``k >= lag`` is stalled when the centroid advanced less
     than ``metrics.deadlock_advance`` along the path since ``k - lag`` and every
     robot farther than ``settle_tolerance`` from its slot moved less than
     ``metrics.deadlock_displacement`` (:func:`dfcoa_opt.outcome.stalled`).
@@ -226,9 +242,13 @@ class BatchStall:
         self.settle = settle_tolerance
         self.advance, self.displacement = cfg.deadlock_advance, cfg.deadlock_displacement
 
-    def update(self, arc: FloatArray, active: NDArray[np.intp], k: NDArray[np.int64],
-               pose: FloatArray, slots: FloatArray) -> None:
-        """Record instant ``k`` of the active runs and decide which are stalled.
+    def update_reference(self, arc: FloatArray, active: NDArray[np.intp], k: NDArray[np.int64],
+                         pose: FloatArray, slots: FloatArray) -> None:
+        """Record instant ``k`` of the active runs and decide which are stalled, in numpy.
+
+        The reference of the environments' compiled pass
+        (:func:`~dfcoa_opt.envs.kernels.score_runs`, which sets :attr:`progress`
+        and :attr:`flags` with these bits).
 
         Args:
             arc: ``(A,)`` each run's centroid arc length at its instant, m.
@@ -251,19 +271,44 @@ class BatchStall:
         moved = np.linalg.norm(now - pose[e, lc, :, :2], axis=-1)
         self.flags[e] = np.all(~away | (moved < self.displacement), axis=1)
 
-    def monitor(self, slot: int) -> _SlotStall:
-        """The monitor to put in ``Stepper.monitors[slot]``: it reads ``slot``'s flag."""
-        return _SlotStall(self.flags, slot)
 
+class PathTable:
+    """Every world's leader path as segments (:func:`path_segments`), for the compiled arc length.
 
-class _SlotStall:
-    """One slot's stall monitor for the Stepper: the flag :meth:`BatchStall.update` set."""
+    Group ``g`` (a world of the batch, ``BatchSimulator.group``) has its
+    segments in columns ``start[g]:start[g] + count[g]`` of :attr:`data`, whose
+    rows are ``ax, ay, abx, aby, seg_len`` and the arc length at each
+    segment's start. A group given a new world gets its path appended; the
+    table is compacted when it fills.
+    """
 
-    __slots__ = ("flags", "slot")
+    def __init__(self) -> None:
+        self.data = np.zeros((6, 64))
+        self.start = np.zeros(0, dtype=np.int64)
+        self.count = np.zeros(0, dtype=np.int64)
+        self.paths: list[FloatArray | None] = []
+        self.used = 0
 
-    def __init__(self, flags: NDArray[np.bool_], slot: int) -> None:
-        self.flags, self.slot = flags, slot
-
-    def update(self, k: int, positions: FloatArray, slots: FloatArray) -> bool:
-        """Whether the slot's run is stalled at ``k`` (decided by :meth:`BatchStall.update`)."""
-        return bool(self.flags[self.slot])
+    def set(self, g: int, path: FloatArray) -> None:
+        """Make ``path`` group ``g``'s (nothing to do when it already is)."""
+        if g < len(self.paths) and self.paths[g] is path:
+            return
+        ax, ay, abx, aby, seg_len, cum = path_segments(path)
+        segs = np.stack((ax, ay, abx, aby, seg_len, cum[:-1]))
+        while g >= len(self.paths):
+            self.paths.append(None)
+            self.start, self.count = np.append(self.start, 0), np.append(self.count, 0)
+        self.paths[g], self.count[g] = path, 0
+        n = segs.shape[1]
+        if self.used + n > self.data.shape[1]:  # compact, with room to grow
+            live = int(self.count.sum())
+            data = np.zeros((6, max(64, 2 * (live + n))))
+            at = 0
+            for h in np.flatnonzero(self.count):
+                c, s0 = int(self.count[h]), int(self.start[h])
+                data[:, at:at + c] = self.data[:, s0:s0 + c]
+                self.start[h], at = at, at + c
+            self.data, self.used = data, at
+        self.data[:, self.used:self.used + n] = segs
+        self.start[g], self.count[g] = self.used, n
+        self.used += n

@@ -229,6 +229,26 @@ class BatchLog:
                   for name, arr in one.arrays().items() if name not in ("offsets", "dyn_radius")}
         return cls(arrays)
 
+    def write(self, active: NDArray[np.intp], k: NDArray[np.int64],
+              **fields: np.ndarray | int) -> tuple[Any, Any]:
+        """Write instant ``k[j]`` of run ``active[j]`` of every given field, one write a field.
+
+        Args:
+            active: ``(A,)`` the runs, strictly increasing.
+            k: ``(A,)`` their instants.
+            **fields: Each field's ``(A, ...)`` rows (or a scalar for all).
+
+        Returns:
+            The index written (``(active, k)``, or a slice of runs and one
+            instant when the runs are consecutive on one clock: a cheaper write).
+        """
+        a = len(active)
+        one = a and active[-1] - active[0] == a - 1 and (a == 1 or bool((k == k[0]).all()))
+        at = (slice(int(active[0]), int(active[-1]) + 1), int(k[0])) if one else (active, k)
+        for name, rows in fields.items():
+            getattr(self, name)[at] = rows
+        return at
+
     def clear(self, e: int) -> None:
         """Run ``e``'s rows as :meth:`allocate` left them (a new run in that slot)."""
         for name in self._names:

@@ -99,6 +99,8 @@ class Stepper:
         self.robot_ids = np.arange(n)
         self.robot_ids.flags.writeable = False  # the same rows every step
         self.monitors = [self._monitor(sc) for sc in sim.scenarios]
+        #: ``(S,)`` stall flags set for all runs by ``apply``'s ``extras``, instead of ``monitors``
+        self.stall_flags: NDArray[np.bool_] | None = None
         self.active = np.arange(slots)  # the slots with a run, in row order
         self.k = np.zeros(slots, dtype=np.int64)  # each slot's step index
         self.prev_static = np.zeros(slots * n, dtype=bool)
@@ -110,6 +112,9 @@ class Stepper:
         self.wall = np.zeros(slots)
         self._tick = time.perf_counter()  # run wall times count from start_clock()
         self._s: dict[str, Any] = {}  # what sense() saw, for apply()
+        self._owners = np.concatenate((np.arange(n), np.full(self.m, -1)))  # a run's LiDAR discs
+        self._disc_r = np.concatenate((np.full(n, sim.radius), dyn.radii))
+        self._rows: tuple[Any, ...] = (None,)  # per-row constants of the last active set
 
     def start_clock(self) -> None:
         """Start counting the runs' wall times (after the controllers' resets)."""
@@ -151,7 +156,7 @@ class Stepper:
         start = sc.start_pose(rng)
         self.estimators[slot] = make_estimators(self.spec.localization.mode, [sc])[0]
         self.estimators[slot].reset(rng)
-        self.monitors[slot] = self._monitor(sc)
+        self.monitors[slot] = None if self.stall_flags is not None else self._monitor(sc)
         self.k[slot], self.wall[slot] = 0, 0.0
         if self.log is not None:
             self.log.clear(slot)
@@ -183,15 +188,13 @@ class Stepper:
         one_group = len(self.tracks) == 1
         if self.scanning and one_group and a > 1:
             scan_all = sim.lidars[0].scan_teams(st.pose, n, dyn_pos, self.dyn.radii,
-                                                sim.radius, [self.rngs[e] for e in active])
+                                                sim.radius, self._row_constants()[6])  # rngs
         elif self.scanning:
-            owners = np.concatenate((np.arange(n), np.full(m, -1)))
-            disc_r = np.concatenate((np.full(n, sim.radius), self.dyn.radii))
             for j, e in enumerate(active):
                 rows = slice(j * n, (j + 1) * n)
                 scans[j] = sim.lidars[sim.group[e]].scan(
-                    st.pose[rows], np.vstack((pos[rows], dyn_pos[j])), disc_r, owners,
-                    self.rngs[e])
+                    st.pose[rows], np.vstack((pos[rows], dyn_pos[j])), self._disc_r,
+                    self._owners, self.rngs[e])
         if self.scanning and scan_all is None:  # (one call per run: seeded worlds, or one run)
             scan_all = scans[0] if a == 1 else LaserScan(
                 scans[0].angle_min, scans[0].angle_increment, scans[0].range_min,
@@ -200,18 +203,39 @@ class Stepper:
         sensors = self.spec.sensors
         prox = batch_proximity(pos, n, sensors.comm_radius, sensors.max_neighbors,
                                2.0 * sim.radius)
-        base = (np.arange(a * n) // n * n)[:, None]
-        row_index = np.where(prox.index >= 0, prox.index + base, -1)
+        rows = self._row_constants()
+        row_index = (prox.index if a == 1 else  # (one run: its indices are its rows)
+                     np.where(prox.index >= 0, prox.index + rows[1], -1))
         nb_pos, nb_vel, nb_heading = gather(row_index, est, st.velocity)
-        mask = dyn_dist - self.dyn.radii[None, :] <= sim.obstacle_range
-        w = mask[..., None]
-        rows_pos, rows_vel = np.repeat(dyn_pos, n, axis=0), np.repeat(dyn_vel, n, axis=0)
-        moving = MovingObstacles(np.where(w, rows_pos, 0.0), np.where(w, rows_vel, 0.0),
-                                 np.where(mask, self.dyn.radii[None, :], 0.0), mask)
+        moving = rows[5]  # no moving obstacle: the same empty arrays every step
+        if m:
+            mask = dyn_dist - self.dyn.radii[None, :] <= sim.obstacle_range
+            w = mask[..., None]
+            rows_pos, rows_vel = np.repeat(dyn_pos, n, axis=0), np.repeat(dyn_vel, n, axis=0)
+            moving = MovingObstacles(np.where(w, rows_pos, 0.0), np.where(w, rows_vel, 0.0),
+                                     np.where(mask, self.dyn.radii[None, :], 0.0), mask)
         self.leaders[active] = lead
         self._s = dict(pos=pos, dyn_pos=dyn_pos, dyn_dist=dyn_dist, lead=lead, slots=slots,
                        at_goal=at_goal, scans=scans, scan_all=scan_all, est=est, prox=prox,
                        row_index=row_index, nb=(nb_pos, nb_vel, nb_heading), moving=moving)
+
+    def _row_constants(self) -> tuple[Any, ...]:
+        """Per-row constants of the active set, made again when it changes.
+
+        ``(active, each row's team's first row, robot ids, env, slot offsets,
+        empty moving obstacles, the runs' generators)``; steps and observations
+        share them, so the arrays are read-only.
+        """
+        if self._rows[0] is not self.active:  # a restart or an end made a new array
+            a, n = len(self.active), self.n
+            rows = [(np.arange(a * n) // n * n)[:, None], np.tile(self.robot_ids, a),
+                    np.repeat(self.active, n), np.tile(self.sim.scenarios[0].offsets, (a, 1)),
+                    np.zeros((a * n, 0, 2)), np.zeros((a * n, 0)), np.zeros((a * n, 0), bool)]
+            for arr in rows:
+                arr.flags.writeable = False
+            self._rows = (self.active, *rows[:4], MovingObstacles(rows[4], rows[4], rows[5],
+                          rows[6]), [self.rngs[e] for e in self.active])
+        return self._rows
 
     def _estimate(self, scans: list[LaserScan | None], scan_all: LaserScan | None,
                   active: NDArray[np.intp]) -> FloatArray:
@@ -261,17 +285,17 @@ class Stepper:
         """
         s, n, a = self._s, self.n, len(self.active)
         kk = self.k[self.active]
-        same = bool(np.all(kk == kk[0]))
+        same = a == 1 or bool((kk == kk[0]).all())
         if one_clock and not same:
             raise DfcoaError("a batched controller needs the runs of a batch on one clock")
         nb_pos, nb_vel, nb_heading = s["nb"]
+        rows = self._row_constants()
         return Observation(
-            float(kk[0] * self.dt) if same else math.nan, self.dt,
-            np.tile(self.robot_ids, a), s["est"],
+            float(kk[0] * self.dt) if same else math.nan, self.dt, rows[2], s["est"],
             self.state.velocity, self.state.twist, s["scan_all"],
             Neighbours(s["row_index"], nb_pos, nb_vel, s["prox"].distance, nb_heading),
-            s["moving"], self.leaders, self.goal, np.tile(self.sim.scenarios[0].offsets, (a, 1)),
-            np.ascontiguousarray(s["slots"]).reshape(a * n, 2), env=np.repeat(self.active, n))
+            s["moving"], self.leaders, self.goal, rows[4],
+            np.ascontiguousarray(s["slots"]).reshape(a * n, 2), env=rows[3])
 
     def run_observation(self, j: int) -> Observation:
         """The observation of the ``j``-th active run alone (today's single-run Observation)."""
@@ -315,26 +339,19 @@ class Stepper:
         clearance = self._clearance(pos, active)
         static_hit = clearance < sim.radius
         dyn_hit = s["dyn_dist"] < sim.radius + self.dyn.radii[None, :]
-        pairs = np.diff(prox.key_ptr)
+        pairs = prox.key_ptr[1:] - prox.key_ptr[:-1]
         events = (new_contacts(self.prev_keys, self.prev_ptr, prox.contact_keys, prox.key_ptr)
-                  + (static_hit & ~self.prev_static).reshape(a, n).sum(axis=1)
-                  + (dyn_hit & ~self.prev_dyn).reshape(a, n * m).sum(axis=1))
-        # -- log
-        log.pose[active, kk] = st.pose.reshape(a, n, 3)
-        log.pose_est[active, kk] = s["est"].reshape(a, n, 3)
-        log.velocity[active, kk] = st.velocity.reshape(a, n, 2)
-        log.twist[active, kk] = new_state.twist.reshape(a, n, 2)
-        log.leader[active, kk] = s["lead"]
-        log.slots[active, kk] = s["slots"]
-        log.clearance[active, kk] = clearance.reshape(a, n)
-        log.min_inter_robot[active, kk] = prox.min_distance
-        log.robot_contacts[active, kk] = pairs
-        log.obstacle_contacts[active, kk] = static_hit.reshape(a, n).sum(axis=1)
-        log.dynamic_contacts[active, kk] = (dyn_hit.any(axis=1).reshape(a, n).sum(axis=1)
-                                            if m else 0)
-        log.collision_events[active, kk] = events
-        log.dyn_pos[active, kk] = s["dyn_pos"]
-        log.command[active, kk] = cmd.reshape(a, n, -1)
+                  + (static_hit & ~self.prev_static).reshape(a, n).sum(axis=1))
+        if m:
+            events += (dyn_hit & ~self.prev_dyn).reshape(a, n * m).sum(axis=1)
+        at = log.write(  # -- log: one write per field for every run
+            active, kk, pose=st.pose.reshape(a, n, 3), pose_est=s["est"].reshape(a, n, 3),
+            velocity=st.velocity.reshape(a, n, 2), twist=new_state.twist.reshape(a, n, 2),
+            leader=s["lead"], slots=s["slots"], clearance=clearance.reshape(a, n),
+            min_inter_robot=prox.min_distance, robot_contacts=pairs,
+            obstacle_contacts=static_hit.reshape(a, n).sum(axis=1),
+            dynamic_contacts=dyn_hit.any(axis=1).reshape(a, n).sum(axis=1) if m else 0,
+            collision_events=events, dyn_pos=s["dyn_pos"], command=cmd.reshape(a, n, -1))
         if extras is not None:
             extras(log, active, kk)
         # -- stop conditions
@@ -346,20 +363,24 @@ class Stepper:
         ended = reached.copy()
         if spec.stop_on_collision:
             ended |= events > 0
-        for j, e in enumerate(active):
-            mon = self.monitors[e]
-            if not ended[j] and mon is not None and mon.update(int(kk[j]), log.pose[e, ..., :2],
-                                                               log.slots[e]):
-                ended[j] = True
+        if self.stall_flags is not None:
+            ended |= self.stall_flags[active]
+        elif self.monitors.count(None) < len(self.monitors):
+            for j, e in enumerate(active):
+                mon = self.monitors[e]
+                if not ended[j] and mon is not None and mon.update(
+                        int(kk[j]), log.pose[e, ..., :2], log.slots[e]):
+                    ended[j] = True
         now = time.perf_counter()
-        self.wall[active] += (now - self._tick) / a
+        self.wall[at[0]] += (now - self._tick) / a
         self._tick = now
         ended |= kk == self.steps - 1
-        out = [Ended(int(e), int(k) + 1, bool(r), float(k * dt) if r else math.nan)
-               for e, k, r in zip(active[ended], kk[ended], reached[ended], strict=True)]
-        self.k[active] += 1
-        keep = ~ended
+        self.k[at[0]] += 1
+        out: list[Ended] = []
         if ended.any():
+            out = [Ended(int(e), int(k) + 1, bool(r), float(k * dt) if r else math.nan)
+                   for e, k, r in zip(active[ended], kk[ended], reached[ended], strict=True)]
+            keep = ~ended
             rows = np.repeat(keep, n)
             new_state = RobotState(new_state.pose[rows], new_state.velocity[rows],
                                    new_state.twist[rows])
