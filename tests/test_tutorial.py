@@ -29,6 +29,7 @@ def test_the_tutorial_notebook_executes():
                      for o in outputs)
     assert "'outcome': 'success'" in text  # dfcoa on S1
     assert "capped_goto" in text and "| variant |" in text  # the comparison and its report
+    assert "my_policy/learned.json" in text  # the trained policy in the paired comparison
     assert any("image/png" in o.get("data", {}) for o in outputs)  # the plot and the ladder
 
 

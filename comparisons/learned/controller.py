@@ -1,0 +1,84 @@
+"""``learned``: a small MLP policy cloned from ``goto_slot+cbf`` (BC + DAgger).
+
+The network reads each robot's observation vector
+(:func:`dfcoa_opt.envs.observation.flatten`: slot, heading, velocities, 40
+LiDAR beams, 4 neighbours, 2 moving obstacles, in the robot's frame) and gives
+a body-frame velocity command (m/s), converted for unicycles by the
+simulator's near-identity map like every velocity controller. It runs the
+shipped policy file ``learned.json`` (+ ``learned.npz``) through the machinery
+of ``policy:PATH`` (:mod:`dfcoa_opt.control.policy`): the same checks, the
+same compiled kernel, batched runs equal single runs bit for bit.
+
+``python -m comparisons.learned.train --seed 0 --out comparisons/learned/``
+reproduces the shipped files; ``docs/methods/learned.md`` has the method and
+its results.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dfcoa_opt.control.policy import (
+    PREFIX,
+    LoadedPolicy,
+    PolicyController,
+    file_policy_class,
+    policy_digest,
+)
+from dfcoa_opt.control.registry import register
+from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.params import param
+
+#: The shipped policy file (its weights: ``learned.npz`` beside it).
+SHIPPED = Path(__file__).resolve().parent / "learned.json"
+#: SHA-256 of the shipped spec and weights (:func:`~dfcoa_opt.control.policy.policy_digest`).
+#: The results cache fingerprints code, not data: a retrained file must change this line,
+#: which re-simulates the stored runs of ``learned``.
+SHIPPED_DIGEST = "2ee25b1eca127db2f12a362583e033f7e9742ca0f2e331664ddc643eb2c9be19"
+
+
+def shipped_policy() -> LoadedPolicy:
+    """The shipped policy, loaded and checked (kept while the files are unchanged).
+
+    Raises:
+        ScenarioError: A file that does not fit, or shipped files whose digest
+            is not :data:`SHIPPED_DIGEST` (retrained without updating it).
+    """
+    digest = policy_digest(SHIPPED)
+    if digest != SHIPPED_DIGEST:
+        raise ScenarioError(str(SHIPPED), "", f"SHA-256 {digest[:16]}... is not the one "
+                            f"comparisons/learned/controller.py expects "
+                            f"({SHIPPED_DIGEST[:16]}...): after retraining, set SHIPPED_DIGEST "
+                            "to the new digest, so that stored results of 'learned' are rerun")
+    return file_policy_class(PREFIX + str(SHIPPED)).policy
+
+
+@register("learned")
+class Learned(PolicyController):
+    """The shipped (or another) policy file's network as a registered controller."""
+
+    @dataclass(frozen=True)
+    class Params:
+        """Parameters of ``learned``."""
+
+        policy: str = param("", doc="Another policy file (JSON spec) to run instead of the "
+                                    "shipped comparisons/learned/learned.json; relative to "
+                                    "the working folder. Empty: the shipped one.")
+
+    def __init__(self, params: Params | None = None) -> None:
+        super().__init__(params)
+        pol = (shipped_policy() if not self.p.policy
+               else file_policy_class(PREFIX + self.p.policy).policy)
+        self.policy = pol
+        self.command = pol.spec.command
+        self.frame = pol.spec.frame or "body"
+        self.spec = pol.spec.observation
+        self.uses_scan = self.spec.beams > 0
+
+    def forward(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Actions ``(R, 2)`` (m/s, :attr:`frame`) for observation vectors ``(R, D)``."""
+        return self.policy.forward(x)
