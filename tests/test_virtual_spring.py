@@ -19,8 +19,6 @@ from comparisons.virtual_spring.equations import (
     dynamic_speed_limit,
     error_trend,
     fig1_adjacency,
-    ideal_position_error,
-    ideal_positions,
     laplacian,
     leader_velocity,
     polygon_normals,
@@ -322,19 +320,6 @@ def test_eq12_13_limit_follows_the_error_trend(memory):
     free = ctrl(scenario=sc, conflict_resolution=False, speed_limit=False)
     free.act(_two(-0.4, 0.0))
     assert np.hypot(*free.act(_two(-0.2, 0.1))[1]) > 0.2
-
-
-# ----------------------------------------------------------------------- eq 14
-def test_eq14_ideal_position_error():
-    ideal = ideal_positions([1.0, 1.0], E[1:3])
-    np.testing.assert_allclose(ideal, [[-0.5, 2.5], [-2.0, 2.5]])
-    np.testing.assert_allclose(ideal_position_error([[0.5, 2.5], [-2.0, 0.5]], ideal),
-                               [1.0, 4.0])
-    # over a log: (T, 2) leader positions, (T, N, 2) ideals
-    lead = np.array([[1.0, 1.0], [2.0, 1.0]])
-    pos = np.array([[[1.0, 1.0], [-0.5, 3.5]], [[2.0, 1.0], [0.5, 2.5]]])
-    mse = ideal_position_error(pos, ideal_positions(lead, E[:2]))
-    np.testing.assert_allclose(mse, [[0.0, 1.0], [0.0, 0.0]])
 
 
 # --------------------------------------------------------------------- eq 15-17

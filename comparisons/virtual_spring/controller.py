@@ -59,8 +59,9 @@ Decisions (the paper's words, the choice and the reason:
    (a scalar added to a vector) as a speed change along the pair's mean
    direction of motion; a non-cooperating moving obstacle makes robot i take
    ``obstacle_share`` times its half.
-10. Eq 14's ideal position is ``p_l + E_i`` (leader robot, not the virtual
-    leader): :func:`comparisons.virtual_spring.equations.ideal_position_error`.
+10. Eq 14's ideal position is the robot's slot around the virtual leader,
+    which runs the obstacle-free route (``log.slots``):
+    :func:`dfcoa_opt.metrics_robots.mse_per_robot`.
 
 Batched (:class:`~dfcoa_opt.control.base.BatchedController`): one object
 steps every run of a batch in one pass, per-run values in rows ``env * N +

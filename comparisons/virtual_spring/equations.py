@@ -14,7 +14,7 @@ inputs only. Equation numbers are the paper's (``docs/methods/virtual_spring.md`
 * :func:`leader_avoidance_velocity`, :func:`follower_avoidance_velocity` -- eq 8, eq 9.
 * :func:`consistency_velocity` -- eq 10-11.
 * :func:`error_trend` and :func:`dynamic_speed_limit` -- eq 12-13.
-* :func:`ideal_positions`, :func:`ideal_position_error` -- eq 14.
+* eq 14 (the error to the ideal position): :func:`dfcoa_opt.metrics_robots.mse_per_robot`.
 * eq 15-17 (conflict resolution): :mod:`comparisons.virtual_spring.conflict`.
 """
 
@@ -327,31 +327,3 @@ def cap_speed(v: ArrayLike, limit: ArrayLike) -> FloatArray:
     norm = np.hypot(v[:, 0], v[:, 1])
     lim = np.asarray(limit, dtype=float)
     return v * np.where(norm > lim, lim / np.where(norm > 0.0, norm, 1.0), 1.0)[:, None]
-
-
-def ideal_positions(leader_position: ArrayLike, offsets: ArrayLike) -> FloatArray:
-    """Eq 14's ideal positions ``p_i-idea = p_l + E_i`` (the consistency criterion alone).
-
-    Args:
-        leader_position: ``(..., 2)`` the leader robot's position, m.
-        offsets: ``(..., N, 2)`` desired offsets ``E_i`` from the leader, m.
-
-    Returns:
-        ``(..., N, 2)`` ideal positions, m.
-    """
-    return np.asarray(leader_position, dtype=float)[..., None, :] + np.asarray(offsets,
-                                                                                dtype=float)
-
-
-def ideal_position_error(position: ArrayLike, ideal: ArrayLike) -> FloatArray:
-    """Eq 14: ``MSE_i(t) = (x_i-idea - x_i)^2 + (y_i-idea - y_i)^2``.
-
-    Args:
-        position: ``(..., 2)`` actual positions, m.
-        ideal: ``(..., 2)`` ideal positions (:func:`ideal_positions`), m.
-
-    Returns:
-        ``(...)`` squared distances, m^2.
-    """
-    d = np.asarray(ideal, dtype=float) - np.asarray(position, dtype=float)
-    return d[..., 0] ** 2 + d[..., 1] ** 2
