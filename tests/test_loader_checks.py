@@ -69,3 +69,22 @@ def test_a_parked_disc_and_a_moving_disc_are_fine():
                   "start_time": 61.0}):
         scenario_from_dict({**BASE, "t_max": 60.0, "world": {
             **BASE["world"], "dynamic_obstacles": [{"radius": 0.3, **disc}]}})
+
+
+def test_start_behind_moves_every_robot_back_along_the_leaders_heading():
+    base = scenario_from_dict({**BASE, "leader": {**BASE["leader"], "start": [5.0, 5.0]}})
+    back = scenario_from_dict({**BASE, "leader": {**BASE["leader"], "start": [5.0, 5.0]},
+                               "team": {"n": 4, "start_behind": 0.98}})
+    # the leader heads +x: x falls by 0.98 m, y and headings stay
+    np.testing.assert_allclose(back.initial_pose[:, 0], base.initial_pose[:, 0] - 0.98)
+    np.testing.assert_array_equal(back.initial_pose[:, 1:], base.initial_pose[:, 1:])
+
+
+@pytest.mark.parametrize("team, key", [
+    ({"n": 4, "start_behind": 5.0}, "team.start_behind"),  # behind the map's edge
+    ({"n": 1, "placement": "explicit", "poses": [[2.0, 5.0, 0.0]], "start_behind": 0.5},
+     "team.start_behind"),
+])
+def test_a_start_behind_that_cannot_apply_is_an_error_naming_the_key(team, key):
+    with pytest.raises(ScenarioError, match=key.replace(".", r"\.")):
+        scenario_from_dict({**BASE, "team": team})

@@ -26,9 +26,10 @@ class _Store:
         return self._rows
 
 
-def _row(scenario, mode, seed, values):
-    return {"scenario": scenario, "seed": seed, "status": "ok",
-            "overrides": {"localization.mode": mode}, "metrics": dict(values)}
+def _row(scenario, mode, seed, values, variant="dfcoa"):
+    return {"scenario": scenario, "seed": seed, "status": "ok", "controller": "dfcoa",
+            "variant": f"{variant}[mode={mode}]", "overrides": {"localization.mode": mode},
+            "metrics": dict(values)}
 
 
 def _cells(text, label):
@@ -48,12 +49,16 @@ def test_table5_has_every_paper_row_paper_values_and_our_means(tmp_path):
                 rows.append(_row(scen, mode, seed, vals))
     path = recipes_dfcoa._table5(_Store(rows), tmp_path)
     text = path.read_text()
-    for key, label, unit in recipes_dfcoa.TABLE5_ROWS:
+    peak_keys = {k for k, *_ in recipes_dfcoa.PEAK_RISK_ROWS}
+    for key, label, unit, pkey in recipes_dfcoa.TABLE5_ROWS:
         cells = _cells(text, label)
         assert cells[1] == unit
         # | label | unit | S1 paper | S1 truth | S1 mcl | S2 paper | S2 truth | S2 mcl |
-        assert float(cells[2]) == pytest.approx(paper[key][0])
-        assert float(cells[5]) == pytest.approx(paper[key][1])
+        assert float(cells[2]) == pytest.approx(paper[pkey][0])
+        assert float(cells[5]) == pytest.approx(paper[pkey][1])
+        if key in peak_keys:  # from the raw risk, which these rows do not carry
+            assert cells[3] == cells[4] == "—"
+            continue
         for col, i, shift in ((3, 0, 0.0), (4, 0, 0.5), (6, 1, 0.0), (7, 1, 0.5)):
             mean = float(cells[col].split("±")[0])
             assert mean == pytest.approx(paper[key][i] + shift, abs=1e-4), (label, col)
@@ -73,6 +78,35 @@ def test_table5_marks_a_missing_mode_and_a_collision(tmp_path):
     text = recipes_dfcoa._table5(_Store([_row("dfcoa_s1", "truth", 0, vals)]), tmp_path).read_text()
     assert _cells(text, "collisions = 0")[1:] == ["**missed**", "—", "—", "—"]
     assert _cells(text, "FCE (RMS)")[4] == "—"  # S1 mcl: no runs
+
+
+def test_peak_risk_divides_by_the_larger_peak_of_the_same_seed_mode_and_reading():
+    raw = {("dfcoa_s1", 0): (4.0, 10.0), ("dfcoa_s2", 0): (2.0, 5.0),
+           ("dfcoa_s1", 1): (3.0, 6.0), ("dfcoa_s2", 1): (1.0, 8.0)}
+    rows = [_row(s, "truth", seed, {"risk_raw_mean": m, "risk_raw_max": x})
+            for (s, seed), (m, x) in raw.items()]
+    rows.append(_row("dfcoa_s1", "mcl", 0, {"risk_raw_mean": 1.0, "risk_raw_max": 2.0}))
+    rows.append(_row("dfcoa_s1", "truth", 0, {"risk_raw_mean": 1.0, "risk_raw_max": 50.0},
+                     variant="dfcoa_no_repulsion"))
+    got = [(r["metrics"]["risk_peak_mean"], r["metrics"]["risk_peak_max"])
+           for r in recipes_dfcoa.with_peak_risk(rows)]
+    assert got[:4] == [(0.4, 1.0), (0.2, 0.5), (3.0 / 8.0, 0.75), (1.0 / 8.0, 1.0)]
+    # no S2 run with that mode (or that reading): no peak over both
+    assert all(np.isnan(v) for v in got[4] + got[5])
+
+
+def test_table5_prints_each_reading_beside_the_tables_truth_column(tmp_path):
+    base = {"fce_rms": 1.0, "collisions": 0}
+    rows = [_row(s, "truth", 0, base) for s in recipes_dfcoa.SCENARIOS]
+    rows += [_row(s, "truth", 0, {**base, "fce_rms": 2.0}, variant="dfcoa_tracking_start")
+             for s in recipes_dfcoa.SCENARIOS]
+    text = recipes_dfcoa._table5(_Store(rows), tmp_path).read_text()
+    main, readings = text.split("## Readings of the paper")
+    # Table 5 is the base controller; the reading's runs show only in the readings' table
+    assert _cells(main, "FCE (RMS)")[3] == "1.0000"
+    cells = _cells(readings, "FCE (RMS)")
+    # | label | unit | S1 paper | S1 base | S1 tracking | S1 no repulsion | S2 paper | ...
+    assert cells[3:6] == ["1.0000", "2.0000", "—"] and cells[7:10] == ["1.0000", "2.0000", "—"]
 
 
 @pytest.fixture(scope="module")

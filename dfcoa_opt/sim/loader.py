@@ -180,6 +180,10 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
     else:
         leader0 = np.array([*spec.leader.start, heading])
         xy = slot_positions(leader0, offsets)
+        if spec.team.start_behind:
+            xy = xy - spec.team.start_behind * np.array([math.cos(heading), math.sin(heading)])
+            for i, p in enumerate(xy):
+                _check_free(world.grid, p, source, f"team.start_behind (robot {i})")
         pose = np.column_stack((xy, np.full(spec.team.n, heading)))
     _check_start_clear(world, pose, spec, source)
     _check_connected(world.grid, spec, source)

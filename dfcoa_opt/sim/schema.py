@@ -193,6 +193,10 @@ class TeamSpec:
                                ge=0.0)
     heading_noise: float = param(0.0, doc="Standard deviation of a Gaussian offset added to "
                                           "each start heading.", unit="rad", ge=0.0)
+    start_behind: float = param(0.0, doc="With placement = 'formation': each robot starts this "
+                                         "far behind its slot, along the leader's start "
+                                         "heading (0: centres on the slots; dfcoa's d puts "
+                                         "its tracking point on the slot).", unit="m")
 
     def check(self, src: str, key: str) -> None:
         """Poses match n; ids unique."""
@@ -201,6 +205,9 @@ class TeamSpec:
                                 f"has {len(self.poses)} poses, team.n = {self.n}")
         if self.placement == "formation" and self.poses:
             raise ScenarioError(src, f"{key}.poses", "only applies when placement = 'explicit'")
+        if self.placement == "explicit" and self.start_behind:
+            raise ScenarioError(src, f"{key}.start_behind",
+                                "only applies when placement = 'formation'")
         if self.ids:
             if len(self.ids) != self.n:
                 raise ScenarioError(src, f"{key}.ids",
