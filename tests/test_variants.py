@@ -76,6 +76,8 @@ def test_grid_names_variants_by_the_values_that_vary_and_never_by_hash(tmp_path)
     ('controllers = ["goto_slot"]\n[ladder]\nkey = "team.n"\nvalues = ["x"]\n',
      "ladder.values[0]", "must be a number"),
     ('controllers = ["goto_slot"]\nseeds = 5\nmax_seeds = 3\n', "max_seeds", ">= seeds"),
+    ('controllers = ["goto_slot"]\n[ladder]\nkey = "team.n"\nvalues = [2]\n'
+     'variants = ["goto_slott"]\n', "ladder[0].variants", "did you mean 'goto_slot'"),
 ])
 def test_bad_variants_and_ladders_give_one_line_errors(tmp_path, body, key, fragment):
     path = _sweep(tmp_path, body)
@@ -115,6 +117,28 @@ value = 1.4
                                          "world.obstacles[1].min": [10.0, 8.5]}
     assert sw.describe()["ladders"] == [{"label": "doorway width (m)", "log_x": True,
                                          "values": [3.0, 1.4]}]
+
+
+def test_a_ladder_that_names_its_variants_runs_only_those(tmp_path):
+    corridor = (ROOT / "scenarios" / "bench" / "corridor.toml").as_posix()
+    sw = load_sweep(_sweep(tmp_path, f'''controllers = ["goto_slot", "dfcoa"]
+seeds = 1
+[[ladder]]
+label = "team"
+scenarios = ["{SCEN}"]
+key = "team.n"
+values = [2, 3]
+variants = ["dfcoa"]
+[[ladder]]
+label = "latency"
+scenarios = ["{corridor}"]
+key = "comms.latency"
+values = [0.0, 0.5]
+'''))
+    by = {(r.ladder, r.variant_name) for r in sw.runs}
+    # the sweep's own scenario (no ladder) and the second ladder run every variant
+    assert by == {("", "goto_slot"), ("", "dfcoa"), ("team", "dfcoa"),
+                  ("latency", "goto_slot"), ("latency", "dfcoa")}
 
 
 def test_a_rung_that_breaks_the_scenario_is_a_one_line_error(tmp_path):

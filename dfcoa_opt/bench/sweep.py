@@ -44,6 +44,7 @@ from typing import Any
 from dfcoa_opt.bench.variants import (
     Ladder,
     Variant,
+    ladder_variants,
     named_variants,
     parse_ladders,
     reaches,
@@ -338,12 +339,13 @@ def expand_sweep(data: dict[str, Any], src: str, base: Path, text: str,
     if not groups:
         raise ScenarioError(src, "scenarios", "lists no scenario")
     n_seeds = spec.seeds if seeds is None else seeds
+    climbers = ladder_variants(ladders, variants, src)
     names: dict[str, Path] = {}
     probed: dict[tuple[str, str], str] = {}
     runs: list[RunSpec] = []
     for files, lad in groups:
         for f, rung, point, v in itertools.product(files, lad.rungs if lad else (None,), points,
-                                                   variants):
+                                                   climbers.get(lad, variants)):
             base = {**point, **dict(rung.overrides if rung else ()), **(overrides or {})}
             _probe(f, base, spec.first_seed, src, probed)  # every grid key, whoever it reaches
             ov = {k: x for k, x in {**base, **dict(v.overrides)}.items()

@@ -41,7 +41,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.errors import ScenarioError, did_you_mean
 
 #: Characters a variant name may hold (it becomes part of file names).
 _NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_+-.=[],")
@@ -80,12 +80,14 @@ class Ladder:
         rungs: The rungs, easy to hard as written.
         scenarios: Scenario files or globs (array form); empty: the sweep's scenarios.
         log_x: Draw the value axis on a log scale.
+        variants: Names of the sweep's variants that climb it; empty: all of them.
     """
 
     label: str
     rungs: tuple[Rung, ...]
     scenarios: tuple[str, ...] = ()
     log_x: bool = False
+    variants: tuple[str, ...] = ()
 
 
 def _items(mapping: Mapping[str, Any]) -> tuple[tuple[str, Any], ...]:
@@ -174,7 +176,7 @@ def parse_ladders(value: Any, flatten: Any, src: str) -> list[Ladder]:
                                        "([[ladder]])")
 
 
-_LADDER_KEYS = ("label", "key", "values", "rungs", "scenarios", "log_x")
+_LADDER_KEYS = ("label", "key", "values", "rungs", "scenarios", "log_x", "variants")
 
 
 def _ladder(data: Mapping[str, Any], flatten: Any, src: str, where: str,
@@ -217,11 +219,29 @@ def _ladder(data: Mapping[str, Any], flatten: Any, src: str, where: str,
     label = data.get("label", key if isinstance(key, str) else "")
     if not isinstance(label, str) or not label:
         raise ScenarioError(src, f"{where}.label", "is required with rungs (the axis label)")
+    names = data.get("variants", [])
+    if not isinstance(names, list) or not all(isinstance(x, str) and x for x in names):
+        raise ScenarioError(src, f"{where}.variants", "must be an array of variant names")
     return Ladder(label, tuple(out), tuple(str(s) for s in scenarios),
-                  bool(data.get("log_x", False)))
+                  bool(data.get("log_x", False)), tuple(names))
 
 
 def _number(v: Any, src: str, key: str) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ScenarioError(src, key, f"must be a number, got {v!r}")
     return float(v)
+
+
+def ladder_variants(ladders: Sequence[Ladder], variants: Sequence[Variant],
+              src: str) -> dict[Ladder | None, list[Variant]]:
+    """The variants of each ladder that names them (``[[ladder]] variants``)."""
+    out: dict[Ladder | None, list[Variant]] = {}
+    names = [v.name for v in variants]
+    for i, lad in enumerate(ladders):
+        if lad.variants:
+            for name in lad.variants:
+                if name not in names:
+                    raise ScenarioError(src, f"ladder[{i}].variants", f"'{name}' is not a "
+                                        "variant of this sweep" + did_you_mean(name, names))
+            out[lad] = [v for v in variants if v.name in lad.variants]
+    return out

@@ -37,6 +37,11 @@ class Neighbours:
         distance: ``(N, K)`` centre distances, m, ascending; ``inf`` when padded.
         heading: ``(N, K)`` their headings (as they broadcast them), rad; 0 when padded.
             Optional: None where a hand-made table gives no headings.
+        age: ``(N, K)`` age of each entry's message, s (``comms.latency`` and the
+            steps since the last one that got through; 0 when padded). None when
+            every message arrives at once (``[comms]`` off); ``distance`` is then
+            the true centre distance, and with ``[comms]`` on the distance from
+            the receiver's own pose to the received position.
     """
 
     index: NDArray[np.intp]
@@ -44,6 +49,7 @@ class Neighbours:
     velocity: FloatArray
     distance: FloatArray
     heading: FloatArray | None = None
+    age: FloatArray | None = None
 
     @property
     def mask(self) -> NDArray[np.bool_]:
@@ -54,7 +60,8 @@ class Neighbours:
         """The rows of the given robots."""
         return Neighbours(self.index[rows], self.position[rows], self.velocity[rows],
                           self.distance[rows],
-                          None if self.heading is None else self.heading[rows])
+                          None if self.heading is None else self.heading[rows],
+                          None if self.age is None else self.age[rows])
 
 
 @dataclass(frozen=True)
@@ -103,6 +110,9 @@ class Observation:
             the run, ``leader`` is ``(E, 5)``, one state per run of the batch
             (``leader[env]`` is row i's), and neighbour indices are rows of
             this observation.
+        leader_age: Age of the leader state received, s (``comms.leader_latency``
+            and the steps since the last broadcast that got through): a number,
+            or ``(E,)`` in a batch; 0 with ``[comms]`` off.
 
     The simulator shares some of these arrays between steps and runs
     (``robot_ids``, ``leader``, ``slot``, and in a batch ``env`` and
@@ -124,6 +134,7 @@ class Observation:
     slot_offset: FloatArray
     slot: FloatArray
     env: NDArray[np.intp] | None = None
+    leader_age: float | FloatArray = 0.0
 
     @property
     def n(self) -> int:
@@ -144,7 +155,7 @@ class Observation:
                            self.velocity[rows], self.twist[rows], scan,
                            self.neighbours.take(rows), self.obstacles.take(rows), self.leader,
                            self.goal, self.slot_offset[rows], self.slot[rows],
-                           None if self.env is None else self.env[rows])
+                           None if self.env is None else self.env[rows], self.leader_age)
 
 
 

@@ -14,133 +14,16 @@ from typing import Any, Literal
 
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.params import param
+from dfcoa_opt.sim.schema_world import (  # noqa: F401 - re-exported: the schema is one module
+    ClutterSpec,
+    DynamicObstacleSpec,
+    ObstacleSpec,
+    Vec2,
+    WorldSpec,
+    _need,
+)
 
-Vec2 = tuple[float, float]
 Pose = tuple[float, float, float]
-
-
-def _need(src: str, key: str, value: Any, what: str) -> None:
-    if value is None or value == ():
-        raise ScenarioError(src, key, f"is required {what}")
-
-
-@dataclass(frozen=True)
-class ObstacleSpec:
-    """A static geometric obstacle (rasterised into the grid, kept as exact geometry)."""
-
-    type: Literal["polygon", "circle", "rectangle"] = param(doc="Shape kind.")
-    vertices: tuple[Vec2, ...] = param((), doc="Polygon vertices, counter-clockwise.", unit="m")
-    center: Vec2 | None = param(None, doc="Circle centre.", unit="m")
-    radius: float | None = param(None, doc="Circle radius.", unit="m", gt=0.0)
-    min: Vec2 | None = param(None, doc="Rectangle lower-left corner.", unit="m")
-    max: Vec2 | None = param(None, doc="Rectangle upper-right corner.", unit="m")
-
-    def check(self, src: str, key: str) -> None:
-        """Per-type required keys."""
-        need = {"polygon": ("vertices",), "circle": ("center", "radius"),
-                "rectangle": ("min", "max")}[self.type]
-        for name in need:
-            _need(src, f"{key}.{name}", getattr(self, name), f"for type = '{self.type}'")
-        for name in ("vertices", "center", "radius", "min", "max"):
-            if name not in need and getattr(self, name) not in (None, ()):
-                raise ScenarioError(src, f"{key}.{name}", f"does not apply to type = '{self.type}'")
-
-
-@dataclass(frozen=True)
-class DynamicObstacleSpec:
-    """A disc moving along waypoints at constant speed (paper 002 humans, paper 004 robots)."""
-
-    radius: float = param(doc="Disc radius.", unit="m", gt=0.0)
-    speed: float = param(doc="Speed along the waypoints.", unit="m/s", ge=0.0)
-    waypoints: tuple[Vec2, ...] = param(doc="Polyline to follow, first point = start.", unit="m")
-    start_time: float = param(0.0, doc="Time the disc starts moving.", unit="s", ge=0.0)
-    end: Literal["stop", "loop", "bounce"] = param("stop", doc="Behaviour at the last waypoint.")
-
-    def check(self, src: str, key: str) -> None:
-        """At least one waypoint, and a motion that means something.
-
-        A disc told to move (``speed > 0``) needs a path of positive length; a
-        disc that never moves (``speed = 0``) makes further waypoints, a
-        ``loop``/``bounce`` end and a ``start_time`` meaningless. A parked disc
-        (one waypoint, speed 0, ``end = "stop"``, no ``start_time``) is fine.
-        A ``start_time`` after ``t_max`` is allowed: a run shortened by an
-        override just ends before the disc starts.
-        """
-        _need(src, f"{key}.waypoints", self.waypoints, "(at least one point)")
-        moves = any(p != self.waypoints[0] for p in self.waypoints[1:])
-        if self.speed > 0 and not moves:
-            raise ScenarioError(src, f"{key}.speed", f"the disc is told to move ({self.speed:g} "
-                                                     "m/s) but its waypoints are a single "
-                                                     "point: add a waypoint or set speed = 0")
-        if self.speed == 0 and moves:
-            raise ScenarioError(src, f"{key}.waypoints", "the disc never moves (speed = 0), so "
-                                                         "the waypoints after the first are never"
-                                                         " reached: set a speed or keep one")
-        if self.speed == 0 and self.end != "stop":
-            raise ScenarioError(src, f"{key}.end", f"'{self.end}' needs a moving disc "
-                                                   "(speed > 0); a parked disc ends with 'stop'")
-        if self.speed == 0 and self.start_time > 0:
-            raise ScenarioError(src, f"{key}.start_time", f"{self.start_time:g} s is when the "
-                                                          "disc starts moving, but it never moves "
-                                                          "(speed = 0): set a speed or drop "
-                                                          "start_time")
-
-
-@dataclass(frozen=True)
-class ClutterSpec:
-    """Seeded random circular obstacles, added to the map (a cluttered field)."""
-
-    density: float = param(0.0, doc="Fraction of the region's area covered by discs; 0 = no "
-                                    "clutter.", ge=0.0, lt=0.9)
-    radius_min: float = param(0.2, doc="Smallest disc radius.", unit="m", gt=0.0)
-    radius_max: float = param(0.5, doc="Largest disc radius.", unit="m", gt=0.0)
-    region: tuple[float, float, float, float] | None = param(
-        None, doc="(x0, y0, x1, y1) box of the disc centres; default: the whole map.", unit="m")
-    keep_clear: float = param(1.0, doc="Free margin around the leader's start (plus the "
-                                       "formation's extent), its goal and explicit robot poses.",
-                              unit="m", ge=0.0)
-    gap: float = param(0.0, doc="Smallest free distance between two discs.", unit="m", ge=0.0)
-    seed: int | None = param(None, doc="Seed of the field; default: the scenario seed, so every "
-                                       "run seed gives a new field.", ge=0)
-
-    def check(self, src: str, key: str) -> None:
-        """Radius order and a non-empty region."""
-        if self.radius_max < self.radius_min:
-            raise ScenarioError(src, f"{key}.radius_max", f"must be >= radius_min "
-                                                          f"({self.radius_min})")
-        if self.region is not None:
-            x0, y0, x1, y1 = self.region
-            if not (x1 > x0 and y1 > y0):
-                raise ScenarioError(src, f"{key}.region", "needs x1 > x0 and y1 > y0")
-
-
-@dataclass(frozen=True)
-class WorldSpec:
-    """The map: occupancy grid plus exact and moving obstacles."""
-
-    resolution: float = param(10.0, doc="Grid resolution.", unit="cells/m", gt=0.0)
-    size: Vec2 | None = param(None, doc="(width, height); required unless a map gives it.",
-                              unit="m", gt=0.0)
-    origin: Vec2 = param((0.0, 0.0), doc="World position of the map's bottom-left corner.",
-                         unit="m")
-    map_ascii: str | None = param(None, doc="ASCII map, top row first: '#' occupied, '.' free.")
-    map_image: str | None = param(None, doc="PNG map (relative to the scenario file); dark = "
-                                            "occupied, one pixel per cell.")
-    image_threshold: float = param(0.5, doc="Grey level below which an image pixel is occupied.",
-                                   ge=0.0, le=1.0)
-    obstacles: tuple[ObstacleSpec, ...] = param((), doc="Static geometric obstacles.")
-    dynamic_obstacles: tuple[DynamicObstacleSpec, ...] = param((), doc="Moving discs.")
-    clutter: ClutterSpec = field(default_factory=ClutterSpec,
-                                 metadata={"doc": "Seeded random disc obstacles."})
-
-    def check(self, src: str, key: str) -> None:
-        """Exactly one source of the grid extent."""
-        if self.map_ascii is not None and self.map_image is not None:
-            raise ScenarioError(src, f"{key}.map_image", "give map_ascii or map_image, not both")
-        if self.map_ascii is None and self.map_image is None and self.size is None:
-            raise ScenarioError(src, f"{key}.size", "is required when there is no map_ascii "
-                                                    "or map_image")
-
 
 @dataclass(frozen=True)
 class RobotSpec:
@@ -164,6 +47,11 @@ class RobotSpec:
                                          "velocity commands on unicycles.", unit="m", gt=0.0)
     mass: float = param(1.0, doc="Mass, turns force disturbances into acceleration.",
                         unit="kg", gt=0.0)
+    command_noise_std: float = param(0.0, doc="Standard deviation of Gaussian noise added to "
+                                              "each component of the applied command, in its "
+                                              "unit (v m/s and omega rad/s; vx, vy m/s; ax, ay "
+                                              "m/s^2), drawn every step from the run's "
+                                              "generator.", ge=0.0)
 
     @property
     def v_lower(self) -> float:
@@ -310,6 +198,34 @@ class SensorSpec:
     obstacle_range: float | None = param(None, doc="Moving obstacles within this distance are "
                                                    "observed; default lidar.range_max.",
                                          unit="m", gt=0.0, finite=False)
+    pose_noise_std: float = param(0.0, doc="With localization 'truth': standard deviation of "
+                                           "Gaussian noise on the position each robot "
+                                           "believes (and broadcasts), drawn every step.",
+                                  unit="m", ge=0.0)
+    heading_noise_std: float = param(0.0, doc="With localization 'truth': the same on the "
+                                              "heading.", unit="rad", ge=0.0)
+
+
+@dataclass(frozen=True)
+class CommsSpec:
+    """How the robots' messages travel (docs/comms.md); every key off by default."""
+
+    latency: float = param(0.0, doc="Age of every message a robot receives about another "
+                                    "robot (its pose, velocity and what its controller "
+                                    "broadcasts); a whole number of steps.", unit="s", ge=0.0)
+    dropout: float = param(0.0, doc="Probability that a message from one robot to another is "
+                                    "lost at a step; the receiver keeps the last one it got.",
+                           ge=0.0, lt=1.0)
+    leader_latency: float = param(0.0, doc="Age of the virtual leader's broadcast (its state, "
+                                           "hence the slots); a whole number of steps.",
+                                  unit="s", ge=0.0)
+    leader_dropout: float = param(0.0, doc="Probability that the leader's broadcast is lost at "
+                                           "a step, for the whole team.", ge=0.0, lt=1.0)
+
+    @property
+    def on(self) -> bool:
+        """Whether any message is late or lost."""
+        return bool(self.latency or self.dropout or self.leader_latency or self.leader_dropout)
 
 
 @dataclass(frozen=True)
@@ -393,6 +309,8 @@ class ScenarioSpec:
     sensors: SensorSpec = field(default_factory=SensorSpec, metadata={"doc": "Sensors."})
     localization: LocalizationSpec = field(default_factory=LocalizationSpec,
                                            metadata={"doc": "Localization."})
+    comms: CommsSpec = field(default_factory=CommsSpec,
+                             metadata={"doc": "Communication: latency and dropout."})
     disturbances: tuple[DisturbanceSpec, ...] = param((), doc="Disturbances.")
     metrics: MetricSpec = field(default_factory=MetricSpec, metadata={"doc": "Metric settings."})
     controllers: dict[str, dict[str, Any]] = param(
@@ -417,6 +335,16 @@ class ScenarioSpec:
             if d.kind == "force" and self.robots.model != "double_integrator":
                 raise ScenarioError(src, f"disturbances[{i}].kind", "'force' needs "
                                     "robots.model = 'double_integrator'")
+        for name in ("latency", "leader_latency"):
+            steps = getattr(self.comms, name) / self.dt
+            if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
+                raise ScenarioError(src, f"comms.{name}", f"({getattr(self.comms, name)} s) is "
+                                    f"not a whole number of steps of dt = {self.dt} s")
+        noisy = self.sensors.pose_noise_std or self.sensors.heading_noise_std
+        if noisy and self.localization.mode != "truth":
+            raise ScenarioError(src, "sensors.pose_noise_std", "applies to localization 'truth' "
+                                f"only, not '{self.localization.mode}' (an estimator has its "
+                                "own noise)")
         if self.formation.shape == "rectangle" and self.team.n != 4:
             raise ScenarioError(src, "formation.shape", f"'rectangle' (paper 000 eq 3-5) places "
                                 f"4 robots, team.n = {self.team.n}")

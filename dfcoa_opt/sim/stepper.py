@@ -31,6 +31,7 @@ from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.localization import TruthEstimator, make_estimators
 from dfcoa_opt.outcome import StallMonitor
 from dfcoa_opt.robots.models import CommandKind, RobotState
+from dfcoa_opt.sim.comms import Comms, wanted
 from dfcoa_opt.sim.leader import leader_track
 from dfcoa_opt.sim.log import BatchLog
 from dfcoa_opt.sim.neighbours import batch_proximity, gather, new_contacts
@@ -108,6 +109,9 @@ class Stepper:
         self.prev_keys = np.zeros(0, dtype=np.int64)
         self.prev_ptr = np.zeros(slots + 1, dtype=np.int64)
         self.leaders = np.zeros((slots, 5))  # each slot's broadcast leader state
+        #: late and lost messages, pose and command noise (None: every key off)
+        self.comms = Comms(spec, n, slots, self.rngs) if wanted(spec) else None
+        self.leader_ages = np.zeros(slots)  # each slot's leader state's age, s
         self.log: BatchLog | None = None
         self.wall = np.zeros(slots)
         self._tick = time.perf_counter()  # run wall times count from start_clock()
@@ -200,13 +204,24 @@ class Stepper:
                 scans[0].angle_min, scans[0].angle_increment, scans[0].range_min,
                 scans[0].range_max, np.concatenate([s.ranges for s in scans]))
         est = self._estimate(scans, scan_all, active)
+        comms = self.comms
+        if comms is not None:
+            est = comms.believed(est, active)
         sensors = self.spec.sensors
         prox = batch_proximity(pos, n, sensors.comm_radius, sensors.max_neighbors,
                                2.0 * sim.radius)
         rows = self._row_constants()
         row_index = (prox.index if a == 1 else  # (one run: its indices are its rows)
                      np.where(prox.index >= 0, prox.index + rows[1], -1))
-        nb_pos, nb_vel, nb_heading = gather(row_index, est, st.velocity)
+        if comms is not None and comms.messages:
+            got = comms.neighbours(kk, active, est, st.velocity, prox.index)
+            nb_index, nb_dist, nb_age = got.index, got.distance, got.age
+            nb_pos, nb_vel, nb_heading = got.position, got.velocity, got.heading
+            row_index = (nb_index if a == 1 else
+                         np.where(nb_index >= 0, nb_index + rows[1], -1))
+        else:
+            nb_index, nb_dist, nb_age = prox.index, prox.distance, None
+            nb_pos, nb_vel, nb_heading = gather(row_index, est, st.velocity)
         moving = rows[5]  # no moving obstacle: the same empty arrays every step
         if m:
             mask = dyn_dist - self.dyn.radii[None, :] <= sim.obstacle_range
@@ -214,10 +229,16 @@ class Stepper:
             rows_pos, rows_vel = np.repeat(dyn_pos, n, axis=0), np.repeat(dyn_vel, n, axis=0)
             moving = MovingObstacles(np.where(w, rows_pos, 0.0), np.where(w, rows_vel, 0.0),
                                      np.where(mask, self.dyn.radii[None, :], 0.0), mask)
-        self.leaders[active] = lead
+        heard, heard_slots = lead, slots  # the leader state and slots the robots received
+        if comms is not None and comms.leader_on:
+            stamp, self.leader_ages[active] = comms.leader(kk, active)
+            heard, heard_slots, _ = self._leader(active, stamp)
+        self.leaders[active] = heard
         self._s = dict(pos=pos, dyn_pos=dyn_pos, dyn_dist=dyn_dist, lead=lead, slots=slots,
                        at_goal=at_goal, scans=scans, scan_all=scan_all, est=est, prox=prox,
-                       row_index=row_index, nb=(nb_pos, nb_vel, nb_heading), moving=moving)
+                       row_index=row_index, nb=(nb_index, nb_pos, nb_vel, nb_heading, nb_dist,
+                                                nb_age), moving=moving, heard=heard,
+                       heard_slots=heard_slots)
 
     def _row_constants(self) -> tuple[Any, ...]:
         """Per-row constants of the active set, made again when it changes.
@@ -288,28 +309,30 @@ class Stepper:
         same = a == 1 or bool((kk == kk[0]).all())
         if one_clock and not same:
             raise DfcoaError("a batched controller needs the runs of a batch on one clock")
-        nb_pos, nb_vel, nb_heading = s["nb"]
+        _, nb_pos, nb_vel, nb_heading, nb_dist, nb_age = s["nb"]
         rows = self._row_constants()
         return Observation(
             float(kk[0] * self.dt) if same else math.nan, self.dt, rows[2], s["est"],
             self.state.velocity, self.state.twist, s["scan_all"],
-            Neighbours(s["row_index"], nb_pos, nb_vel, s["prox"].distance, nb_heading),
+            Neighbours(s["row_index"], nb_pos, nb_vel, nb_dist, nb_heading, nb_age),
             s["moving"], self.leaders, self.goal, rows[4],
-            np.ascontiguousarray(s["slots"]).reshape(a * n, 2), env=rows[3])
+            np.ascontiguousarray(s["heard_slots"]).reshape(a * n, 2), env=rows[3],
+            leader_age=self.leader_ages if self.comms is not None else 0.0)
 
     def run_observation(self, j: int) -> Observation:
         """The observation of the ``j``-th active run alone (today's single-run Observation)."""
         s, n, e = self._s, self.n, int(self.active[j])
         rows = slice(j * n, (j + 1) * n)
-        nb_pos, nb_vel, nb_heading = s["nb"]
-        prox, st = s["prox"], self.state
-        nb = Neighbours(prox.index[rows], nb_pos[rows], nb_vel[rows], prox.distance[rows],
-                        nb_heading[rows])
+        nb_index, nb_pos, nb_vel, nb_heading, nb_dist, nb_age = s["nb"]
+        st = self.state
+        nb = Neighbours(nb_index[rows], nb_pos[rows], nb_vel[rows], nb_dist[rows],
+                        nb_heading[rows], None if nb_age is None else nb_age[rows])
         return Observation(float(self.k[e] * self.dt), self.dt, self.robot_ids, s["est"][rows],
                            st.velocity[rows], st.twist[rows],
                            self._scan(s["scans"], s["scan_all"], j), nb,
-                           s["moving"].take(rows), s["lead"][j], self.goal,
-                           self.sim.scenarios[e].offsets, s["slots"][j])
+                           s["moving"].take(rows), s["heard"][j], self.goal,
+                           self.sim.scenarios[e].offsets, s["heard_slots"][j],
+                           leader_age=float(self.leader_ages[e]))
 
     # ------------------------------------------------------------------ apply
     def apply(self, cmd: FloatArray, kind: CommandKind, extras: Any = None) -> list[Ended]:
@@ -333,6 +356,8 @@ class Stepper:
         log, pos, prox = self.log, s["pos"], s["prox"]
         native = convert(cmd, kind, sim.model.native, s["est"], st.velocity, dt,
                          spec.robots.nid_distance)
+        if self.comms is not None:
+            native = self.comms.command(native, active)
         new_state = sim.model.step(st, native, dt, self._disturbance("velocity", kk),
                                    self._disturbance("force", kk))
         # -- contacts at t_k
