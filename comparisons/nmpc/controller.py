@@ -21,7 +21,8 @@ set, :mod:`comparisons.nmpc.problem`) and applies the first control ``(v, omega)
   step, ``D = 2 radius + margin``. One slack per stage, with an exact L1 penalty.
 * **Distributed.** The controller keeps every robot's last plan by global id;
   robot ``i`` reads only the plans of its neighbours in ``obs.neighbours`` (plans
-  written at time ``t`` are visible from the next step on).
+  written at time ``t`` are visible from the next step on). A plan travels with its
+  robot's state message: an entry ``a`` s old carries the plan of ``a`` s ago.
 * **Batched.** One object steps every run of a batch (``batched = True``): the
   problems of every robot of every run are set up elementwise over the rows and
   solved in one compiled call; each run's rows give its numbers alone, bit for bit
@@ -56,12 +57,7 @@ from numpy.typing import NDArray
 from comparisons.constraints.distance import StaticObstacles
 from comparisons.constraints.world_shapes import WorldShapes
 from comparisons.nmpc.fallback import goto_command, solve_time_stats
-from comparisons.nmpc.geometry import (
-    neighbour_predictions,
-    obstacle_halfplanes,
-    robot_halfplanes,
-    slot_reference,
-)
+from comparisons.nmpc.geometry import obstacle_halfplanes, robot_halfplanes, slot_reference
 from comparisons.nmpc.model import rollout
 from comparisons.nmpc.outputs import BatchOutput, SolveOutput
 from comparisons.nmpc.plans import PlanBuffers
@@ -264,9 +260,7 @@ class Nmpc(PlanBuffers, BatchedController):
             self._static_of[obs.env]
         on, oc = obstacle_halfplanes(lin, self.statics, obs.obstacles, self.tau,
                                      p.max_obstacles, self.radius + p.margin, p.reach, world)
-        every = np.arange(len(self._r["t"]))
-        pred, mask = neighbour_predictions(obs.neighbours, p.max_neighbours, self._r["x"][..., :2],
-                                           self._age(float(obs.t), every), self.tau, h, nb_ids)
+        pred, mask = self._predictions(obs, nb_ids, p.max_neighbours)
         rn, rc = robot_halfplanes(lin, pred, mask, 2.0 * self.radius + p.margin, p.reach)
         normals = np.concatenate((on, rn), axis=2).reshape(n, h, -1)
         stage = np.concatenate((ref, psi[..., None], uref, normals), axis=2).reshape(n, -1)
@@ -328,7 +322,7 @@ class Nmpc(PlanBuffers, BatchedController):
         made from.
         """
         h, t = self.p.horizon, float(obs.t)
-        self._advance(t)
+        self._advance(t, None if obs.neighbours.age is None else float(obs.dt))
         ids, nb_ids = self._global_ids(obs)
         u0, age = self._shifted(t, ids)
         fresh = age >= h  # no plan: guess the goto command

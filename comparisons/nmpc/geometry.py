@@ -93,6 +93,23 @@ def plan_positions(plans: FloatArray, age: FloatArray, horizon: int) -> FloatArr
     return a + frac * (b - a)
 
 
+def _entries(nb: Neighbours, count: int, index: NDArray[np.intp]
+             ) -> tuple[NDArray[np.intp], FloatArray, FloatArray, int]:
+    """The first ``count`` entries of each row, padded: ids, positions (m), velocities (m/s).
+
+    Returns ``(idx (N, K), pos (N, K, 2), vel (N, K, 2), take)`` with ``take`` the
+    entries taken from the table (the others are padding, ``idx = -1``).
+    """
+    n = len(index)
+    idx = np.full((n, count), -1, dtype=np.intp)
+    take = min(count, index.shape[1])
+    idx[:, :take] = index[:, :take]
+    pos = np.zeros((n, count, 2))
+    vel = np.zeros((n, count, 2))
+    pos[:, :take], vel[:, :take] = nb.position[:, :take], nb.velocity[:, :take]
+    return idx, pos, vel, take
+
+
 def neighbour_predictions(nb: Neighbours, count: int, plans: FloatArray, plan_age: FloatArray,
                           tau: float, horizon: int, index: NDArray[np.intp] | None = None
                           ) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -101,7 +118,8 @@ def neighbour_predictions(nb: Neighbours, count: int, plans: FloatArray, plan_ag
     A neighbour with a plan of the previous steps (``plan_age`` finite, in
     stages, less than ``horizon``) follows that plan, translated so that it starts
     at the neighbour's broadcast position; one without moves at its broadcast
-    velocity.
+    velocity. Every message is fresh here (``nb.age`` None): with late or lost
+    messages each entry carries its own plan, :func:`entry_predictions`.
 
     Args:
         nb: The observation's neighbour table.
@@ -116,14 +134,7 @@ def neighbour_predictions(nb: Neighbours, count: int, plans: FloatArray, plan_ag
     Returns:
         ``(pred (N, K, H, 2) m, mask (N, K))``.
     """
-    index = nb.index if index is None else index
-    n = len(index)
-    idx = np.full((n, count), -1, dtype=np.intp)
-    take = min(count, index.shape[1])
-    idx[:, :take] = index[:, :take]
-    pos = np.zeros((n, count, 2))
-    vel = np.zeros((n, count, 2))
-    pos[:, :take], vel[:, :take] = nb.position[:, :take], nb.velocity[:, :take]
+    idx, pos, vel, _ = _entries(nb, count, nb.index if index is None else index)
     mask = idx >= 0
     safe = np.where(mask, idx, 0)
     steps = tau * np.arange(1, horizon + 1)
@@ -134,6 +145,49 @@ def neighbour_predictions(nb: Neighbours, count: int, plans: FloatArray, plan_ag
         # each plan is sampled once (a robot is the neighbour of several), then gathered
         used, slot = np.unique(safe[planned], return_inverse=True)
         traj = plan_positions(plans[used], plan_age[used], horizon)[slot]
+        pred[planned] = traj[:, 1:] + (pos[planned] - traj[:, 0])[:, None, :]
+    return pred, mask
+
+
+def entry_predictions(nb: Neighbours, count: int, plans: FloatArray, plan_age: FloatArray,
+                      tau: float, horizon: int, index: NDArray[np.intp] | None = None
+                      ) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """:func:`neighbour_predictions` when each entry carries its own plan.
+
+    With late or lost messages (``nb.age``) entry ``(i, k)`` carries the plan its
+    sender had when it sent the message, so two receivers of one sender may
+    hold different plans. Each is used as :func:`neighbour_predictions` uses a
+    plan: less than ``horizon`` stages old (its age counted from now), it is
+    sampled at ``t + k tau`` and translated so that it starts at the entry's
+    position; without one the neighbour moves at the entry's velocity. Given
+    each entry the plan of its id, the numbers are :func:`neighbour_predictions`',
+    bit for bit.
+
+    Args:
+        nb: The observation's neighbour table.
+        count: Neighbour slots ``K`` (extra ones are dropped, missing ones padded).
+        plans: ``(N, K', H + 1, 2)`` each entry's plan, m (columns as ``nb``'s, or
+            its first ``K'`` ones).
+        plan_age: ``(N, K')`` their ages now, in stages (``inf`` = none).
+        tau: Stage length, s.
+        horizon: Stages ``H``.
+        index: ``(N, K'')`` the neighbours' global ids (-1 padded); default ``nb.index``.
+
+    Returns:
+        ``(pred (N, K, H, 2) m, mask (N, K))``.
+    """
+    idx, pos, vel, take = _entries(nb, count, nb.index if index is None else index)
+    n, take = len(idx), min(take, plans.shape[1])
+    mask = idx >= 0
+    age = np.full((n, count), np.inf)
+    age[:, :take] = plan_age[:, :take]
+    own = np.zeros((n, count, *plans.shape[2:]))
+    own[:, :take] = plans[:, :take]
+    steps = tau * np.arange(1, horizon + 1)
+    pred = pos[:, :, None, :] + vel[:, :, None, :] * steps[:, None]
+    planned = mask & (age < horizon)
+    if planned.any():
+        traj = plan_positions(own[planned], age[planned], horizon)
         pred[planned] = traj[:, 1:] + (pos[planned] - traj[:, 0])[:, None, :]
     return pred, mask
 

@@ -6,15 +6,24 @@ robots (one run: the robot index; a hand-made observation without ``env``: its
 ``robot_ids``). Plans are written to ``_w`` and read from ``_r``, a copy of
 ``_w`` taken when a new step begins, so every robot reads its neighbours' plans
 of the previous step, whatever the order of the rows.
+
+A plan travels with its robot's state message. With late or lost messages
+(``obs.neighbours.age`` set) an entry ``a`` s old carries the plan its sender
+had when it sent it, the readable plan of the step ``a`` s ago: the buffers
+keep the readable plans of the last steps (:func:`relayed_plans`).
 """
 
 from __future__ import annotations
 
+import math
+from collections import deque
+from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
+from comparisons.nmpc.geometry import entry_predictions, neighbour_predictions
 from comparisons.nmpc.model import rollout
 from dfcoa_opt.geometry import take_rows
 
@@ -23,6 +32,43 @@ if TYPE_CHECKING:
     from dfcoa_opt.control.base import Observation
 
 FloatArray = NDArray[np.float64]
+#: A step's readable plans: ``(time of the step s, plan times (G,) s, poses (G, H + 1, 3))``.
+Snapshot = tuple[float, FloatArray, FloatArray]
+
+
+def relayed_plans(snapshots: Iterable[Snapshot], t: float, dt: float, ids: NDArray[np.intp],
+                  age: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The plan each neighbour entry carries: its sender's readable plan when it was sent.
+
+    Entry ``(i, k)``, a message ``age[i, k]`` s old (``A`` steps), was sent at
+    step ``t - age``; the plan it carries is the one its sender had stored then,
+    the readable plan of that step (made at ``A + 1`` steps before now, or
+    earlier when kept by the ``shift`` fallback). A step no snapshot holds, a
+    padded entry or an id beyond a snapshot's buffers gives no plan.
+
+    Args:
+        snapshots: The readable plans of some steps (:data:`Snapshot`), any order.
+        t: Now, s.
+        dt: Simulation step, s (a message's age is a whole number of steps).
+        ids: ``(N, K)`` the senders' global ids (-1 padded).
+        age: ``(N, K)`` the messages' ages, s.
+
+    Returns:
+        ``(plan_t (N, K) s, NaN = no plan; plans (N, K, H + 1, 2) m, 0 without)``.
+    """
+    sent = t - age
+    plan_t = np.full(ids.shape, np.nan)
+    plans: FloatArray | None = None
+    for when, times, poses in snapshots:  # a few steps: vectorised over the entries
+        if plans is None:
+            plans = np.zeros((*ids.shape, poses.shape[1], 2))
+        sel = (ids >= 0) & (ids < len(times)) & (np.abs(sent - when) < 0.5 * dt)
+        if sel.any():
+            g = ids[sel]
+            plan_t[sel], plans[sel] = times[g], poses[g, :, :2]
+    if plans is None:
+        plans = np.zeros((*ids.shape, 0, 2))
+    return plan_t, plans
 
 
 class PlanBuffers:
@@ -37,6 +83,8 @@ class PlanBuffers:
         _r: Readable plans (same keys): ``_w`` as it was when the step began.
         _t: Time of the current step, s (None before the first).
         _t_prev: Time of the step before it, s (NaN before the second).
+        _past: The readable plans of the steps before the current one, newest
+            first (:data:`Snapshot`; None until a step with late or lost messages).
     """
 
     spec: ProblemSpec
@@ -46,6 +94,7 @@ class PlanBuffers:
     _r: dict[str, np.ndarray]
     _t: float | None
     _t_prev: float
+    _past: deque[Snapshot] | None
 
     def _alloc(self, n: int) -> None:
         """Plan buffers for ``n`` global ids, empty; no step yet."""
@@ -55,6 +104,7 @@ class PlanBuffers:
                    "lam_g": np.zeros((n, rows * h)), "lam_ok": np.zeros(n, dtype=bool)}
         self._r = {k: v.copy() for k, v in self._w.items()}
         self._t, self._t_prev = None, np.nan
+        self._past = None
 
     def _grow(self, n: int) -> None:
         """Make room for global ids below ``n`` (hand-made observations)."""
@@ -66,9 +116,21 @@ class PlanBuffers:
                 fill = np.nan if k == "t" else 0
                 buf[k] = np.concatenate((v, np.full((n - have, *v.shape[1:]), fill, v.dtype)))
 
-    def _advance(self, t: float) -> None:
-        """At a new step (``t`` later than the last), last step's plans become readable."""
+    def _advance(self, t: float, dt: float | None = None) -> None:
+        """At a new step (``t`` later than the last), last step's plans become readable.
+
+        Args:
+            t: Time of the step, s.
+            dt: The simulation step, s, when messages are late or lost: the
+                readable plans of the last ``ceil(H tau / dt)`` steps are then kept
+                (older ones would be at least ``H`` stages old when they arrive).
+        """
         if self._t is None or t > self._t + 1e-9:
+            if dt is not None:
+                if self._past is None:
+                    self._past = deque(maxlen=math.ceil(self.spec.horizon * self.tau / dt))
+                if self._t is not None:  # _r is replaced, never written: kept as it is
+                    self._past.appendleft((self._t, self._r["t"], self._r["x"]))
             self._r = {k: v.copy() for k, v in self._w.items()}
             self._t_prev = np.nan if self._t is None else self._t
             self._t = t
@@ -101,8 +163,40 @@ class PlanBuffers:
 
     def _age(self, t: float, ids: NDArray[np.intp]) -> FloatArray:
         """Age of the readable plans of ``ids`` at ``t``, in stages (``inf`` = none)."""
-        age = (t - self._r["t"][ids]) / self.tau
+        return self._stages(t, self._r["t"][ids])
+
+    def _stages(self, t: float, made: FloatArray) -> FloatArray:
+        """Age at ``t`` (s) of plans made at ``made`` (s, NaN = none) in stages (``inf``: none)."""
+        age = (t - made) / self.tau
         return np.where(np.isfinite(age) & (age >= -1e-9), np.maximum(age, 0.0), np.inf)
+
+    def _predictions(self, obs: Observation, nb_ids: NDArray[np.intp], count: int
+                     ) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Predicted centres ``(R, K, H, 2)`` (m) of each row's ``count`` nearest neighbours.
+
+        Fresh messages (``obs.neighbours.age`` None): every neighbour's readable
+        plan (:func:`~comparisons.nmpc.geometry.neighbour_predictions`). Late or
+        lost ones: the plan each entry carries (:func:`relayed_plans`, from this
+        step's readable plans and the kept ones), sampled from now on
+        (:func:`~comparisons.nmpc.geometry.entry_predictions`).
+
+        Args:
+            obs: This step's observation.
+            nb_ids: ``(R, K')`` the neighbours' global ids (-1 padded).
+            count: Neighbour slots ``K``.
+
+        Returns:
+            ``(pred (R, K, H, 2) m, mask (R, K))``.
+        """
+        t, h, nb = float(obs.t), self.spec.horizon, obs.neighbours
+        if nb.age is None:
+            every = np.arange(len(self._r["t"]))
+            return neighbour_predictions(nb, count, self._r["x"][..., :2], self._age(t, every),
+                                         self.tau, h, nb_ids)
+        now: Snapshot = (t, self._r["t"], self._r["x"])  # only the entries used are gathered
+        plan_t, plans = relayed_plans((now, *(self._past or ())), t, float(obs.dt),
+                                      nb_ids[:, :count], nb.age[:, :count])
+        return entry_predictions(nb, count, plans, self._stages(t, plan_t), self.tau, h, nb_ids)
 
     def _shifted(self, t: float, ids: NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
         """Own previous controls shifted to ``t`` (zeros without a plan), and their age."""
