@@ -42,9 +42,11 @@ class Recorder(BatchedController):
 
     def __init__(self) -> None:
         self.seen: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]] = []
+        self.team: list[tuple[np.ndarray, np.ndarray] | None] = []
 
     def reset_batch(self, scenarios, rngs) -> None:
         self.seen.clear()
+        self.team.clear()
 
     def act(self, obs):
         obs = as_batch(obs)
@@ -52,6 +54,7 @@ class Recorder(BatchedController):
         age = None if nb.age is None else nb.age.copy()
         self.seen.append((obs.t, nb.index.copy(), nb.position.copy(), age,
                           np.array(obs.leader).reshape(-1, 5)[0], float(np.max(obs.leader_age))))
+        self.team.append(None if obs.team is None else (obs.team.copy(), obs.team_age.copy()))
         return 0.5 * (obs.slot - obs.pose[:, :2])
 
 
@@ -59,11 +62,11 @@ def _recorded(**keys):
     sc = d.load(CROSSING, overrides={"t_max": 8.0, **keys})
     rec = Recorder()
     run = d.run(sc, rec, seed=3)
-    return run.log, rec.seen
+    return run.log, rec.seen, rec.team
 
 
 def test_a_latency_delivers_each_senders_pose_of_that_many_steps_before():
-    log, seen = _recorded(**{"comms.latency": 0.3})
+    log, seen, team = _recorded(**{"comms.latency": 0.3})
     lag = 3
     for k, (t, index, position, age, _, _) in enumerate(seen):
         assert t == pytest.approx(k * 0.1)
@@ -72,10 +75,13 @@ def test_a_latency_delivers_each_senders_pose_of_that_many_steps_before():
         src = max(k - lag, 0)
         np.testing.assert_array_equal(position[i, slot], log.pose[src, sender, :2])
         np.testing.assert_allclose(age[i, slot], (k - src) * 0.1)
+        # the planner at the leader hears every robot as late
+        np.testing.assert_array_equal(team[k][0][:, :2], log.pose[src, :, :2])
+        np.testing.assert_allclose(team[k][1], (k - src) * 0.1)
 
 
 def test_a_lost_message_leaves_the_last_one_received_with_its_age():
-    log, seen = _recorded(**{"comms.latency": 0.1, "comms.dropout": 0.4})
+    log, seen, team = _recorded(**{"comms.latency": 0.1, "comms.dropout": 0.4})
     ages = []
     for k, (_, index, position, age, _, _) in enumerate(seen):
         i, slot = np.nonzero(index >= 0)
@@ -84,12 +90,15 @@ def test_a_lost_message_leaves_the_last_one_received_with_its_age():
         assert (step >= 0).all() and (step <= max(k - 1, 0)).all()
         np.testing.assert_array_equal(position[i, slot], log.pose[step, sender, :2])
         ages.append(age[i, slot])
+        sent = np.rint(k - team[k][1] / 0.1).astype(int)
+        np.testing.assert_array_equal(team[k][0][:, :2], log.pose[sent, np.arange(4), :2])
     ages = np.concatenate(ages)
     assert ages.max() >= 0.4 and (ages > 0.1 + 1e-9).mean() > 0.2  # lost ones age on
 
 
 def test_the_leaders_broadcast_is_late_and_lost_for_the_whole_team():
-    log, seen = _recorded(**{"comms.leader_latency": 0.2, "comms.leader_dropout": 0.3})
+    log, seen, team = _recorded(**{"comms.leader_latency": 0.2, "comms.leader_dropout": 0.3})
+    assert all(x is None for x in team)  # messages between robots are not late: no team view
     held = 0
     for k, (_, _, _, _, leader, age) in enumerate(seen):
         step = int(round(k - age / 0.1))

@@ -113,6 +113,11 @@ class Observation:
         leader_age: Age of the leader state received, s (``comms.leader_latency``
             and the steps since the last broadcast that got through): a number,
             or ``(E,)`` in a batch; 0 with ``[comms]`` off.
+        team: ``(N, 5)`` each row's robot as the team's planner at the virtual
+            leader last received it (x, y m, theta rad, vx, vy m/s), for a
+            central planner; None when messages are neither late nor lost
+            (``comms.latency`` and ``comms.dropout`` 0): it then reads ``pose``.
+        team_age: ``(N,)`` the age of each of those messages, s; None with ``team``.
 
     The simulator shares some of these arrays between steps and runs
     (``robot_ids``, ``leader``, ``slot``, and in a batch ``env`` and
@@ -135,6 +140,8 @@ class Observation:
     slot: FloatArray
     env: NDArray[np.intp] | None = None
     leader_age: float | FloatArray = 0.0
+    team: FloatArray | None = None
+    team_age: FloatArray | None = None
 
     @property
     def n(self) -> int:
@@ -155,7 +162,9 @@ class Observation:
                            self.velocity[rows], self.twist[rows], scan,
                            self.neighbours.take(rows), self.obstacles.take(rows), self.leader,
                            self.goal, self.slot_offset[rows], self.slot[rows],
-                           None if self.env is None else self.env[rows], self.leader_age)
+                           None if self.env is None else self.env[rows], self.leader_age,
+                           None if self.team is None else self.team[rows],
+                           None if self.team_age is None else self.team_age[rows])
 
 
 

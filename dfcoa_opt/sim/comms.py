@@ -6,7 +6,9 @@ What the keys do (docs/comms.md):
   another robot (its believed pose and its velocity: the neighbour table, and
   what a controller sends with it) is ``latency`` old; at each step each
   (receiver, sender) message is lost with probability ``dropout``, and the
-  receiver keeps the last one it got, with its age.
+  receiver keeps the last one it got, with its age. The team's planner at the
+  virtual leader (a central planner such as ``reshape``'s) is one more
+  receiver of every robot's message (``Observation.team``).
 - ``comms.leader_latency`` / ``comms.leader_dropout``: the same for the virtual
   leader's broadcast (its state, hence every slot). A lost broadcast is lost
   for the whole team (``Observation.leader`` is one state per run).
@@ -18,9 +20,9 @@ What the keys do (docs/comms.md):
 
 At t = 0 every robot knows every other's start (and the leader's): messages
 are late and lost from then on. Every draw comes from the run's own generator,
-run by run in a fixed order each step (pose noise, then the (N, N) message
-draws, then the leader's, in ``sense``; command noise in ``apply``), so a
-batch gives its runs' bits and a seed fixes them. With every key at its
+run by run in a fixed order each step (pose noise, then the (N + 1, N) message
+draws, the planner's row last, then the leader's, in ``sense``; command noise
+in ``apply``), so a batch gives its runs' bits and a seed fixes them. With every key at its
 default the simulator makes no :class:`Comms` and draws nothing.
 """
 
@@ -56,6 +58,9 @@ class Received:
         distance: ``(R, K)`` from the receiver's believed position to the
             received one, m (``inf`` padded).
         age: ``(R, K)`` age of each message, s (0 padded).
+        team: ``(R, 5)`` each robot as the planner at the leader last received
+            it: x, y (m), theta (rad), vx, vy (m/s).
+        team_age: ``(R,)`` the age of that message, s.
     """
 
     index: NDArray[np.intp]
@@ -64,6 +69,8 @@ class Received:
     heading: FloatArray
     distance: FloatArray
     age: FloatArray
+    team: FloatArray
+    team_age: FloatArray
 
 
 class Comms:
@@ -93,8 +100,9 @@ class Comms:
         self.leader_on = bool(c.leader_latency or c.leader_dropout)
         if self.messages:
             self.history = np.zeros((slots, self.lag + 1, n, 5))  # sent: x, y, theta, vx, vy
-            self.got = np.zeros((slots, n, n, 5))  # [receiver, sender]: last message received
-            self.stamp = np.zeros((slots, n, n), dtype=np.int64)  # its content's step
+            # [receiver, sender]: last message received; receiver N is the planner at the leader
+            self.got = np.zeros((slots, n + 1, n, 5))
+            self.stamp = np.zeros((slots, n + 1, n), dtype=np.int64)  # its content's step
         self.leader_stamp = np.zeros(slots, dtype=np.int64)
 
     def believed(self, pose: FloatArray, active: IntArray) -> FloatArray:
@@ -125,10 +133,10 @@ class Comms:
         src = np.maximum(kk - lag, 0)
         content = self.history[active, src % (lag + 1)]  # (A, N, 5): what arrives now
         if self.drop:
-            lost = np.stack([self.rngs[e].random((n, n)) < self.drop for e in active])
+            lost = np.stack([self.rngs[e].random((n + 1, n)) < self.drop for e in active])
             lost[kk == 0] = False  # every start is known
         else:
-            lost = np.zeros((a, n, n), dtype=bool)
+            lost = np.zeros((a, n + 1, n), dtype=bool)
         keep = lost[..., None]
         self.got[active] = np.where(keep, self.got[active], content[:, None, :, :])
         self.stamp[active] = np.where(lost, self.stamp[active], src[:, None, None])
@@ -145,8 +153,10 @@ class Comms:
         order = np.argsort(dist, axis=1, kind="stable")
         take = np.take_along_axis
         msg = take(msg, order[..., None], axis=1)
+        team = self.got[active, n].reshape(a * n, 5)
+        team_age = ((kk[:, None] - self.stamp[active, n]) * self.dt).reshape(a * n)
         return Received(take(index, order, axis=1), msg[..., :2], msg[..., 3:5], msg[..., 2],
-                        take(dist, order, axis=1), take(age, order, axis=1))
+                        take(dist, order, axis=1), take(age, order, axis=1), team, team_age)
 
     def leader(self, kk: IntArray, active: IntArray) -> tuple[IntArray, FloatArray]:
         """The step whose leader broadcast each active run holds, and its age (s)."""

@@ -216,11 +216,13 @@ class Stepper:
         if comms is not None and comms.messages:
             got = comms.neighbours(kk, active, est, st.velocity, prox.index)
             nb_index, nb_dist, nb_age = got.index, got.distance, got.age
+            team: tuple[Any, Any] = (got.team, got.team_age)
             nb_pos, nb_vel, nb_heading = got.position, got.velocity, got.heading
             row_index = (nb_index if a == 1 else
                          np.where(nb_index >= 0, nb_index + rows[1], -1))
         else:
             nb_index, nb_dist, nb_age = prox.index, prox.distance, None
+            team = (None, None)
             nb_pos, nb_vel, nb_heading = gather(row_index, est, st.velocity)
         moving = rows[5]  # no moving obstacle: the same empty arrays every step
         if m:
@@ -238,7 +240,7 @@ class Stepper:
                        at_goal=at_goal, scans=scans, scan_all=scan_all, est=est, prox=prox,
                        row_index=row_index, nb=(nb_index, nb_pos, nb_vel, nb_heading, nb_dist,
                                                 nb_age), moving=moving, heard=heard,
-                       heard_slots=heard_slots)
+                       heard_slots=heard_slots, team=team)
 
     def _row_constants(self) -> tuple[Any, ...]:
         """Per-row constants of the active set, made again when it changes.
@@ -317,7 +319,8 @@ class Stepper:
             Neighbours(s["row_index"], nb_pos, nb_vel, nb_dist, nb_heading, nb_age),
             s["moving"], self.leaders, self.goal, rows[4],
             np.ascontiguousarray(s["heard_slots"]).reshape(a * n, 2), env=rows[3],
-            leader_age=self.leader_ages if self.comms is not None else 0.0)
+            leader_age=self.leader_ages if self.comms is not None else 0.0,
+            team=s["team"][0], team_age=s["team"][1])
 
     def run_observation(self, j: int) -> Observation:
         """The observation of the ``j``-th active run alone (today's single-run Observation)."""
@@ -332,7 +335,9 @@ class Stepper:
                            self._scan(s["scans"], s["scan_all"], j), nb,
                            s["moving"].take(rows), s["heard"][j], self.goal,
                            self.sim.scenarios[e].offsets, s["heard_slots"][j],
-                           leader_age=float(self.leader_ages[e]))
+                           leader_age=float(self.leader_ages[e]),
+                           team=None if s["team"][0] is None else s["team"][0][rows],
+                           team_age=None if s["team"][1] is None else s["team"][1][rows])
 
     # ------------------------------------------------------------------ apply
     def apply(self, cmd: FloatArray, kind: CommandKind, extras: Any = None) -> list[Ended]:
