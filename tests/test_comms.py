@@ -43,10 +43,12 @@ class Recorder(BatchedController):
     def __init__(self) -> None:
         self.seen: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]] = []
         self.team: list[tuple[np.ndarray, np.ndarray] | None] = []
+        self.now: list[tuple[np.ndarray, np.ndarray] | None] = []
 
     def reset_batch(self, scenarios, rngs) -> None:
         self.seen.clear()
         self.team.clear()
+        self.now.clear()
 
     def act(self, obs):
         obs = as_batch(obs)
@@ -55,6 +57,8 @@ class Recorder(BatchedController):
         self.seen.append((obs.t, nb.index.copy(), nb.position.copy(), age,
                           np.array(obs.leader).reshape(-1, 5)[0], float(np.max(obs.leader_age))))
         self.team.append(None if obs.team is None else (obs.team.copy(), obs.team_age.copy()))
+        self.now.append(None if obs.leader_now is None else
+                        (np.array(obs.leader_now).reshape(-1, 5)[0], obs.slot_now.copy()))
         return 0.5 * (obs.slot - obs.pose[:, :2])
 
 
@@ -62,11 +66,11 @@ def _recorded(**keys):
     sc = d.load(CROSSING, overrides={"t_max": 8.0, **keys})
     rec = Recorder()
     run = d.run(sc, rec, seed=3)
-    return run.log, rec.seen, rec.team
+    return run.log, rec.seen, rec.team, rec.now
 
 
 def test_a_latency_delivers_each_senders_pose_of_that_many_steps_before():
-    log, seen, team = _recorded(**{"comms.latency": 0.3})
+    log, seen, team, _ = _recorded(**{"comms.latency": 0.3})
     lag = 3
     for k, (t, index, position, age, _, _) in enumerate(seen):
         assert t == pytest.approx(k * 0.1)
@@ -81,7 +85,7 @@ def test_a_latency_delivers_each_senders_pose_of_that_many_steps_before():
 
 
 def test_a_lost_message_leaves_the_last_one_received_with_its_age():
-    log, seen, team = _recorded(**{"comms.latency": 0.1, "comms.dropout": 0.4})
+    log, seen, team, _ = _recorded(**{"comms.latency": 0.1, "comms.dropout": 0.4})
     ages = []
     for k, (_, index, position, age, _, _) in enumerate(seen):
         i, slot = np.nonzero(index >= 0)
@@ -97,7 +101,8 @@ def test_a_lost_message_leaves_the_last_one_received_with_its_age():
 
 
 def test_the_leaders_broadcast_is_late_and_lost_for_the_whole_team():
-    log, seen, team = _recorded(**{"comms.leader_latency": 0.2, "comms.leader_dropout": 0.3})
+    log, seen, team, known = _recorded(**{"comms.leader_latency": 0.2,
+                                          "comms.leader_dropout": 0.3})
     assert all(x is None for x in team)  # messages between robots are not late: no team view
     held = 0
     for k, (_, _, _, _, leader, age) in enumerate(seen):
@@ -105,6 +110,10 @@ def test_the_leaders_broadcast_is_late_and_lost_for_the_whole_team():
         assert k - step >= min(k, 2)
         np.testing.assert_array_equal(leader, log.leader[step])
         held += k - step > 2
+        # a planner at the leader knows the state of now, and its slots
+        now, slots = known[k]
+        np.testing.assert_array_equal(now, log.leader[k])
+        np.testing.assert_array_equal(slots, log.slots[k])
     assert held > 5
 
 

@@ -3,8 +3,9 @@
 Every ``replan_period`` s the controller (:mod:`~comparisons.reshape.controller`)
 hands each due run's own rows to that run's :class:`CentralPlanner`, which
 picks the route, nominal or region mode (docs/methods/reshape.md, "The
-programs") from the robots' broadcast positions and leaves the run's targets,
-the assignment and the guidance waypoints. Planning is per run by nature:
+programs") from the robots' positions as it hears them (:func:`heard_positions`:
+their messages, ``Observation.team``, when messages are late or lost) and
+leaves the run's targets, the assignment and the guidance waypoints. Planning is per run by nature:
 every run of a batch has its own planner, counters and history, and runs of
 one static world share what is derived from that world (:class:`RunMap`).
 """
@@ -227,11 +228,12 @@ class CentralPlanner(RouteMode):
 
         Args:
             obs: The observation of this run alone: every robot, in robot order,
-                and ``leader`` ``(5,)``.
+                and ``leader`` ``(5,)``. The robots' positions are read from
+                ``team`` when it is given (:func:`heard_positions`).
         """
         t0 = time.perf_counter()
         self.counters["replans"] += 1
-        pos = obs.pose[:, :2]
+        pos = heard_positions(obs)
         centroid = pos.mean(axis=0)
         s_c = float(self._path.arc_length(centroid[None])[0])
         s_l = float(self._path.arc_length(obs.leader[None, :2])[0])
@@ -241,7 +243,7 @@ class CentralPlanner(RouteMode):
             return
         self._routes.clear()
         if s_c + self.p.lookahead >= s_l and self._nominal_fits(obs, s_l):
-            self._nominal_plan(obs)  # nothing in the way: the scenario's formation
+            self._nominal_plan(obs, pos)  # nothing in the way: the scenario's formation
             self.plan_times.append(time.perf_counter() - t0)
             return
         segments = np.concatenate([self._segments, self._moving_segments(obs)])
@@ -293,15 +295,20 @@ class CentralPlanner(RouteMode):
         self._waypoint = self._waypoints(obs.t, pos)
         self.plan_times.append(time.perf_counter() - t0)
 
-    def _nominal_plan(self, obs: Observation) -> None:
-        """The scenario's formation on the virtual leader (``goto_slot`` with the CBF filter)."""
+    def _nominal_plan(self, obs: Observation, pos: FloatArray) -> None:
+        """The scenario's formation on the virtual leader (``goto_slot`` with the CBF filter).
+
+        Args:
+            obs: The run's observation (:meth:`plan`).
+            pos: ``(N, 2)`` the robots' positions as the planner hears them, m.
+        """
         if self._template not in (None, "scenario"):
             self.counters["switches"] += 1
         self.history.append((obs.t, "scenario", 1.0))
         self._template, self._nominal, self._carried = "scenario", True, None
         self._assign = np.arange(self._n)
         self._targets = obs.slot.copy()
-        self._waypoint = self._waypoints(obs.t, obs.pose[:, :2])
+        self._waypoint = self._waypoints(obs.t, pos)
 
     def _waypoints(self, t: float, pos: FloatArray) -> dict[int, FloatArray]:
         """Guidance waypoints towards the targets (stuck robots: around the others too)."""
@@ -312,6 +319,17 @@ class CentralPlanner(RouteMode):
         """Robot i -> slot index (:func:`~comparisons.reshape.planner.assign`)."""
         return planner.assign(pos, slots, template, self._template, self._assign,
                               self.p.hysteresis)
+
+
+def heard_positions(obs: Observation) -> FloatArray:
+    """``(N, 2)`` each robot's position as the planner at the virtual leader has it, m.
+
+    The planner hears the robots through their messages: ``obs.team`` (each
+    robot's last message that reached it, ``comms.latency`` old or older)
+    when messages are late or lost, else every robot's believed pose
+    ``obs.pose`` (what the messages carry when they arrive at once).
+    """
+    return obs.pose[:, :2] if obs.team is None else obs.team[:, :2]
 
 
 def _spacing(offsets: FloatArray, radius: float) -> float:

@@ -2,9 +2,9 @@
 
 Beyond the papers (after Alonso-Mora, Baker & Rus, IJRR 2017: a formation
 optimised inside a convex obstacle-free region). Every ``replan_period`` s a
-central planner, from the robots' broadcast positions, takes the formation's
-progress ``s_c`` along the leader's path (the centroid's nearest path point)
-and picks one of three modes (docs/methods/reshape.md):
+central planner, from the robots' positions as their messages tell it, takes
+the formation's progress ``s_c`` along the leader's path (the centroid's
+nearest path point) and picks one of three modes (docs/methods/reshape.md):
 
 1. **route** -- the leader's path ahead is blocked for the scenario's
    formation even at the smallest scale (a wall, a circle on the line, a
@@ -34,6 +34,13 @@ command turned (``unsticks``). Broadcast per plan: the mode and template id,
 ``t`` (2 floats), ``theta``, ``s`` and the assignment (N integers) -- 4 N + 24
 bytes. The counters are in the run's metrics as ``ctl_*``.
 
+Communication (docs/comms.md): the planner runs at the virtual leader. It
+hears the robots through their messages (``Observation.team`` when
+``comms.latency`` or ``comms.dropout`` is on), and its plan reaches the robots
+with the leader's broadcast: a run whose broadcast is ``leader_age`` s old
+follows the plan of ``round(leader_age / dt)`` steps before
+(:mod:`~comparisons.reshape.relay`). Each robot tracks from its own pose.
+
 Batched (:class:`~dfcoa_opt.control.base.BatchedController`): one object steps
 every run of a batch. The due runs are planned one by one, each from its own
 rows; the tracking is one elementwise pass over every row of every run (one
@@ -53,6 +60,7 @@ from numpy.typing import NDArray
 from comparisons.cbf.filter import CbfFilter
 from comparisons.reshape import planner
 from comparisons.reshape.central import CentralPlanner, RunMap
+from comparisons.reshape.relay import Plan, PlanRelay, depth_for
 from comparisons.reshape.tracking import StuckMonitor
 from dfcoa_opt.control.base import (
     BatchedController,
@@ -95,6 +103,9 @@ class Reshape(BatchedController):
         safety: The tracking filter (built by the reset: it needs the robots' ``v_max``).
         runs: The planner of each run, by ``env``.
         last_result: The filter's result of the latest step, one entry per row.
+        last_plan: The plan each row followed at the latest step, as it reached
+            the robots (the planner's latest, or an older one when the leader's
+            broadcast is late), one entry per row.
     """
 
     command = "velocity"
@@ -152,6 +163,7 @@ class Reshape(BatchedController):
         self.p = params
         self.safety: CbfFilter | None = None
         self.last_result: FilterResult | None = None
+        self.last_plan: Plan | None = None
         self.runs: list[CentralPlanner] = []
         self._n = 0
         self._v_max = 1.0
@@ -162,6 +174,7 @@ class Reshape(BatchedController):
         self._carried = np.zeros((0, 2))  # CARRIED targets in the leader frame, per row, m
         self._waypoint = np.zeros((0, 2))  # guidance waypoints, per row, m
         self._guided = np.zeros(0, dtype=bool)  # rows heading for their waypoint
+        self._relay = PlanRelay(0, 0, 1)  # the runs' recent plans, for a late broadcast
         # the assignment's state for :meth:`_assignment` alone (a run's is its planner's)
         self._assign = np.zeros(0, dtype=np.intp)
         self._template: str | None = None
@@ -196,7 +209,8 @@ class Reshape(BatchedController):
         self._carried = np.zeros((runs * n, 2))
         self._waypoint = np.zeros((runs * n, 2))
         self._guided = np.zeros(runs * n, dtype=bool)
-        self.last_result = None
+        self._relay = PlanRelay(runs, n, depth_for(self.p.replan_period))
+        self.last_result = self.last_plan = None
 
     # ------------------------------------------------------------ one run's results
     @property
@@ -246,18 +260,18 @@ class Reshape(BatchedController):
         pos = obs.pose[:, :2]
         rows = obs.env * self._n + obs.robot_ids
         lead = obs.row_leader()
-        mode = self._mode[obs.env]
-        target = self._target[rows]
-        nominal = mode == NOMINAL
-        carried = mode == CARRIED
+        plan = self.last_plan = self._heard(obs, rows)
+        target = plan.target
+        nominal = plan.mode == NOMINAL
+        carried = plan.mode == CARRIED
         target[nominal] = obs.slot[nominal]
         if carried.any():  # a plan made while keeping up: carried along in the leader's frame
-            target[carried] = lead[carried, :2] + rotate(self._carried[rows[carried]],
+            target[carried] = lead[carried, :2] + rotate(plan.carried[carried],
                                                          lead[carried, 2])
         ff = slot_velocity(lead, target)  # the leader's feed-forward (nominal and carried)
         ff[~(nominal | carried)] = 0.0
-        guided = self._guided[rows]
-        target[guided], ff[guided] = self._waypoint[rows[guided]], 0.0
+        guided = plan.guided
+        target[guided], ff[guided] = plan.waypoint[guided], 0.0
         u = self.p.kp * (target - pos) + ff
         u, turned = self._stuck.turn(obs.t, rows, pos, target, u)
         if turned:
@@ -274,8 +288,30 @@ class Reshape(BatchedController):
         self.last_result = res
         return res.command
 
+    def _heard(self, obs: Observation, rows: NDArray[np.intp]) -> Plan:
+        """The plan each row follows: its run's as of the leader broadcast the row holds.
+
+        Args:
+            obs: The batch's observation (``leader_age`` a number or ``(E,)`` by ``env``).
+            rows: ``(R,)`` each row's index ``env * N + robot``.
+
+        Returns:
+            Fresh per-row arrays: the planner's latest plan where the broadcast
+            is current (``leader_age`` 0), else the plan ``round(leader_age / dt)``
+            steps older (:class:`~comparisons.reshape.relay.PlanRelay`).
+        """
+        env = obs.env
+        assert env is not None, "as_batch(obs) first"
+        age = np.asarray(obs.leader_age, dtype=float)
+        lag = np.rint((age[env] if age.ndim else age) / obs.dt).astype(np.int64)
+        if not np.any(lag):
+            return Plan(self._mode[env], self._target[rows], self._carried[rows],
+                        self._guided[rows], self._waypoint[rows])
+        step = _step(obs) - np.broadcast_to(lag, env.shape)
+        return self._relay.heard(env, obs.robot_ids, step)
+
     def _plan(self, obs: Observation, e: int) -> None:
-        """Run ``e``'s plan, from its own rows; its targets into the batch's rows."""
+        """Run ``e``'s plan, from its own rows; its targets into the batch's rows and relay."""
         run = self.runs[e]
         run.plan(_run_rows(obs, e))
         self._next[e] = obs.t + self.p.replan_period
@@ -290,6 +326,14 @@ class Reshape(BatchedController):
         for i, point in run.waypoints.items():
             self._guided[e * self._n + i] = True
             self._waypoint[e * self._n + i] = point
+        self._relay.keep(e, _step(obs), Plan(np.full(self._n, self._mode[e]), self._target[rows],
+                                             self._carried[rows], self._guided[rows],
+                                             self._waypoint[rows]))
+
+
+def _step(obs: Observation) -> int:
+    """The step of ``obs`` (the runs of a batch share one clock)."""
+    return int(round(obs.t / obs.dt))
 
 
 def _run_rows(obs: Observation, e: int) -> Observation:
@@ -297,14 +341,23 @@ def _run_rows(obs: Observation, e: int) -> Observation:
 
     The rows are views of the batch's (a run's rows are one block); the
     neighbour indices stay rows of the batch, and there is no scan (the
-    planner reads neither).
+    planner reads neither). ``leader_age`` is the run's; ``team`` and
+    ``team_age`` are its rows (None when the batch has none). The planner runs
+    at the virtual leader, so it reads the leader's state and slots of now
+    (``leader_now``, ``slot_now``) where the robots' broadcast is late.
     """
     at = slice(int(np.searchsorted(obs.env, e)), int(np.searchsorted(obs.env, e, side="right")))
     nb, mv = obs.neighbours, obs.obstacles
+    age = np.asarray(obs.leader_age, dtype=float)
     return Observation(obs.t, obs.dt, obs.robot_ids[at], obs.pose[at], obs.velocity[at],
                        obs.twist[at], None,
                        Neighbours(nb.index[at], nb.position[at], nb.velocity[at],
                                   nb.distance[at], None if nb.heading is None else nb.heading[at]),
                        MovingObstacles(mv.position[at], mv.velocity[at], mv.radius[at],
                                        mv.mask[at]),
-                       obs.leader[e], obs.goal, obs.slot_offset[at], obs.slot[at])
+                       obs.leader[e] if obs.leader_now is None else obs.leader_now[e], obs.goal,
+                       obs.slot_offset[at], obs.slot[at] if obs.slot_now is None
+                       else obs.slot_now[at],
+                       leader_age=float(age[e]) if age.ndim else float(age),
+                       team=None if obs.team is None else obs.team[at],
+                       team_age=None if obs.team_age is None else obs.team_age[at])

@@ -118,6 +118,10 @@ class Observation:
             central planner; None when messages are neither late nor lost
             (``comms.latency`` and ``comms.dropout`` 0): it then reads ``pose``.
         team_age: ``(N,)`` the age of each of those messages, s; None with ``team``.
+        leader_now: The virtual leader's state at this step as its own node (a
+            central planner there) knows it: like ``leader``; None when the
+            broadcast is neither late nor lost (``leader`` is then the same).
+        slot_now: ``(N, 2)`` the slots of ``leader_now``, m; None with it.
 
     The simulator shares some of these arrays between steps and runs
     (``robot_ids``, ``leader``, ``slot``, and in a batch ``env`` and
@@ -142,6 +146,8 @@ class Observation:
     leader_age: float | FloatArray = 0.0
     team: FloatArray | None = None
     team_age: FloatArray | None = None
+    leader_now: FloatArray | None = None
+    slot_now: FloatArray | None = None
 
     @property
     def n(self) -> int:
@@ -164,7 +170,9 @@ class Observation:
                            self.goal, self.slot_offset[rows], self.slot[rows],
                            None if self.env is None else self.env[rows], self.leader_age,
                            None if self.team is None else self.team[rows],
-                           None if self.team_age is None else self.team_age[rows])
+                           None if self.team_age is None else self.team_age[rows],
+                           self.leader_now,
+                           None if self.slot_now is None else self.slot_now[rows])
 
 
 

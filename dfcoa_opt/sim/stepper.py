@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.control.adapters import convert
-from dfcoa_opt.control.base import MovingObstacles, Neighbours, Observation
+from dfcoa_opt.control.base import MovingObstacles
 from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.localization import TruthEstimator, make_estimators
 from dfcoa_opt.outcome import StallMonitor
@@ -35,6 +35,7 @@ from dfcoa_opt.sim.comms import Comms, wanted
 from dfcoa_opt.sim.leader import leader_track
 from dfcoa_opt.sim.log import BatchLog
 from dfcoa_opt.sim.neighbours import batch_proximity, gather, new_contacts
+from dfcoa_opt.sim.observe import Observing
 from dfcoa_opt.world.lidar import LaserScan
 
 if TYPE_CHECKING:
@@ -65,7 +66,7 @@ class Ended:
     t_goal: float
 
 
-class Stepper:
+class Stepper(Observing):
     """The state of a batch's runs, stepped in two halves (module docstring).
 
     Args:
@@ -112,6 +113,7 @@ class Stepper:
         #: late and lost messages, pose and command noise (None: every key off)
         self.comms = Comms(spec, n, slots, self.rngs) if wanted(spec) else None
         self.leader_ages = np.zeros(slots)  # each slot's leader state's age, s
+        self.leaders_now = np.zeros((slots, 5))  # the true states, when the robots' are late
         self.log: BatchLog | None = None
         self.wall = np.zeros(slots)
         self._tick = time.perf_counter()  # run wall times count from start_clock()
@@ -235,6 +237,7 @@ class Stepper:
         if comms is not None and comms.leader_on:
             stamp, self.leader_ages[active] = comms.leader(kk, active)
             heard, heard_slots, _ = self._leader(active, stamp)
+            self.leaders_now[active] = lead
         self.leaders[active] = heard
         self._s = dict(pos=pos, dyn_pos=dyn_pos, dyn_dist=dyn_dist, lead=lead, slots=slots,
                        at_goal=at_goal, scans=scans, scan_all=scan_all, est=est, prox=prox,
@@ -294,50 +297,6 @@ class Stepper:
     def t(self) -> FloatArray:
         """``(A,)`` each active run's time, s."""
         return self.k[self.active] * self.dt
-
-    # ------------------------------------------------------------ observations
-    def batch_observation(self, one_clock: bool = True) -> Observation:
-        """The observation of every active run (``env`` = slot; ``leader`` one state a slot).
-
-        Args:
-            one_clock: Require the runs to share one clock (a batched controller sees
-                one ``t``). With False, runs restarted at different steps give ``t`` NaN.
-
-        Raises:
-            DfcoaError: ``one_clock`` and the runs' clocks differ.
-        """
-        s, n, a = self._s, self.n, len(self.active)
-        kk = self.k[self.active]
-        same = a == 1 or bool((kk == kk[0]).all())
-        if one_clock and not same:
-            raise DfcoaError("a batched controller needs the runs of a batch on one clock")
-        _, nb_pos, nb_vel, nb_heading, nb_dist, nb_age = s["nb"]
-        rows = self._row_constants()
-        return Observation(
-            float(kk[0] * self.dt) if same else math.nan, self.dt, rows[2], s["est"],
-            self.state.velocity, self.state.twist, s["scan_all"],
-            Neighbours(s["row_index"], nb_pos, nb_vel, nb_dist, nb_heading, nb_age),
-            s["moving"], self.leaders, self.goal, rows[4],
-            np.ascontiguousarray(s["heard_slots"]).reshape(a * n, 2), env=rows[3],
-            leader_age=self.leader_ages if self.comms is not None else 0.0,
-            team=s["team"][0], team_age=s["team"][1])
-
-    def run_observation(self, j: int) -> Observation:
-        """The observation of the ``j``-th active run alone (today's single-run Observation)."""
-        s, n, e = self._s, self.n, int(self.active[j])
-        rows = slice(j * n, (j + 1) * n)
-        nb_index, nb_pos, nb_vel, nb_heading, nb_dist, nb_age = s["nb"]
-        st = self.state
-        nb = Neighbours(nb_index[rows], nb_pos[rows], nb_vel[rows], nb_dist[rows],
-                        nb_heading[rows], None if nb_age is None else nb_age[rows])
-        return Observation(float(self.k[e] * self.dt), self.dt, self.robot_ids, s["est"][rows],
-                           st.velocity[rows], st.twist[rows],
-                           self._scan(s["scans"], s["scan_all"], j), nb,
-                           s["moving"].take(rows), s["heard"][j], self.goal,
-                           self.sim.scenarios[e].offsets, s["heard_slots"][j],
-                           leader_age=float(self.leader_ages[e]),
-                           team=None if s["team"][0] is None else s["team"][0][rows],
-                           team_age=None if s["team"][1] is None else s["team"][1][rows])
 
     # ------------------------------------------------------------------ apply
     def apply(self, cmd: FloatArray, kind: CommandKind, extras: Any = None) -> list[Ended]:
