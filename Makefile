@@ -6,7 +6,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 JOBS   ?= 2
 
-.PHONY: test figures bench lint clean
+.PHONY: test figures bench lint docs clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -16,6 +16,10 @@ $(STAMP): pyproject.toml
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m pytest -q -n $(JOBS)
+
+# The documentation site (mkdocs.yml) into site/; make test builds it with --strict too.
+docs: $(STAMP)
+	$(BIN)/mkdocs build --strict
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
@@ -36,4 +40,4 @@ bench: $(VENV)/.bench-installed
 	MPLBACKEND=Agg BENCH_FIGURES=$(BENCH_FIGURES) $(BIN)/python -m benchmarks.run
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache
+	rm -rf $(VENV) .pytest_cache .ruff_cache site

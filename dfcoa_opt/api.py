@@ -62,7 +62,7 @@ def load(path: str | Path, *, seed: int | None = None,
         ScenarioError: A bad file or key, in one line naming the file, the key
             and the problem (as ``dfcoa run`` prints it).
 
-    Example:
+    Examples:
         >>> import dfcoa_opt as d
         >>> s = d.load("scenarios/dfcoa_s1.toml", t_max=20.0)
         >>> s.spec.t_max
@@ -80,7 +80,7 @@ def controllers() -> list[str]:
     A safety filter is added to any of them as ``"<controller>+<filter>"``, e.g.
     ``"goto_slot+cbf"``.
 
-    Example:
+    Examples:
         >>> import dfcoa_opt as d
         >>> "dfcoa" in d.controllers()
         True
@@ -116,7 +116,7 @@ def run(scenario: Scenario | str | Path, controller: str | Any,
         UnknownNameError: An unknown controller id, with a "did you mean" hint.
         ControllerError: The controller returned a bad command.
 
-    Example:
+    Examples:
         >>> import dfcoa_opt as d
         >>> r = d.run("scenarios/example_empty.toml", "goto_slot", seed=1)
         >>> r.metrics["outcome"]
@@ -162,7 +162,7 @@ def run_batch(scenario: Scenario | str | Path, controller: str | Any,
         ControllerError: The controller returned a bad command.
         DfcoaError: No seeds, or an unbatched controller object for several seeds.
 
-    Example:
+    Examples:
         >>> import dfcoa_opt as d
         >>> runs = d.run_batch("scenarios/example_empty.toml", "goto_slot", range(4))
         >>> [r.log.meta["seed"] for r in runs]
@@ -285,7 +285,7 @@ def sweep(spec: str | Path | Mapping[str, Any], out: str | Path | None = None, *
     Raises:
         ScenarioError: A bad sweep or scenario key, before any run starts.
 
-    Example:
+    Examples:
         >>> import dfcoa_opt as d
         >>> res = d.sweep({"scenarios": ["scenarios/example_empty.toml"],
         ...                "controllers": ["goto_slot"], "seeds": 2}, "/tmp/demo")
@@ -325,7 +325,7 @@ def report(results: str | Path | Results, out: str | Path | None = None,
     Returns:
         The written files (``report.md`` first).
 
-    Example:
+    Examples:
         >>> import dfcoa_opt as d
         >>> d.report("results/examples")[0].name      # after d.sweep(..., "results/examples")
         'report.md'

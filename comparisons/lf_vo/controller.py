@@ -83,7 +83,7 @@ Decisions (the paper's words, the choice and the reason; also in
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -100,6 +100,9 @@ from comparisons.lf_vo.kernel import vo_clearance
 from dfcoa_opt.control.base import BatchedController, Observation, as_batch
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.params import param
+
+if TYPE_CHECKING:
+    from dfcoa_opt.sim.scenario import Scenario
 
 #: Below this broadcast speed the leader robot's heading is taken from the virtual leader, m/s.
 _STILL = 1e-3
@@ -189,7 +192,7 @@ class LeaderFollowerVO(BatchedController):
         self._world_of = np.zeros(1, dtype=np.intp)  # (E,) each run's world
         self._grid: tuple[float, np.ndarray, np.ndarray] = (np.nan, np.zeros(0), np.zeros(0))
 
-    def reset_batch(self, scenarios, rngs: list[np.random.Generator]) -> None:
+    def reset_batch(self, scenarios: list[Scenario], rngs: list[np.random.Generator]) -> None:
         """Keep the robot radius, speed limits, and per run the leader's offset and the discs.
 
         Args:

@@ -1,0 +1,47 @@
+"""mkdocs hook: pages generated from the code, so they cannot drift from it.
+
+- ``scenario-keys.md``: the scenario key reference (``scenarios/README.md``,
+  made by ``dfcoa schema``);
+- ``controller-params.md``: every registered controller's and filter's
+  ``Params`` (the ``[controllers.<id>]`` keys), from their field metadata.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from mkdocs.structure.files import File
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _params_page() -> str:
+    import dfcoa_opt  # noqa: F401 - first: pins numpy's SIMD dispatch
+    from dfcoa_opt.control import registry
+    from dfcoa_opt.params import describe
+
+    out = ["# Controller parameters", "",
+           "Every registered controller's and safety filter's parameters: the keys of a "
+           "scenario's `[controllers.<id>]` table (a filter's under its own id, e.g. "
+           "`[controllers.cbf]` for `goto_slot+cbf`). A bad key or value is a one-line "
+           "error naming it. Generated from the code by the documentation build.", ""]
+    tables = [(cid, registry.controller_class(cid)) for cid in registry.available()]
+    tables += [(fid, registry._FILTERS[fid]) for fid in registry.available_filters()]
+    for cid, cls in tables:
+        rows = describe(cls.Params, f"controllers.{cid}")
+        out += [f"## `{cid}`", ""]
+        if not rows:
+            out += ["No parameters.", ""]
+            continue
+        out += ["| key | type | default | unit | meaning |", "|---|---|---|---|---|"]
+        out += [f"| `{k}` | {t} | `{d}` | {u} | {doc} |" for k, t, d, u, doc in rows]
+        out.append("")
+    return "\n".join(out)
+
+
+def on_files(files, config):  # noqa: ANN001, ANN201 - mkdocs hook signature
+    """Add the generated pages to the site."""
+    text = (ROOT / "scenarios" / "README.md").read_text(encoding="utf-8")
+    files.append(File.generated(config, "scenario-keys.md", content=text))
+    files.append(File.generated(config, "controller-params.md", content=_params_page()))
+    return files
