@@ -4,7 +4,7 @@
 average each run over its own open steps. When one variant stands in front of
 an obstacle for most of the run and the other gets past it, those are
 different stretches of the map, so the two numbers do not compare tracking
-(issue 20's target compares ``reshape`` with ``goto_slot+cbf`` there). This
+(the comparison sets ``reshape`` against ``goto_slot+cbf`` there). This
 module pairs the runs of one scenario and seed and keeps only the instants at
 which both runs are open, at the metric's open clearance and at a wider one
 (``reshape``'s look-ahead, 3 m: a planner that looks ahead deforms the

@@ -1,4 +1,4 @@
-"""Figure recipe "beyond": the ``cbf`` filter and the ``nmpc`` controller (issue 9).
+"""Figure recipe "beyond": the ``cbf`` filter and the ``nmpc`` controller.
 
 The same report as the "comparison" recipe (mean ± 95 % CI per controller and
 scenario, box plots, trajectories) over fewer seeds, plus the solve time per
@@ -50,7 +50,7 @@ def solve_time_table(store: ResultsStore) -> list[str]:
         title="Beyond the papers: CBF-QP filter and distributed NMPC (3 seeds)")
 def render_beyond(store: ResultsStore, dest: Path) -> list[Artefact]:
     """The comparison report over this sweep, and the solve-time table."""
-    arts = report_artefacts(store, dest, "no paper (issue 9)")
+    arts = report_artefacts(store, dest, "no paper (beyond the papers: cbf, nmpc)")
     lines = ["# Solve time per robot per step, and counted failures", "",
              "Robot-steps with a solver (`filter_time` > 0 or a status): `nmpc`'s NLP, the "
              "`cbf` filter's programs (its time is the step's total over the robots, fast "

@@ -20,7 +20,7 @@ def render_comparison(store: ResultsStore, dest: Path) -> list[Artefact]:
     """Mean ± 95 % CI tables, per-metric box plots and one-seed trajectory overlays.
 
     Also ``shared_open.md``: ``reshape`` against ``goto_slot+cbf`` over the instants
-    open in both runs of a seed (issue 20's formation-error target).
+    open in both runs of a seed (their formation error where both can track).
     """
     arts = report_artefacts(store, dest, "paper 000 Table 6 (qualitative there)")
     table = shared_open_table(store.root, *SHARED_OPEN)

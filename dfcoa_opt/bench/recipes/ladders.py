@@ -21,4 +21,4 @@ from dfcoa_opt.bench.store import ResultsStore
         title="Difficulty ladders: doorway width, clutter density, team size")
 def render_ladders(store: ResultsStore, dest: Path) -> list[Artefact]:
     """The report of the ladder sweep: a success-rate curve and table per ladder."""
-    return report_artefacts(store, dest, "no paper (difficulty ladders, issue 19)")
+    return report_artefacts(store, dest, "no paper (difficulty ladders)")
