@@ -243,15 +243,15 @@ class Run:
         Raises:
             DfcoaError: ``path`` does not end in ``.gif``.
         """
-        from dfcoa_opt import plotting
+        from dfcoa_opt import animation
 
         if not str(path).lower().endswith(".gif"):
             raise DfcoaError(f"animate: '{path}' must end in .gif")
         sc = self.scenario
         out: list[Figure] = []
-        plotting.animate_run(self.log, sc.world.grid, path, sc.spec.leader.goal, fps,
-                             max_frames, sc.spec.leader.start, shapes=sc.world.shapes,
-                             figure=out)
+        animation.animate_run(self.log, sc.world.grid, path, sc.spec.leader.goal, fps,
+                              max_frames, sc.spec.leader.start, shapes=sc.world.shapes,
+                              figure=out)
         return out[0]
 
 

@@ -200,15 +200,15 @@ def _cmd_run(a: argparse.Namespace) -> int:
                   "metrics": jsonable(summary)}
         Path(f"{stem}.json").write_text(json.dumps(result, indent=2) + "\n")
         if a.plot or a.animate:
-            from dfcoa_opt import plotting
+            from dfcoa_opt import animation, plotting
 
             goal, start = sc.spec.leader.goal, sc.spec.leader.start
             if a.plot:
                 plotting.plot_run(log, sc.world.grid, Path(f"{stem}.png"), goal=goal,
                                   start=start, shapes=sc.world.shapes)
             if a.animate:
-                plotting.animate_run(log, sc.world.grid, a.animate, goal=goal, start=start,
-                                     shapes=sc.world.shapes)
+                animation.animate_run(log, sc.world.grid, a.animate, goal=goal, start=start,
+                                      shapes=sc.world.shapes)
         if a.json:
             print(json.dumps(result))  # one object per line (JSON Lines) with --seeds
             continue

@@ -6,6 +6,12 @@ imported: the functions work under any ``MPLBACKEND`` setting and without a
 display. Files are written atomically (a temporary file in the target
 directory, then a rename), so a reader never sees a half-written image.
 
+Map figures whose ``figsize`` is not given are :data:`MAP_FIGURE_WIDTH` wide and as
+tall as the map's aspect needs, so the map fills them. Teams of more than
+:data:`MAX_LEGEND_ROBOTS` robots get a colour bar of robot indices, not a legend
+entry per robot. Animations draw the static map once and only the moving
+artists per frame (blitting), and write the GIF with Pillow.
+
 All coordinates are world metres, angles radians and times seconds. Typical use
 with a loaded scenario::
 
@@ -20,23 +26,27 @@ import os
 import uuid
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import matplotlib as mpl
 import numpy as np
-from matplotlib.animation import PillowWriter
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.cm import ScalarMappable
 from matplotlib.collections import LineCollection, PatchCollection
-from matplotlib.colors import ListedColormap, to_rgb
+from matplotlib.colors import BoundaryNorm, ListedColormap, to_rgb
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle as CirclePatch
 from matplotlib.patches import Polygon as PolygonPatch
+from matplotlib.ticker import MaxNLocator
 
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.world.shapes import Circle
 
 if TYPE_CHECKING:
+    from matplotlib.artist import Artist
     from matplotlib.axes import Axes
+    from matplotlib.colorbar import Colorbar
+    from matplotlib.legend import Legend
     from numpy.typing import ArrayLike, NDArray
 
     from dfcoa_opt.sim.log import RunLog
@@ -48,6 +58,12 @@ FREE_COLOR = "#ffffff"
 OCCUPIED_COLOR = "#404040"
 #: Colour of moving obstacles.
 OBSTACLE_COLOR = "#8c8c8c"
+
+#: Largest team (or number of time series) with a legend entry per robot (series);
+#: larger ones get a colour bar of indices instead.
+MAX_LEGEND_ROBOTS = 8
+#: Width (in) of a map figure whose ``figsize`` is not given; its height follows the map.
+MAP_FIGURE_WIDTH = 7.0
 
 _MAP_CMAP = ListedColormap([FREE_COLOR, OCCUPIED_COLOR])
 
@@ -157,11 +173,12 @@ def draw_world(ax: Axes, grid: OccupancyGrid, goal: ArrayLike | None = None,
 
 def run_figure(log: RunLog, grid: OccupancyGrid, goal: ArrayLike | None = None,
                start: ArrayLike | None = None, title: str | None = None, *,
-               shapes: Iterable[Shape] = (), figsize: tuple[float, float] = (7.0, 6.0),
+               shapes: Iterable[Shape] = (), figsize: tuple[float, float] | None = None,
                dpi: float = 100.0) -> Figure:
     """The summary figure of a run (what :func:`plot_run` saves).
 
-    Shows the map, each robot's trajectory (legend "robot i"), the virtual
+    Shows the map, each robot's trajectory (legend "robot i"; a colour bar of
+    robot indices for more than :data:`MAX_LEGEND_ROBOTS` robots), the virtual
     leader's path (dashed black), the final robot discs with heading lines, the
     final formation slots (hollow circles), and the moving obstacles'
     trajectories (thin grey) with their final discs.
@@ -173,7 +190,8 @@ def run_figure(log: RunLog, grid: OccupancyGrid, goal: ArrayLike | None = None,
         start: Leader start ``(x, y)`` in m.
         title: Figure title; default ``"{scenario} - {controller} - seed {seed}"``.
         shapes: Exact static shapes to outline.
-        figsize: ``(width, height)`` in inches.
+        figsize: ``(width, height)`` in inches; None: :data:`MAP_FIGURE_WIDTH` wide
+            and as tall as the map needs.
         dpi: Pixels per inch (image is ``figsize * dpi`` pixels).
 
     Raises:
@@ -181,7 +199,7 @@ def run_figure(log: RunLog, grid: OccupancyGrid, goal: ArrayLike | None = None,
     """
     if log.n_steps == 0:
         raise ValueError("the log has no steps")
-    fig = new_figure(figsize, dpi)
+    fig = _map_figure(grid, figsize, dpi)
     ax = fig.add_subplot()
     draw_world(ax, grid, goal, start, shapes=shapes)
     colors = robot_colors(log.n_robots)
@@ -189,7 +207,7 @@ def run_figure(log: RunLog, grid: OccupancyGrid, goal: ArrayLike | None = None,
     pose = np.asarray(log.pose, dtype=float)
     for i, color in enumerate(colors):
         ax.plot(pose[:, i, 0], pose[:, i, 1], "-", color=color, linewidth=2.0,
-                label=f"robot {i}", zorder=3)
+                label=_robot_label(i, len(colors)), zorder=3)
     leader = np.asarray(log.leader, dtype=float)
     ax.plot(leader[:, 0], leader[:, 1], "--", color="black", linewidth=1.5, label="leader",
             zorder=4)
@@ -201,13 +219,13 @@ def run_figure(log: RunLog, grid: OccupancyGrid, goal: ArrayLike | None = None,
     final.update(pose[-1], np.asarray(log.slots, dtype=float)[-1], dyn[-1])
     ax.set_title(_default_title(log) if title is None else title)
     _set_view(ax, grid, log, radius, goal, start)
-    fig.legend(loc="outside right upper", fontsize="small")
+    _legend_and_fit(fig, ax, colors, fit=figsize is None)
     return fig
 
 
 def plot_run(log: RunLog, grid: OccupancyGrid, path: str | Path, goal: ArrayLike | None = None,
              start: ArrayLike | None = None, title: str | None = None, *,
-             shapes: Iterable[Shape] = (), figsize: tuple[float, float] = (7.0, 6.0),
+             shapes: Iterable[Shape] = (), figsize: tuple[float, float] | None = None,
              dpi: float = 100.0) -> Path:
     """Save :func:`run_figure` of a run as a PNG at ``path`` (folders are created).
 
@@ -223,99 +241,13 @@ def plot_run(log: RunLog, grid: OccupancyGrid, path: str | Path, goal: ArrayLike
     return save_png(fig, path)
 
 
-def animate_run(log: RunLog, grid: OccupancyGrid, path: str | Path,
-                goal: ArrayLike | None = None, fps: float = 10.0, max_frames: int = 200,
-                start: ArrayLike | None = None, *, shapes: Iterable[Shape] = (),
-                figsize: tuple[float, float] = (7.0, 6.0), dpi: float = 80.0,
-                figure: list[Figure] | None = None) -> Path:
-    """Save a GIF animation of a run.
-
-    The ``T`` logged steps are subsampled uniformly (first and last included) to
-    ``min(T, max_frames)`` frames. Each frame shows the map, the trails so far,
-    the robots as discs with heading lines, the leader, the formation slots
-    (hollow circles), the moving obstacles and the time in the title. (Pillow
-    merges consecutive identical frames; frames always differ in their time.)
-
-    Args:
-        log: The run.
-        grid: The map the run used.
-        path: Output ``.gif`` file; parent directories are created.
-        goal: Leader goal ``(x, y)`` in m.
-        fps: Frames per second of the GIF, > 0.
-        max_frames: Largest number of frames, >= 1.
-        start: Leader start ``(x, y)`` in m.
-        shapes: Exact static shapes to outline.
-        figsize: ``(width, height)`` in inches.
-        dpi: Pixels per inch (frames are ``figsize * dpi`` pixels).
-        figure: When given, the animation's figure (at its last frame) is appended.
-
-    Returns:
-        The written path.
-
-    Raises:
-        ValueError: On an empty log, ``max_frames < 1`` or ``fps <= 0``.
-    """
-    if max_frames < 1 or not fps > 0:
-        raise ValueError("need max_frames >= 1 and fps > 0")
-    steps = frame_indices(log.n_steps, max_frames)
-    pose = np.asarray(log.pose, dtype=float)
-    leader = np.asarray(log.leader, dtype=float)
-    slots = np.asarray(log.slots, dtype=float)
-    dyn = np.asarray(log.dyn_pos, dtype=float)
-    t = np.asarray(log.t, dtype=float)
-    colors = robot_colors(log.n_robots)
-    radius = _robot_radius(log, grid)
-
-    fig = new_figure(figsize, dpi)
-    ax = fig.add_subplot()
-    draw_world(ax, grid, goal, start, shapes=shapes)
-    trails = [ax.plot([], [], "-", color=c, linewidth=1.5, label=f"robot {i}", zorder=3)[0]
-              for i, c in enumerate(colors)]
-    lead_trail = ax.plot([], [], "--", color="black", linewidth=1.2, label="leader",
-                         zorder=4)[0]
-    lead_dot = ax.plot([], [], "o", color="black", markersize=5, zorder=6)[0]
-    dyn_trails = [ax.plot([], [], "-", color=OBSTACLE_COLOR, linewidth=0.8, zorder=2,
-                          label="moving obstacle" if j == 0 else None)[0]
-                  for j in range(dyn.shape[1])]
-    frame = _Frame(ax, colors, radius, np.asarray(log.dyn_radius, dtype=float))
-    _set_view(ax, grid, log, radius, goal, start)
-    fig.legend(loc="outside right upper", fontsize="small")
-    head = _default_title(log)
-
-    def draw(k: int) -> list[Any]:
-        for i, line in enumerate(trails):
-            line.set_data(pose[: k + 1, i, 0], pose[: k + 1, i, 1])
-        lead_trail.set_data(leader[: k + 1, 0], leader[: k + 1, 1])
-        lead_dot.set_data(leader[k : k + 1, 0], leader[k : k + 1, 1])
-        for j, line in enumerate(dyn_trails):
-            line.set_data(dyn[: k + 1, j, 0], dyn[: k + 1, j, 1])
-        frame.update(pose[k], slots[k], dyn[k])
-        ax.set_title(f"{head}\nt = {t[k]:.2f} s (step {k})")
-        return []
-
-    draw(int(steps[0]))
-    # Lay the figure out once and freeze it, so frames do not jitter; grab_frame then
-    # draws each frame once (FuncAnimation.save drew it three times: its own draw,
-    # then savefig's layout pass and real draw).
-    freeze_layout(fig)
-    writer = PillowWriter(fps=fps)
-
-    def write(tmp: str) -> None:
-        with writer.saving(fig, tmp, dpi):
-            for k in steps:
-                draw(int(k))
-                writer.grab_frame()
-
-    out = _save_atomic(path, write, ".gif")
-    if figure is not None:
-        figure.append(fig)
-    return out
-
-
 def plot_timeseries(log: RunLog, series: Mapping[str, ArrayLike], path: str | Path,
                     ylabel: str = "", *, title: str | None = None,
                     figsize: tuple[float, float] = (7.0, 3.5), dpi: float = 100.0) -> Path:
     """Save a PNG of several signals against the run time ``log.t``.
+
+    Up to :data:`MAX_LEGEND_ROBOTS` series get a legend; more are coloured as
+    :func:`robot_colors` and named on a colour bar.
 
     Args:
         log: The run (provides the time axis, s).
@@ -335,41 +267,25 @@ def plot_timeseries(log: RunLog, series: Mapping[str, ArrayLike], path: str | Pa
     t = np.asarray(log.t, dtype=float)
     fig = new_figure(figsize, dpi)
     ax = fig.add_subplot()
-    for label, values in series.items():
+    many = len(series) > MAX_LEGEND_ROBOTS
+    colors = robot_colors(len(series)) if many else [None] * len(series)
+    for (label, values), color in zip(series.items(), colors, strict=True):
         y = np.asarray(values, dtype=float)
         if y.shape != t.shape:
             raise ValueError(f"series {label!r} has shape {y.shape}, expected {t.shape}")
-        ax.plot(t, y, linewidth=1.5, label=label)
+        ax.plot(t, y, linewidth=1.5, color=color, label=None if many else label)
     ax.set_xlabel("t (s)")
     ax.set_ylabel(ylabel)
     ax.grid(True, alpha=0.3)
-    if series:
+    if many:
+        _index_colorbar(fig, ax, colors, [str(k) for k in series])  # type: ignore[arg-type]
+    elif series:
         ax.legend(fontsize="small")
     if title is not None:
         ax.set_title(title)
     return save_png(fig, path)
 
 
-def frame_indices(n_steps: int, max_frames: int) -> NDArray[np.intp]:
-    """Uniformly spaced step indices, first and last included, at most ``max_frames``.
-
-    Args:
-        n_steps: Number of logged steps T, >= 1.
-        max_frames: Largest number of frames, >= 1.
-
-    Returns:
-        ``min(n_steps, max_frames)`` strictly increasing indices into ``[0, T)``.
-    """
-    if n_steps < 1 or max_frames < 1:
-        raise ValueError("need n_steps >= 1 and max_frames >= 1")
-    n = min(n_steps, max_frames)
-    if n == 1:
-        return np.array([n_steps - 1], dtype=np.intp)
-    # Spacing (T-1)/(n-1) >= 1, so rounding keeps the indices distinct.
-    return np.round(np.linspace(0.0, n_steps - 1, n)).astype(np.intp)
-
-
-# ------------------------------------------------------------------ internals
 class _Frame:
     """Robot discs, heading lines, slot markers and moving-obstacle discs at one step."""
 
@@ -389,6 +305,10 @@ class _Frame:
             ax.add_patch(patch)
         ax.add_collection(self.headings, autolim=False)
 
+    def artists(self) -> list[Artist]:
+        """Every artist :meth:`update` moves."""
+        return [*self.discs, self.headings, self.slots, *self.obstacles]
+
     def update(self, pose: NDArray[np.float64], slots: NDArray[np.float64],
                dyn_pos: NDArray[np.float64]) -> None:
         """Move everything to ``pose (N, 3)``, ``slots (N, 2)``, ``dyn_pos (M, 2)`` (m, rad)."""
@@ -400,6 +320,94 @@ class _Frame:
         self.slots.set_offsets(slots.reshape(-1, 2))
         for disc, q in zip(self.obstacles, dyn_pos, strict=True):
             disc.set_center((q[0], q[1]))
+
+
+def _robot_label(i: int, n: int) -> str | None:
+    """Legend label of robot ``i`` of ``n``; None (no entry) past :data:`MAX_LEGEND_ROBOTS`."""
+    return f"robot {i}" if n <= MAX_LEGEND_ROBOTS else None
+
+
+def _map_figure(grid: OccupancyGrid, figsize: tuple[float, float] | None,
+                dpi: float) -> Figure:
+    """A figure of ``figsize``, or :data:`MAP_FIGURE_WIDTH` wide and tall for the map."""
+    if figsize is None:
+        xmin, xmax, ymin, ymax = grid.extent
+        aspect = (ymax - ymin) / (xmax - xmin) if xmax > xmin else 1.0
+        width = MAP_FIGURE_WIDTH
+        figsize = (width, float(np.clip(width * aspect + 1.5, 0.4 * width, 1.6 * width)))
+    return new_figure(figsize, dpi)
+
+
+def _legend_and_fit(fig: Figure, ax: Axes, colors: Sequence[tuple[float, float, float]],
+                    fit: bool) -> None:
+    """The figure legend (robots' entries, or a colour bar of their indices), then the fit.
+
+    Up to :data:`MAX_LEGEND_ROBOTS` robots, the legend (robots and the other
+    labelled artists) is right of the map; for more, the robots get a colour bar
+    and the other artists a one-row legend under the map. With ``fit``, the
+    figure is trimmed to the map (:func:`_fit_to_map`).
+    """
+    if len(colors) <= MAX_LEGEND_ROBOTS:
+        legend = fig.legend(loc="outside right upper", fontsize="small")
+    else:
+        _index_colorbar(fig, ax, colors, [str(i) for i in range(len(colors))], "robot")
+        n_entries = len(ax.get_legend_handles_labels()[0])
+        legend = fig.legend(loc="outside lower center", fontsize="small",
+                            ncols=max(n_entries, 1))
+    if fit:
+        _fit_to_map(fig, ax, legend)
+
+
+def _index_colorbar(fig: Figure, ax: Axes, colors: Sequence[tuple[float, float, float]],
+                    labels: Sequence[str], title: str = "") -> Colorbar:
+    """A colour bar right of ``ax``: one band per colour, some ticked with ``labels[i]``.
+
+    About 0.15 in thick: its length (the axes' height) is guessed as the figure's
+    height less 1.5 in of labels and title.
+    """
+    n = len(colors)
+    norm = BoundaryNorm(np.arange(n + 1) - 0.5, n)
+    length = max(float(fig.get_size_inches()[1]) - 1.5, 1.0)
+    bar = fig.colorbar(ScalarMappable(norm, ListedColormap(list(colors))), ax=ax,
+                       pad=0.02, aspect=length / 0.15)
+    ticks = [int(v) for v in MaxNLocator(6, integer=True).tick_values(0, n - 1) if 0 <= v < n]
+    bar.set_ticks(ticks, labels=[labels[i] for i in ticks])
+    bar.minorticks_off()
+    bar.ax.tick_params(labelsize="small")
+    bar.set_label(title, fontsize="small")
+    return bar
+
+
+def _fit_to_map(fig: Figure, ax: Axes, legend: Legend) -> None:
+    """Resize ``fig`` (same width or narrower) so that the map ``ax`` fills its layout box.
+
+    Lays ``fig`` out with its layout engine (kept) with the map's aspect off, so
+    the axes box is the space left by the decorations (labels, title, legend,
+    colour bar; their size in inches barely depends on the figure's), then sets
+    the height for which that box has the map's aspect (at most 1.6 times the
+    width; for a taller map the width shrinks). The legend keeps room.
+    """
+    engine = fig.get_layout_engine()
+    if engine is None:
+        return
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    aspect = abs((y1 - y0) / (x1 - x0))
+    width = float(fig.get_size_inches()[0])
+    to_inches = fig.dpi_scale_trans.inverted()
+    ax.set_aspect("auto")
+    for _ in range(4):  # later passes correct for tick labels that came or went, and for
+        # the colour bar, whose thickness follows the height
+        engine.execute(fig)
+        w, h = fig.get_size_inches()
+        box = ax.get_position()
+        deco_w, deco_h = w * (1.0 - box.width), h * (1.0 - box.height)
+        leg = legend.get_window_extent(fig.canvas.get_renderer()).transformed(to_inches)
+        new_h = float(np.clip(deco_h + (w - deco_w) * aspect, leg.height + 0.2, 1.6 * width))
+        new_w = min(width, max(deco_w + (new_h - deco_h) / aspect, leg.width + 0.2))
+        if max(abs(new_w - w), abs(new_h - h)) * fig.dpi < 0.5:
+            break
+        fig.set_size_inches(new_w, new_h)
+    ax.set_aspect("equal")
 
 
 def _robot_radius(log: RunLog, grid: OccupancyGrid) -> float:

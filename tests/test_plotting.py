@@ -16,7 +16,7 @@ from matplotlib.colors import to_rgb
 from matplotlib.figure import Figure
 from PIL import Image
 
-from dfcoa_opt import plotting
+from dfcoa_opt import animation, plotting
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.shapes import Circle, Rectangle
@@ -32,14 +32,16 @@ def make_grid() -> OccupancyGrid:
     return OccupancyGrid(occ, resolution=1.0)
 
 
-def make_log(n_steps: int = T, n_dyn: int = M) -> RunLog:
-    """Three robots on straight lines from x = 2 to x = 14 along y = 3, 5, 7."""
+def make_log(n_steps: int = T, n_dyn: int = M, n_robots: int = N) -> RunLog:
+    """Robots on straight lines from x = 2 to x = 14: three along y = 3, 5, 7, more spread
+    over y in [2, 18]."""
     t = np.arange(n_steps) * 0.1
     s = np.linspace(0.0, 1.0, n_steps)
     x = 2.0 + 12.0 * s
-    pose = np.zeros((n_steps, N, 3))
+    pose = np.zeros((n_steps, n_robots, 3))
     pose[:, :, 0] = x[:, None]
-    pose[:, :, 1] = np.asarray(ROBOT_Y)[None, :]
+    pose[:, :, 1] = (np.asarray(ROBOT_Y) if n_robots == N
+                     else np.linspace(2.0, 18.0, n_robots))[None, :]
     leader = np.zeros((n_steps, 5))
     leader[:, 0] = x + 0.5
     leader[:, 1] = 4.0  # between the robots, so its dashes hide no trajectory
@@ -49,16 +51,16 @@ def make_log(n_steps: int = T, n_dyn: int = M) -> RunLog:
     if n_dyn:
         dyn_pos[:, 0, 0] = 10.0
         dyn_pos[:, 0, 1] = 1.0 + 8.0 * s
-    zf = np.zeros((n_steps, N))
+    zf = np.zeros((n_steps, n_robots))
     zi = np.zeros(n_steps, dtype=np.int32)
     return RunLog(
-        t=t, pose=pose, pose_est=pose.copy(), velocity=np.zeros((n_steps, N, 2)),
-        twist=np.zeros((n_steps, N, 2)), command=np.zeros((n_steps, N, 2)), leader=leader,
-        slots=slots, offsets=np.zeros((N, 2)), clearance=zf.copy(),
+        t=t, pose=pose, pose_est=pose.copy(), velocity=np.zeros((n_steps, n_robots, 2)),
+        twist=np.zeros((n_steps, n_robots, 2)), command=np.zeros((n_steps, n_robots, 2)),
+        leader=leader, slots=slots, offsets=np.zeros((n_robots, 2)), clearance=zf.copy(),
         min_inter_robot=np.full(n_steps, 2.0), robot_contacts=zi.copy(),
         obstacle_contacts=zi.copy(), dynamic_contacts=zi.copy(), collision_events=zi.copy(),
         dyn_pos=dyn_pos, dyn_radius=np.full(n_dyn, 0.4),
-        filter_status=np.zeros((n_steps, N), dtype=np.int8), filter_slack=zf.copy(),
+        filter_status=np.zeros((n_steps, n_robots), dtype=np.int8), filter_slack=zf.copy(),
         filter_time=zf.copy(), steering=np.full_like(zf, np.nan),
         meta={"scenario": "unit", "controller": "dfcoa", "seed": 7, "robot_radius": 0.3},
     )
@@ -173,7 +175,8 @@ def test_plot_run_no_moving_obstacles_custom_title_shapes(tmp_path: Path) -> Non
     shapes = (Rectangle((12.0, 12.0), (16.0, 16.0)), Circle((4.0, 15.0), 1.0))
     out = plotting.plot_run(log, make_grid(), tmp_path / "a.png", title="custom", dpi=50,
                             shapes=shapes)
-    assert mpimg.imread(out).shape[:2] == (300, 350)
+    height, width = mpimg.imread(out).shape[:2]
+    assert width == plotting.MAP_FIGURE_WIDTH * 50 and height < width  # height fits the map
 
 
 def test_plot_run_overwrites_atomically(tmp_path: Path) -> None:
@@ -195,7 +198,7 @@ def _gif_frames(path: Path) -> list[np.ndarray]:
 
 @pytest.mark.parametrize("max_frames", [200, 10])
 def test_animate_run_gif(tmp_path: Path, max_frames: int, draws: list[int]) -> None:
-    out = plotting.animate_run(make_log(), make_grid(), tmp_path / "run.gif", goal=(15.0, 5.0),
+    out = animation.animate_run(make_log(), make_grid(), tmp_path / "run.gif", goal=(15.0, 5.0),
                                fps=12, max_frames=max_frames, figsize=(4.0, 3.0), dpi=50)
     assert out.is_file()
     assert [p.name for p in tmp_path.iterdir()] == ["run.gif"]
@@ -203,7 +206,7 @@ def test_animate_run_gif(tmp_path: Path, max_frames: int, draws: list[int]) -> N
         assert im.format == "GIF"
         assert im.size == (200, 150)
         assert im.n_frames == min(T, max_frames)
-    assert len(draws) == min(T, max_frames)  # one draw per frame
+    assert len(draws) == 1  # the figure is drawn once; the frames are blitted over it
     frames = _gif_frames(out)
     for a, b in zip(frames, frames[1:], strict=False):
         assert np.abs(a - b).sum() > 0
@@ -211,18 +214,18 @@ def test_animate_run_gif(tmp_path: Path, max_frames: int, draws: list[int]) -> N
 
 
 def test_frame_indices() -> None:
-    assert plotting.frame_indices(30, 200).tolist() == list(range(30))
-    idx = plotting.frame_indices(1001, 200)
+    assert animation.frame_indices(30, 200).tolist() == list(range(30))
+    idx = animation.frame_indices(1001, 200)
     assert len(idx) == 200 and idx[0] == 0 and idx[-1] == 1000
     assert (np.diff(idx) > 0).all() and np.ptp(np.diff(idx)) <= 1
     for n, m in [(7, 6), (5, 5), (2, 1), (1, 3)]:
-        got = plotting.frame_indices(n, m)
+        got = animation.frame_indices(n, m)
         assert len(got) == min(n, m) and len(set(got.tolist())) == len(got)
         assert got[-1] == n - 1
     with pytest.raises(ValueError):
-        plotting.frame_indices(0, 10)
+        animation.frame_indices(0, 10)
     with pytest.raises(ValueError):
-        plotting.animate_run(make_log(), make_grid(), "unused.gif", max_frames=0)
+        animation.animate_run(make_log(), make_grid(), "unused.gif", max_frames=0)
 
 
 def test_plot_timeseries(tmp_path: Path) -> None:
@@ -239,10 +242,10 @@ _SCRIPT = textwrap.dedent("""
     import sys
     sys.path.insert(0, {tests!r})
     from test_plotting import make_grid, make_log
-    from dfcoa_opt import plotting
+    from dfcoa_opt import animation, plotting
     log, grid = make_log(n_steps=5), make_grid()
     plotting.plot_run(log, grid, {png!r}, dpi=30)
-    plotting.animate_run(log, grid, {gif!r}, max_frames=3, dpi=30)
+    animation.animate_run(log, grid, {gif!r}, max_frames=3, dpi=30)
     plotting.plot_timeseries(log, {{"x": log.pose[:, 0, 0]}}, {ts!r}, dpi=30)
     assert "matplotlib.pyplot" not in sys.modules, "pyplot was imported"
 """)
@@ -262,4 +265,111 @@ def test_works_without_display_under_any_backend(tmp_path: Path, backend: str | 
     assert proc.returncode == 0, proc.stderr
     with Image.open(files["gif"]) as im:
         assert im.n_frames == 3
-    assert mpimg.imread(files["png"]).shape[:2] == (180, 210)
+    assert mpimg.imread(files["png"]).shape[1] == plotting.MAP_FIGURE_WIDTH * 30
+
+
+# ------------------------------------------------------------- legends and layout
+def _legend_texts(fig: Figure) -> list[str]:
+    """Texts of every legend of ``fig``: figure legends and Axes legends."""
+    legends = [*fig.legends, *(ax.get_legend() for ax in fig.axes)]
+    return [t.get_text() for leg in legends if leg is not None for t in leg.get_texts()]
+
+
+@pytest.mark.parametrize("n_robots", [3, 8, 9, 20])
+def test_per_robot_legend_up_to_8_robots_then_a_colour_bar(tmp_path: Path, n_robots: int) -> None:
+    log, ends = make_log(n_steps=6, n_robots=n_robots), {"goal": (15.0, 5.0), "start": (2.5, 5.0)}
+    fig = plotting.run_figure(log, make_grid(), dpi=40, **ends)  # type: ignore[arg-type]
+    out: list[Figure] = []
+    animation.animate_run(log, make_grid(), tmp_path / "a.gif", max_frames=2, dpi=30, figure=out,
+                         **ends)  # type: ignore[arg-type]
+    for f in (fig, out[0]):  # the summary figure and the animation's
+        texts = _legend_texts(f)
+        robots = [t for t in texts if t.startswith("robot")]
+        assert {"start", "goal", "leader", "slots", "moving obstacle"} <= set(texts)
+        if n_robots <= plotting.MAX_LEGEND_ROBOTS:
+            assert robots == [f"robot {i}" for i in range(n_robots)]
+            assert len(f.axes) == 1
+        else:
+            assert robots == []  # no entry per robot ...
+            assert len(f.axes) == 2  # ... but a colour bar of their indices
+            labels = [t.get_text() for t in f.axes[1].get_yticklabels()]
+            assert "0" in labels and all(0 <= int(v) < n_robots for v in labels)
+
+
+def _longest_blank(png: np.ndarray) -> tuple[int, int]:
+    """Longest run of all-white rows, and of all-white columns, of an image (px)."""
+    ink = (png[..., :3] < 0.97).any(axis=-1)
+
+    def longest(has_ink: np.ndarray) -> int:
+        edges = np.flatnonzero(np.diff(np.concatenate(([1], has_ink.astype(int), [1]))))
+        return int(np.max(np.diff(edges)[::2], initial=0))  # lengths of the 0-runs
+
+    return longest(ink.any(axis=1)), longest(ink.any(axis=0))
+
+
+@pytest.mark.parametrize(("cells", "n_robots"), [((10, 40), 20), ((10, 40), 3), ((30, 12), 3),
+                                                  ((20, 20), 12)])
+def test_map_figure_is_sized_to_the_map(tmp_path: Path, cells: tuple[int, int],
+                                        n_robots: int) -> None:
+    """Default size: MAP_FIGURE_WIDTH wide, as tall as the map needs: no empty band.
+
+    (Before, a fixed 7 x 6 in figure left 80-100 blank rows under a 40 x 10 m map.)
+    """
+    grid = OccupancyGrid(np.zeros(cells, dtype=bool), resolution=1.0)
+    log = make_log(n_steps=6, n_robots=n_robots)
+    for arr in (log.pose[..., 1], log.slots[..., 1], log.dyn_pos[..., 1]):
+        arr *= cells[0] / 20.0  # keep everything inside the map
+    log.leader[:, 1] = cells[0] / 2.0
+    out = plotting.plot_run(log, grid, tmp_path / "m.png", dpi=50)
+    png = mpimg.imread(out)
+    height, width = png.shape[:2]
+    assert width == plotting.MAP_FIGURE_WIDTH * 50
+    assert height <= 1.6 * width
+    rows, cols = _longest_blank(png)
+    assert rows <= 10 and cols <= 10, (rows, cols)
+
+
+def test_plot_timeseries_many_series_get_a_colour_bar(tmp_path: Path) -> None:
+    log = make_log()
+    series = {f"robot {i}": np.sin(log.t + i) for i in range(12)}
+    captured: list[Figure] = []
+    real = plotting.save_png
+
+    def keep(fig: Figure, path: str | Path) -> Path:
+        captured.append(fig)
+        return real(fig, path)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(plotting, "save_png", keep)
+        plotting.plot_timeseries(log, series, tmp_path / "many.png", dpi=40)
+        plotting.plot_timeseries(log, dict(list(series.items())[:4]), tmp_path / "few.png",
+                                 dpi=40)
+    many, few = captured
+    assert _legend_texts(many) == [] and len(many.axes) == 2
+    assert "robot 0" in [t.get_text() for t in many.axes[1].get_yticklabels()]
+    assert _legend_texts(few) == [f"robot {i}" for i in range(4)] and len(few.axes) == 1
+
+
+# ------------------------------------------------------------- animation frames
+@pytest.mark.parametrize("n_robots", [3, 12])
+def test_animation_frames_are_the_full_redraw_pictures(tmp_path: Path, n_robots: int) -> None:
+    """The GIF has a frame per step; each is the picture a full redraw of the figure gives."""
+    log, grid = make_log(n_robots=n_robots), make_grid()
+    args = dict(goal=(15.0, 5.0), start=(2.5, 5.0), shapes=(Circle((4.0, 15.0), 1.0),))
+    out = animation.animate_run(log, grid, tmp_path / "run.gif", max_frames=12, dpi=50,
+                               **args)  # type: ignore[arg-type]
+    steps = animation.frame_indices(T, 12).tolist()
+    frames = _gif_frames(out)
+    assert len(frames) == len(steps) == 12
+    # the same figure, drawn the plain way: every artist redrawn, for every frame
+    old = animation._RunAnimation(log, grid, args["goal"], args["start"], args["shapes"],
+                                 None, 50.0)
+    for k, frame in zip(steps, frames, strict=True):
+        full = np.asarray(old.render_full(k), dtype=np.int16)
+        assert frame.shape == full.shape
+        diff = np.abs(frame - full)
+        assert diff.mean() < 2.0, (k, diff.mean())  # only the 256-colour palette differs
+        assert (diff.max(axis=-1) > 32).mean() < 0.01
+    # blitting itself is exact: the frames before quantisation are the full redraws
+    for k in (steps[0], steps[5], steps[-1]):
+        assert np.array_equal(np.asarray(old.render(k)), np.asarray(old.render_full(k)))

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from dfcoa_opt import plotting
+from dfcoa_opt import animation, plotting
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.plots import scenario_for_row
 from dfcoa_opt.bench.recipes import Artefact, recipe
@@ -52,7 +52,7 @@ def render_reshape(store: ResultsStore, dest: Path) -> list[Artefact]:
         arts.append(Artefact(png, "-", f"reshape on {name}: trajectories, slots, map"))
         if name == ANIMATED:
             gif = f"reshape_{name}.gif"
-            plotting.animate_run(log, sc.world.grid, dest / gif, max_frames=120, **kw)
+            animation.animate_run(log, sc.world.grid, dest / gif, max_frames=120, **kw)
             arts.append(Artefact(gif, "-", f"reshape through the {name}: animation"))
     atomic_write(dest / "summary.md", "\n".join(lines) + "\n")
     return [Artefact("summary.md", "-", "outcome and counters of every run"), *arts]
