@@ -26,7 +26,9 @@ def _params_page() -> str:
            "`[controllers.cbf]` for `goto_slot+cbf`). A bad key or value is a one-line "
            "error naming it. Generated from the code by the documentation build.", ""]
     tables = [(cid, registry.controller_class(cid)) for cid in registry.available()]
-    tables += [(fid, registry._FILTERS[fid]) for fid in registry.available_filters()]
+    # a filter's class: the second of the classes behind "goto_slot+<filter>"
+    tables += [(fid, registry.component_classes(f"goto_slot+{fid}")[1])
+               for fid in registry.available_filters()]
     for cid, cls in tables:
         rows = describe(cls.Params, f"controllers.{cid}")
         out += [f"## `{cid}`", ""]
