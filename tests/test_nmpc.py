@@ -1,13 +1,11 @@
 """``nmpc``: distributed nonlinear MPC (casadi) tracking the formation slot."""
 
 import math
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 import pytest
 
-import comparisons.nmpc.compiled as nmpc_compiled
 import comparisons.nmpc.problem as nmpc_problem
 from comparisons.constraints.distance import StaticObstacles
 from comparisons.nmpc import Nmpc, goto_command, solve_time_stats
@@ -19,67 +17,18 @@ from comparisons.nmpc.geometry import (
     slot_reference,
 )
 from comparisons.nmpc.problem import arc_step, rollout
-from dfcoa_opt.control.base import MovingObstacles, Observation, slot_velocity
-from dfcoa_opt.control.registry import available, build_controller, make_controller
+from dfcoa_opt.control.base import MovingObstacles, slot_velocity
+from dfcoa_opt.control.registry import available, build_controller
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.formation import slot_positions
 from dfcoa_opt.metrics import filter_counts
 from dfcoa_opt.robots.models import integrate_unicycle
-from dfcoa_opt.sim.loader import load_scenario, scenario_from_dict
+from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.log import STATUS_OK, STATUS_SOLVER_FAIL
-from dfcoa_opt.sim.simulator import Simulator, run_batch_logs, run_scenario
+from dfcoa_opt.sim.simulator import Simulator, run_scenario
 from dfcoa_opt.world.shapes import Circle, Rectangle
 from tests.helpers import neighbours_from_lists
-
-ROOT = Path(__file__).resolve().parents[1]
-R = 0.2  # robot radius, m
-
-
-def scenario(n=1, poses=None, offsets=((0.0, 0.0),), obstacles=(), humans=(), t_max=10.0,
-             leader=None, **extra):
-    """A small open field; the leader goes +x at 0.3 m/s from (2, 5)."""
-    team = {"n": n} if poses is None else {"n": n, "placement": "explicit", "poses": poses}
-    data = {
-        "name": "nmpc_test", "dt": 0.1, "t_max": t_max, "seed": 1,
-        "world": {"size": [20.0, 10.0], "resolution": 10, "obstacles": list(obstacles),
-                  "dynamic_obstacles": list(humans)},
-        "robots": {"radius": R, "v_max": 0.6, "w_max": 2.0, **extra.pop("robots", {})},
-        "team": team,
-        "formation": {"shape": "offsets", "offsets": [list(o) for o in offsets]},
-        "leader": leader or {"start": [2.0, 5.0], "goal": [18.0, 5.0], "speed": 0.3,
-                             "wait_for_formation": False},
-        "sensors": {"lidar": {"enabled": False}, "obstacle_range": 5.0},
-        **extra,
-    }
-    return scenario_from_dict(data, "<nmpc>")
-
-
-def controller(sc, **params):
-    c = make_controller("nmpc", params)
-    c.reset(sc, np.random.default_rng(0))
-    return c
-
-
-def observation(pose, slot, t=0.0, leader=(0.0, 0.0, 0.0, 0.0, 0.0), lists=None, offsets=None,
-                humans=()):
-    """A hand-made observation; ``lists[i]`` = robot i's neighbours."""
-    pose = np.asarray(pose, dtype=float).reshape(-1, 3)
-    n = len(pose)
-    nb = neighbours_from_lists(pose[:, :2], np.zeros((n, 2)), lists or [[] for _ in range(n)])
-    m = max(len(humans), 1)
-    hp, hv, hr = np.zeros((n, m, 2)), np.zeros((n, m, 2)), np.zeros((n, m))
-    hm = np.zeros((n, m), dtype=bool)
-    for j, (p, v, r) in enumerate(humans):
-        hp[:, j], hv[:, j], hr[:, j], hm[:, j] = p, v, r, True
-    slot = np.asarray(slot, dtype=float).reshape(n, 2)
-    leader = np.asarray(leader, dtype=float)
-    if offsets is None:  # offsets consistent with the slots and the leader
-        c, s = math.cos(leader[2]), math.sin(leader[2])
-        rel = slot - leader[:2]
-        offsets = np.column_stack((c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]))
-    return Observation(t, 0.1, np.arange(n), pose, np.zeros((n, 2)), np.zeros((n, 2)), None,
-                       nb, MovingObstacles(hp, hv, hr, hm), leader, np.zeros(2),
-                       np.asarray(offsets, float), slot)
+from tests.nmpc_support import ROOT, R, break_every_solver, controller, observation, scenario
 
 
 # ----------------------------------------------------------------- registry and parameters
@@ -293,19 +242,6 @@ def test_warm_start_needs_fewer_iterations(solver):
 
 
 # ----------------------------------------------------------------- failures
-def break_every_solver(monkeypatch):
-    """Every solve fails: the interpreted solvers raise, the compiled ones flag an error."""
-    def broken(self, *args, **kwargs):
-        raise RuntimeError("forced")
-
-    def flagged(self, z):
-        return np.full((len(z), self.n_out), np.nan), np.ones(len(z), np.intc), np.zeros(len(z))
-
-    monkeypatch.setattr(nmpc_problem.NmpcProblem, "_interpreted", broken)
-    monkeypatch.setattr(nmpc_compiled.CompiledFunction, "__call__", broken)
-    monkeypatch.setattr(nmpc_compiled.CompiledFunction, "batch", flagged)
-
-
 @pytest.mark.parametrize("policy", ["shift", "stop", "goto"])
 def test_forced_solver_failure_applies_the_policy_and_is_counted(monkeypatch, policy):
     sc = scenario(poses=[(2.0, 4.0, 0.0)], t_max=0.5)
@@ -405,99 +341,3 @@ def test_runs_end_to_end_on_dfcoa_s1():
     assert stats["failures"] == int(np.count_nonzero(log.filter_status == STATUS_SOLVER_FAIL))
     counts = filter_counts(log)
     assert counts["filter_time_median"] == pytest.approx(stats["median"])
-
-
-# ----------------------------------------------------------------- real-time iteration
-def recording(ctrl):
-    """Record ``(last_rti, last_iterations, status)`` after each ``act`` of ``ctrl``."""
-    seen, act = [], ctrl.act
-
-    def wrapped(obs):
-        u = act(obs)
-        seen.append((ctrl.last_rti.copy(), ctrl.last_iterations.copy(),
-                     ctrl.last_result.status.copy()))
-        return u
-
-    ctrl.act = wrapped
-    return seen
-
-
-def test_rti_makes_one_iteration_per_step_after_a_full_first_solve():
-    """Interpreted (it counts iterations; the compiled solver gives the same numbers)."""
-    sc = scenario(n=2, poses=[(2.0, 4.0, 0.5), (1.5, 6.0, -0.5)],
-                  offsets=[(0.0, -1.0), (0.0, 1.0)], t_max=4.0)
-    ctrl = controller(sc, rti=True, compiled=False)
-    assert ctrl.iterate.spec.rti and ctrl.iterate.spec.max_iter == 1
-    seen = recording(ctrl)
-    Simulator(sc, ctrl).run()
-    rti = np.array([s[0] for s in seen])
-    its = np.array([s[1] for s in seen])
-    assert not rti[0].any() and its[0].min() > 1  # the first step: the full SQP, converged
-    assert rti[1:].all()
-    assert its[1:].max() == 1 and np.mean(its[1:] == 1) > 0.5  # 0: the warm start was optimal
-    assert all(np.all(s[2] == STATUS_OK) for s in seen)
-
-
-def test_without_rti_the_full_sqp_iterates_to_convergence():
-    sc = scenario(n=2, poses=[(2.0, 4.0, 0.5), (1.5, 6.0, -0.5)],
-                  offsets=[(0.0, -1.0), (0.0, 1.0)], t_max=4.0)
-    ctrl = controller(sc, compiled=False)
-    assert ctrl.iterate is None and ctrl.problem.spec.max_iter == 20
-    assert not ctrl.problem.spec.rti
-    seen = recording(ctrl)
-    Simulator(sc, ctrl).run()
-    assert not any(s[0].any() for s in seen)
-    assert max(int(s[1].max()) for s in seen[1:]) > 1  # it goes on after the first iteration
-
-
-def test_rti_needs_the_sqp_solver():
-    sc = scenario(poses=[(2.0, 4.0, 0.0)])
-    with pytest.raises(ScenarioError, match=r"controllers\.nmpc\.rti"):
-        controller(sc, rti=True, solver="ipopt")
-
-
-def test_rti_run_is_finite_and_reaches_the_goal():
-    sc = load_scenario(ROOT / "scenarios/example_empty.toml",
-                       overrides={"controllers.nmpc.rti": True})
-    log = run_scenario(sc, "nmpc")
-    assert np.all(np.isfinite(log.command))
-    assert log.meta["reached_goal"]
-    assert int(log.collision_events.sum()) == 0
-    assert np.all(log.filter_status == STATUS_OK)
-
-
-def test_rti_is_deterministic_and_compiled_equals_interpreted():
-    path = ROOT / "scenarios/dfcoa_s1.toml"
-    over = {"t_max": 2.0, "controllers.nmpc.rti": True}
-    runs = [run_scenario(load_scenario(path, 0, over), "nmpc").digest() for _ in range(2)]
-    interpreted = run_scenario(load_scenario(path, 0, {**over, "controllers.nmpc.compiled": False}),
-                               "nmpc").digest()
-    assert runs[0] == runs[1] == interpreted
-    full = run_scenario(load_scenario(path, 0, {"t_max": 2.0}), "nmpc").digest()
-    assert full != runs[0]  # rti really changes the iterates
-
-
-@pytest.mark.parametrize("name", ["dfcoa_s2.toml", "bench/clutter.toml"])
-def test_rti_batch_equals_its_single_runs(name):
-    path = ROOT / "scenarios" / name
-    over = {"t_max": 3.0, "controllers.nmpc.rti": True}
-    batch = run_batch_logs(load_scenario(path, 7, over), "nmpc", [0, 1, 2])
-    singles = [run_scenario(load_scenario(path, s, over), "nmpc").digest() for s in (0, 1, 2)]
-    assert [log.digest() for log in batch] == singles
-
-
-def test_rti_after_a_fallback_solves_fully_then_iterates_again(monkeypatch):
-    sc = scenario(poses=[(2.0, 4.0, 0.0)])
-    ctrl = controller(sc, rti=True)
-    leader = (2.0, 5.0, 0.0, 0.3, 0.0)
-
-    def act(k):
-        ctrl.act(observation([2.0 + 0.01 * k, 4.0, 0.0], [[2.0 + 0.03 * k, 5.0]], t=0.1 * k,
-                             leader=leader))
-        return bool(ctrl.last_rti[0]), int(ctrl.last_result.status[0])
-
-    assert [act(0), act(1)] == [(False, STATUS_OK), (True, STATUS_OK)]
-    break_every_solver(monkeypatch)  # the iteration and its IPOPT rescue fail: shift
-    assert act(2) == (True, STATUS_SOLVER_FAIL)
-    monkeypatch.undo()
-    assert [act(3), act(4)] == [(False, STATUS_OK), (True, STATUS_OK)]
