@@ -197,12 +197,8 @@ def flatten_rows(pose, velocity, leader, env, slot, ranges, scanned, range_max, 
         for j in range(kn):
             p = 1.0 if nb_index[i, j] >= 0 else 0.0
             col = nb0 + 5 * j
-            dx, dy = nb_pos[i, j, 0] - px, nb_pos[i, j, 1] - py
-            out[i, col] = (c * dx + s * dy) / scale * p
-            out[i, col + 1] = (-s * dx + c * dy) / scale * p
-            dx, dy = nb_vel[i, j, 0] - vx, nb_vel[i, j, 1] - vy
-            out[i, col + 2] = (c * dx + s * dy) / v_scale * p
-            out[i, col + 3] = (-s * dx + c * dy) / v_scale * p
+            _relative(out[i], col, nb_pos[i, j], nb_vel[i, j], px, py, vx, vy, c, s, scale,
+                      v_scale, p)
             out[i, col + 4] = 1.0 * p
         if mk == 0:
             continue
@@ -218,15 +214,27 @@ def flatten_rows(pose, velocity, leader, env, slot, ranges, scanned, range_max, 
             taken[q] = True
             p = 1.0 if mv_mask[i, q] else 0.0
             col = mv0 + 6 * j
-            dx, dy = mv_pos[i, q, 0] - px, mv_pos[i, q, 1] - py
-            out[i, col] = (c * dx + s * dy) / scale * p
-            out[i, col + 1] = (-s * dx + c * dy) / scale * p
-            dx, dy = mv_vel[i, q, 0] - vx, mv_vel[i, q, 1] - vy
-            out[i, col + 2] = (c * dx + s * dy) / v_scale * p
-            out[i, col + 3] = (-s * dx + c * dy) / v_scale * p
+            _relative(out[i], col, mv_pos[i, q], mv_vel[i, q], px, py, vx, vy, c, s, scale,
+                      v_scale, p)
             out[i, col + 4] = mv_radius[i, q] / scale * p
             out[i, col + 5] = 1.0 * p
     return out
+
+
+@numba.njit(cache=True, inline="always")
+def _relative(row, col, pos, vel, px, py, vx, vy, c, s, scale, v_scale, p):  # pragma: no cover
+    """Columns ``col .. col+3`` of one row: another body relative to the robot.
+
+    Its position and velocity minus the robot's, turned into the robot's frame
+    (cos ``c``, sin ``s``), divided by ``scale`` (m) and ``v_scale`` (m/s),
+    times its presence ``p`` (0 or 1).
+    """
+    dx, dy = pos[0] - px, pos[1] - py
+    row[col] = (c * dx + s * dy) / scale * p
+    row[col + 1] = (-s * dx + c * dy) / scale * p
+    dx, dy = vel[0] - vx, vel[1] - vy
+    row[col + 2] = (c * dx + s * dy) / v_scale * p
+    row[col + 3] = (-s * dx + c * dy) / v_scale * p
 
 
 @numba.njit(cache=True)
