@@ -137,24 +137,24 @@ class Comms:
             lost[kk == 0] = False  # every start is known
         else:
             lost = np.zeros((a, n + 1, n), dtype=bool)
-        keep = lost[..., None]
-        self.got[active] = np.where(keep, self.got[active], content[:, None, :, :])
-        self.stamp[active] = np.where(lost, self.stamp[active], src[:, None, None])
+        got = np.where(lost[..., None], self.got[active], content[:, None, :, :])
+        stamp = np.where(lost, self.stamp[active], src[:, None, None])
+        self.got[active], self.stamp[active] = got, stamp
         rows = np.arange(a * n)
         run, me = rows // n, rows % n
         pad = index < 0
         j = np.where(pad, 0, index)
-        msg = self.got[active][run[:, None], me[:, None], j]  # (A*N, K, 5)
+        msg = got[run[:, None], me[:, None], j]  # (A*N, K, 5)
         msg[pad] = 0.0
-        age = (kk[run][:, None] - self.stamp[active][run[:, None], me[:, None], j]) * self.dt
+        age = (kk[run][:, None] - stamp[run[:, None], me[:, None], j]) * self.dt
         age[pad] = 0.0
         dist = np.hypot(msg[..., 0] - pose[:, None, 0], msg[..., 1] - pose[:, None, 1])
         dist[pad] = np.inf
         order = np.argsort(dist, axis=1, kind="stable")
         take = np.take_along_axis
         msg = take(msg, order[..., None], axis=1)
-        team = self.got[active, n].reshape(a * n, 5)
-        team_age = ((kk[:, None] - self.stamp[active, n]) * self.dt).reshape(a * n)
+        team = got[:, n].reshape(a * n, 5)
+        team_age = ((kk[:, None] - stamp[:, n]) * self.dt).reshape(a * n)
         return Received(take(index, order, axis=1), msg[..., :2], msg[..., 3:5], msg[..., 2],
                         take(dist, order, axis=1), take(age, order, axis=1), team, team_age)
 
