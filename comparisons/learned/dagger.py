@@ -25,22 +25,11 @@ from dfcoa_opt.control.base import BatchedController, Observation
 from dfcoa_opt.control.policy import LoadedPolicy
 from dfcoa_opt.control.registry import build_controller
 from dfcoa_opt.envs.observation import ObservationSpec, flatten
+from dfcoa_opt.geometry import rotate
 
 FloatArray = NDArray[np.float64]
 #: The teacher's controller id.
 TEACHER = "goto_slot+cbf"
-
-
-def to_body(vel: FloatArray, heading: FloatArray) -> FloatArray:
-    """World vectors ``(R, 2)`` in each robot's frame (x forward, y left)."""
-    c, s = np.cos(heading), np.sin(heading)
-    return np.column_stack((c * vel[:, 0] + s * vel[:, 1], -s * vel[:, 0] + c * vel[:, 1]))
-
-
-def to_world(vel: FloatArray, heading: FloatArray) -> FloatArray:
-    """Body-frame vectors ``(R, 2)`` in the world frame."""
-    c, s = np.cos(heading), np.sin(heading)
-    return np.column_stack((c * vel[:, 0] - s * vel[:, 1], s * vel[:, 0] + c * vel[:, 1]))
 
 
 class Mixture(BatchedController):
@@ -88,10 +77,10 @@ class Mixture(BatchedController):
         x = flatten(obs, self.spec)
         if round(obs.t / obs.dt) % self.every == 0:
             self.inputs.append(x)
-            self.targets.append(to_body(teacher, th) / self.scale)
+            self.targets.append(rotate(teacher, -th) / self.scale)  # into the robot's frame
         if self.beta == 1.0 or self.student is None:
             return teacher
-        student = to_world(self.student.forward(x), th)
+        student = rotate(self.student.forward(x), th)
         return self.beta * teacher + (1.0 - self.beta) * student
 
 

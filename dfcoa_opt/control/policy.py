@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from dfcoa_opt.control.base import BatchedController, Observation
 from dfcoa_opt.envs.observation import ObservationSpec, flatten
 from dfcoa_opt.errors import DfcoaError, ScenarioError, UnknownNameError
+from dfcoa_opt.geometry import rotate
 from dfcoa_opt.params import build, param
 from dfcoa_opt.robots.models import CommandKind
 
@@ -339,9 +340,7 @@ class PolicyController(BatchedController):
                                   f"({obs.n}, 2)")
         if self.command == "unicycle" or self.frame == "world":
             return y
-        th = obs.pose[:, 2]
-        c, s = np.cos(th), np.sin(th)
-        return np.column_stack((c * y[:, 0] - s * y[:, 1], s * y[:, 0] + c * y[:, 1]))
+        return rotate(y, obs.pose[:, 2])
 
 
 class FilePolicy(PolicyController):
