@@ -50,6 +50,18 @@ def test_batch_sizes_follow_the_runs_rows_and_workers():
     assert [len(b) for b in batches(wide)] == [2, 1]
 
 
+def test_batches_start_with_the_most_work():
+    """Runs x robots x steps, largest first; equal work keeps the runs' order."""
+    short, long_ = canonical({"t_max": 10.0}), canonical({"t_max": 1000.0})
+    runs = [RunSpec(CLUTTER, "clutter", c, s, o) for o in (short, long_)
+            for c in ("goto_slot", "lf_vo") for s in range(3)]
+    runs += [RunSpec(LARGE, "large_100", "goto_slot", s, short) for s in range(2)]
+    out = [(b[0].scenario, b[0].controller, b[0].overrides, len(b)) for b in batches(runs)]
+    assert out == [("clutter", "goto_slot", long_, 3), ("clutter", "lf_vo", long_, 3),
+                   ("large_100", "goto_slot", short, 2),  # 2 x 100 robots x 100 steps
+                   ("clutter", "goto_slot", short, 3), ("clutter", "lf_vo", short, 3)]
+
+
 def test_a_batch_gives_each_runs_own_row_and_a_failing_seed_its_own_failure(tmp_path):
     """Two seeds' clutter fields close the goal: those runs fail alone, the others are rows."""
     path = tmp_path / "closing.toml"

@@ -43,3 +43,33 @@ def test_clutter_world_of_circles_and_nonconvex_polygon():
     # the notch of the non-convex polygon is free, its arms are not
     assert world.clearance(np.array([[3.0, 4.0]]))[0] > 0.0
     assert world.clearance(np.array([[1.5, 4.0], [7.0, 7.5]])).tolist() == [0.0, 0.0]
+
+
+def test_stacked_worlds_measure_each_point_in_its_own_world_bit_for_bit():
+    from dfcoa_opt.sim.scenario import World
+    from dfcoa_opt.world.shape_clearance import shape_clearance_worlds
+
+    names = ["dfcoa_s1.toml", "bench/clutter.toml", "example_empty.toml", "dfcoa_s2.toml"]
+    worlds = [load_scenario(SCEN / name, seed=3).world for name in names]
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(0.0, 30.0, size=(4000, 2))
+    which = rng.integers(0, len(worlds), len(pts))
+    got = shape_clearance_worlds(pts, which, *World.stacked_shapes(worlds), 10.0)
+    for w, world in enumerate(worlds):
+        assert np.array_equal(got[which == w], world.clearance(pts[which == w], 10.0))
+    # one world per point matters: the first world's answer differs for the others' points
+    assert not np.array_equal(got, worlds[0].clearance(pts, 10.0))
+
+
+def test_a_world_with_a_map_raster_is_not_stacked():
+    from dfcoa_opt.sim.scenario import World
+
+    base = {"name": "t", "dt": 0.1, "t_max": 1.0, "team": {"n": 1},
+            "formation": {"shape": "line", "spacing": 1.0},
+            "leader": {"start": [1.5, 1.5], "goal": [2.5, 1.5], "planner": "straight"}}
+    mapped = scenario_from_dict({**base, "world": {
+        "map_ascii": "....\n.#..\n....\n....", "resolution": 1}}).world
+    plain = scenario_from_dict({**base, "world": {"size": [4.0, 4.0], "resolution": 1}}).world
+    assert mapped.raster is not None
+    assert World.stacked_shapes([plain, plain]) is not None
+    assert World.stacked_shapes([plain, mapped]) is None

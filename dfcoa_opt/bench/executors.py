@@ -76,11 +76,16 @@ BATCH_ROWS = 2000
 
 
 def batches(runs: Sequence[RunSpec], jobs: int = 1) -> list[list[RunSpec]]:
-    """Group runs that differ only in their seed, in their order, into batches.
+    """Group runs that differ only in their seed into batches, the most work first.
 
     A group is cut into batches of at most :data:`BATCH_RUNS` runs and
     :data:`BATCH_ROWS` robot rows, and smaller ones when there are too few runs
-    to give every worker two batches.
+    to give every worker two batches. The batches are ordered by their work,
+    runs x robots x steps (``t_max / dt``), largest first, and in the runs'
+    order where that is equal: workers that take them in this order end
+    close together (longest processing time first). The comparison recipe's
+    batch of ``nmpc`` on ``large_100`` (100 robots) is a third of its
+    simulation; started last, one worker ran it alone for about 25 s on 2 cores.
 
     Args:
         runs: The runs to execute.
@@ -90,25 +95,32 @@ def batches(runs: Sequence[RunSpec], jobs: int = 1) -> list[list[RunSpec]]:
     for r in runs:
         groups.setdefault((r.scenario_file, r.overrides, r.controller), []).append(r)
     size = max(1, min(BATCH_RUNS, math.ceil(len(runs) / (2 * jobs))))
-    out = []
+    out: list[tuple[float, list[RunSpec]]] = []
     for group in groups.values():
-        n = _robots(group[0])
+        n, steps = _size(group[0])
         step = max(1, min(size, BATCH_ROWS // max(n, 1)))
-        out += [group[i:i + step] for i in range(0, len(group), step)]
-    return out
+        out += [(len(b) * n * steps, b) for b in
+                (group[i:i + step] for i in range(0, len(group), step))]
+    return [b for _, b in sorted(out, key=lambda item: -item[0])]
 
 
-def _robots(run: RunSpec) -> int:
-    """The team size of a run's scenario (read from the file and its overrides; 1 if unknown)."""
+def _size(run: RunSpec) -> tuple[int, float]:
+    """A run's team size and steps (``t_max / dt``), from its file and overrides.
+
+    What cannot be read counts as one robot and one step (the run itself reports it).
+    """
     from dfcoa_opt.sim.loader import read_toml
+    from dfcoa_opt.sim.schema import ScenarioSpec
 
-    over = run.overrides_dict
-    if "team.n" in over:
-        return int(over["team.n"])
     try:
-        return int(read_toml(run.scenario_file).get("team", {}).get("n", 1))
+        data = read_toml(run.scenario_file)
+        over = run.overrides_dict
+        n = int(over.get("team.n", data.get("team", {}).get("n", 1)))
+        dt = float(over.get("dt", data.get("dt", ScenarioSpec.dt)))
+        steps = float(over.get("t_max", data.get("t_max", ScenarioSpec.t_max))) / dt
     except Exception:  # noqa: BLE001 - the run itself reports a bad file
-        return 1
+        return 1, 1.0
+    return max(n, 1), max(steps, 1.0)
 
 
 def run_all(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome]:

@@ -36,7 +36,7 @@ from dfcoa_opt.control.base import Controller
 from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.robots.models import make_model
 from dfcoa_opt.sim.log import BatchLog, RunLog
-from dfcoa_opt.sim.scenario import Scenario
+from dfcoa_opt.sim.scenario import Scenario, World
 from dfcoa_opt.sim.stepper import Ended, Stepper, is_batched
 from dfcoa_opt.world.lidar import Lidar
 
@@ -102,6 +102,7 @@ class BatchSimulator:
         self.group = np.array([groups[id(sc)] for sc in self.scenarios])
         self.lidars = [Lidar(spec.sensors.lidar, sc.world.grid) if spec.sensors.lidar.enabled
                        else None for sc in self.group_scenarios]
+        self._stacks: dict[str, Any] = {}  # lidar_fields(), world_shapes(): until place()
         #: Disturbance tables by kind: ``(robot, t_start, t_end, value)``.
         self.disturbances = {kind: [(spec.robot_index(d.robot), d.t_start, d.t_end, d.value)
                                      for d in spec.disturbances if d.kind == kind]
@@ -123,6 +124,7 @@ class BatchSimulator:
                 return False
         lidar = (Lidar(self.spec.sensors.lidar, scenario.world.grid)
                  if self.spec.sensors.lidar.enabled else None)
+        self._stacks.clear()
         old = int(self.group[slot])
         if np.count_nonzero(self.group == old) == 1:  # only this slot used it: reuse it
             self.group_scenarios[old], self.lidars[old] = scenario, lidar
@@ -131,6 +133,24 @@ class BatchSimulator:
         self.group_scenarios.append(scenario)
         self.lidars.append(lidar)
         return True
+
+    def lidar_fields(self) -> NDArray[np.float64] | None:
+        """Every group's LiDAR grid in one array (:meth:`Lidar.stack`), kept until a world changes.
+
+        Row ``g`` is the grid of ``lidars[g]``; None without a LiDAR or when the
+        grids differ in geometry.
+        """
+        if "lidar" not in self._stacks:
+            self._stacks["lidar"] = (None if self.lidars[0] is None
+                                     else Lidar.stack(self.lidars))  # type: ignore[arg-type]
+        return self._stacks["lidar"]
+
+    def world_shapes(self) -> tuple[NDArray, ...] | None:
+        """Every group's static shapes stacked (:meth:`World.stacked_shapes`), kept likewise."""
+        if "shapes" not in self._stacks:
+            self._stacks["shapes"] = World.stacked_shapes(
+                [sc.world for sc in self.group_scenarios])
+        return self._stacks["shapes"]
 
     # ------------------------------------------------------------------ helpers
     def _checked(self, controller: Any, cmd: object, t: float, rows: int) -> FloatArray:

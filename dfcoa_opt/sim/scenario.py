@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -85,6 +85,27 @@ class World:
         if self.raster is not None:
             out = np.minimum(out, self.raster.clearance(p, cap))
         return out
+
+    @staticmethod
+    def stacked_shapes(worlds: Sequence[World]) -> tuple[NDArray, ...] | None:
+        """The shapes of several worlds, stacked for one clearance call over all of them.
+
+        Returns:
+            The arguments of :func:`~dfcoa_opt.world.shape_clearance.shape_clearance_worlds`
+            after ``points`` and ``world`` (edges, polygon and circle offsets per world);
+            None when a world has a map raster (then each world measures alone).
+        """
+        if any(w.raster is not None for w in worlds):
+            return None
+        parts = [w._kernel_args for w in worlds]
+        a, b, _, lo, hi, centres, radii = (np.concatenate([part[f] for part in parts])
+                                           for f in range(7))
+        sizes = [len(v) for w in worlds for v in w.polygons]
+        start = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
+        poly_ptr = np.cumsum([0, *(len(w.polygons) for w in worlds)]).astype(np.int64)
+        circle_ptr = np.cumsum([0, *(len(part[6]) for part in parts)]).astype(np.int64)
+        return (a.reshape(-1, 2), b.reshape(-1, 2), start, poly_ptr, lo.reshape(-1, 2),
+                hi.reshape(-1, 2), centres.reshape(-1, 2), radii, circle_ptr)
 
     def clearance_reference(self, points: ArrayLike, cap: float = 10.0) -> NDArray[np.float64]:
         """:meth:`clearance` with vectorised numpy (the reference of the kernel's tests).

@@ -37,6 +37,7 @@ from dfcoa_opt.sim.log import BatchLog
 from dfcoa_opt.sim.neighbours import batch_proximity, gather, new_contacts
 from dfcoa_opt.sim.observe import Observing
 from dfcoa_opt.world.lidar import LaserScan
+from dfcoa_opt.world.shape_clearance import shape_clearance_worlds
 
 if TYPE_CHECKING:
     from dfcoa_opt.sim.batch import BatchSimulator
@@ -191,17 +192,18 @@ class Stepper(Observing):
         lead, slots, at_goal = self._leader(active, kk)
         scans: list[LaserScan | None] = [None] * a  # per run; views of scan_all made on demand
         scan_all: LaserScan | None = None  # every row's scan, when made in one call
-        one_group = len(self.tracks) == 1
-        if self.scanning and one_group and a > 1:
-            scan_all = sim.lidars[0].scan_teams(st.pose, n, dyn_pos, self.dyn.radii,
-                                                sim.radius, self._row_constants()[6])  # rngs
+        fields = sim.lidar_fields() if self.scanning and len(sim.lidars) > 1 else None
+        if self.scanning and a > 1 and (len(sim.lidars) == 1 or fields is not None):
+            scan_all = sim.lidars[0].scan_teams(
+                st.pose, n, dyn_pos, self.dyn.radii, sim.radius, self._row_constants()[6],  # rngs
+                None if fields is None else (fields, sim.group[active]))
         elif self.scanning:
             for j, e in enumerate(active):
                 rows = slice(j * n, (j + 1) * n)
                 scans[j] = sim.lidars[sim.group[e]].scan(
                     st.pose[rows], np.vstack((pos[rows], dyn_pos[j])), self._disc_r,
                     self._owners, self.rngs[e])
-        if self.scanning and scan_all is None:  # (one call per run: seeded worlds, or one run)
+        if self.scanning and scan_all is None:  # (one call per run: one run, or unlike grids)
             scan_all = scans[0] if a == 1 else LaserScan(
                 scans[0].angle_min, scans[0].angle_increment, scans[0].range_min,
                 scans[0].range_max, np.concatenate([s.ranges for s in scans]))
@@ -403,5 +405,9 @@ class Stepper(Observing):
         sim, n, cap = self.sim, self.n, self.spec.metrics.clearance_cap
         if len(sim.group_scenarios) == 1:
             return sim.group_scenarios[0].world.clearance(pos, cap)
+        shapes = sim.world_shapes()
+        if shapes is not None:  # seeded worlds: one call, each row in its own run's world
+            return shape_clearance_worlds(np.ascontiguousarray(pos),
+                                          np.repeat(sim.group[active], n), *shapes, float(cap))
         return np.concatenate([sim.group_scenarios[sim.group[e]].world.clearance(
             pos[j * n:(j + 1) * n], cap) for j, e in enumerate(active)])

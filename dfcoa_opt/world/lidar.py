@@ -122,8 +122,9 @@ class Lidar:
         angles = self.angle_min + self.angle_increment * np.arange(spec.beams)
         self._cos = np.cos(angles)
         self._sin = np.sin(angles)
-        # 0 on occupied cells, else the centre distance field (m): one array to read
-        self._dist = np.where(grid.occupied, 0.0, grid.distance_field)
+        # 0 on occupied cells, else the centre distance field (m): one array to read,
+        # (1, rows, cols) as the kernel takes a stack of grids
+        self._dist = np.where(grid.occupied, 0.0, grid.distance_field)[None]
         # [ox, oy, cell, range_min, range_max, angle_min, angle_increment]
         self._par = np.array([grid.origin[0], grid.origin[1], grid.cell_size, spec.range_min,
                               spec.range_max, self.angle_min, self.angle_increment])
@@ -162,8 +163,8 @@ class Lidar:
         else:
             xy, rad, own, ptr, idx = self._discs(p, discs_xy, discs_r, owner)
         out = np.empty((p.shape[0], spec.beams))
-        _scan_kernel(p, self._cos, self._sin, self._dist, self._par, xy, rad, own, ptr, idx,
-                     skip, out)
+        _scan_kernel(p, self._cos, self._sin, self._dist, self._no_i, self._par, xy, rad, own,
+                     ptr, idx, skip, out)
         if spec.noise_std > 0.0:
             noise = rng.normal(0.0, spec.noise_std, size=out.shape)  # type: ignore[union-attr]
             fin = np.isfinite(out)
@@ -173,7 +174,9 @@ class Lidar:
 
     def scan_teams(self, poses: NDArray[np.float64], n: int, extra_xy: NDArray[np.float64],
                    extra_r: NDArray[np.float64], robot_r: float,
-                   rngs: list[np.random.Generator]) -> LaserScan:
+                   rngs: list[np.random.Generator],
+                   worlds: tuple[NDArray[np.float64], NDArray[np.int64]] | None = None
+                   ) -> LaserScan:
         """:meth:`scan` of several teams of ``n`` robots at once, each seeing only its own team.
 
         Team ``j`` is rows ``j*n .. j*n+n-1`` of ``poses``; its robots see the
@@ -190,6 +193,9 @@ class Lidar:
             extra_r: ``(M,)`` their radii, m.
             robot_r: Robot radius, m.
             rngs: One generator per team (used when ``spec.noise_std > 0``).
+            worlds: Each team in its own grid: ``(fields, world)`` with ``fields`` of
+                :meth:`stack` and ``world`` ``(T,)`` each team's index in it; row for
+                row, the ranges of that grid's :class:`Lidar`. Default: this one's grid.
         """
         p = np.ascontiguousarray(poses, dtype=np.float64)
         teams, m = len(p) // n, np.shape(extra_xy)[-2]
@@ -204,7 +210,9 @@ class Lidar:
         ptr = np.arange(teams * n + 1, dtype=np.int64) * per
         idx = (team[:, None] * per + np.arange(per)[None, :]).astype(np.int64).ravel()
         out = np.empty((len(p), self.spec.beams))
-        _scan_kernel(p, self._cos, self._sin, self._dist, self._par, xy.reshape(-1, 2), rad,
+        fields, world = ((self._dist, self._no_i) if worlds is None
+                         else (worlds[0], np.repeat(worlds[1], n)))
+        _scan_kernel(p, self._cos, self._sin, fields, world, self._par, xy.reshape(-1, 2), rad,
                      own.ravel(), ptr, idx, True, out)
         spec = self.spec
         if spec.noise_std > 0.0:
@@ -215,6 +223,20 @@ class Lidar:
                 rows[fin] = np.clip(rows[fin] + noise[fin], spec.range_min, spec.range_max)
         return LaserScan(self.angle_min, self.angle_increment, spec.range_min, spec.range_max,
                          out)
+
+    @staticmethod
+    def stack(lidars: list[Lidar]) -> NDArray[np.float64] | None:
+        """The grids of ``lidars`` as one ``(G, rows, cols)`` array for :meth:`scan_teams`.
+
+        Returns:
+            The stacked fields, or None when the LiDARs differ in their beams,
+            limits or grid geometry (shape, origin, cell size): then each casts alone.
+        """
+        first = lidars[0]
+        if any(lid.spec != first.spec or lid._dist.shape != first._dist.shape
+               or not np.array_equal(lid._par, first._par) for lid in lidars[1:]):
+            return None
+        return np.concatenate([lid._dist for lid in lidars])
 
     def _discs(self, p: NDArray[np.float64], discs_xy: ArrayLike, discs_r: ArrayLike | None,
                owner: ArrayLike | None) -> tuple[NDArray, ...]:

@@ -171,11 +171,16 @@ def _hit_disc(out_row, k, fx, fy, cc, ux, uy):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def _scan_kernel(poses, cos_a, sin_a, dist, par, disc_xy, disc_r, owner, cand_ptr, cand_idx,
-                 skip, out):  # pragma: no cover - numba
-    """Fill ``out`` ``(N, B)`` with REP-117 ranges (see :meth:`Lidar.scan`)."""
+def _scan_kernel(poses, cos_a, sin_a, dists, world, par, disc_xy, disc_r, owner, cand_ptr,
+                 cand_idx, skip, out):  # pragma: no cover - numba
+    """Fill ``out`` ``(N, B)`` with REP-117 ranges (see :meth:`Lidar.scan`).
+
+    ``dists`` ``(G, rows, cols)``: the distance fields of ``G`` grids of one
+    geometry (``par``); row ``i`` casts in grid ``world[i]`` (``world`` empty:
+    grid 0 for every row).
+    """
     ox, oy, h, rmin, rmax, amin, inc = par[0], par[1], par[2], par[3], par[4], par[5], par[6]
-    n_rows, n_cols = dist.shape
+    n_rows, n_cols = dists.shape[1], dists.shape[2]
     n_beams = cos_a.shape[0]
     n_discs = disc_r.shape[0]
     two_pi = 2.0 * math.pi
@@ -190,6 +195,7 @@ def _scan_kernel(poses, cos_a, sin_a, dist, par, disc_xy, disc_r, owner, cand_pt
         if not (np.isfinite(px) and np.isfinite(py) and np.isfinite(th)):
             raise ValueError("poses must be finite")
         ct, st = math.cos(th), math.sin(th)
+        dist = dists[world[i]] if world.shape[0] > 0 else dists[0]
         row = out[i]
         for k in range(n_beams):
             ux[k] = ct * cos_a[k] - st * sin_a[k]

@@ -44,14 +44,51 @@ def shape_clearance(points: FloatArray, a: FloatArray, b: FloatArray, start: Int
     Returns:
         ``(P,)`` clearances, m.
     """
-    n_poly = start.shape[0] - 1
+    one = np.zeros(0, np.int64)
+    return shape_clearance_worlds(points, one, a, b, start, np.array([0, start.shape[0] - 1]),
+                                  lo, hi, centres, radii, np.array([0, radii.shape[0]]), cap)
+
+
+@numba.njit(cache=True)
+def shape_clearance_worlds(points: FloatArray, world: IntArray, a: FloatArray, b: FloatArray,
+                           start: IntArray, poly_ptr: IntArray, lo: FloatArray, hi: FloatArray,
+                           centres: FloatArray, radii: FloatArray, circle_ptr: IntArray,
+                           cap: float) -> FloatArray:  # pragma: no cover - numba
+    """:func:`shape_clearance` of each point against its own world's shapes.
+
+    The shapes of every world are stacked, world after world: world ``w`` has
+    polygons ``poly_ptr[w] .. poly_ptr[w + 1] - 1`` (their edges from
+    ``start``) and circles ``circle_ptr[w] .. circle_ptr[w + 1] - 1``. Point
+    ``i`` is measured in world ``world[i]`` (``world`` empty: world 0 for every
+    point), with the operations of a call on that world alone.
+
+    Args:
+        points: ``(P, 2)`` query points, m.
+        world: ``(P,)`` each point's world, or ``(0,)``.
+        a: ``(E, 2)`` edge starts of all polygons, m.
+        b: ``(E, 2)`` edge ends, m.
+        start: ``(Q + 1,)`` first edge of each polygon, then ``E``.
+        poly_ptr: ``(W + 1,)`` first polygon of each world, then ``Q``.
+        lo: ``(Q, 2)`` lower corners of the polygons' bounding boxes, m.
+        hi: ``(Q, 2)`` upper corners, m.
+        centres: ``(C, 2)`` circle centres, m.
+        radii: ``(C,)`` circle radii, m.
+        circle_ptr: ``(W + 1,)`` first circle of each world, then ``C``.
+        cap: Larger distances are reported as ``cap``, m.
+
+    Returns:
+        ``(P,)`` clearances, m.
+    """
     out = np.empty(points.shape[0])
     for i in range(points.shape[0]):
+        w = world[i] if world.shape[0] > 0 else 0
+        q0, q1 = poly_ptr[w], poly_ptr[w + 1]
+        e0, e1 = start[q0], start[q1]
         px, py = points[i, 0], points[i, 1]
         best = cap
-        if a.shape[0]:
+        if e1 > e0:
             d_min = np.inf
-            for k in range(a.shape[0]):
+            for k in range(e0, e1):
                 ax, ay = a[k, 0], a[k, 1]
                 abx, aby = b[k, 0] - ax, b[k, 1] - ay
                 denom = abx * abx + aby * aby
@@ -62,7 +99,7 @@ def shape_clearance(points: FloatArray, a: FloatArray, b: FloatArray, start: Int
                 if d < d_min:
                     d_min = d
             best = min(best, d_min)
-            for q in range(n_poly):
+            for q in range(q0, q1):
                 if not (lo[q, 0] <= px <= hi[q, 0] and lo[q, 1] <= py <= hi[q, 1]):
                     continue
                 inside = False
@@ -75,9 +112,10 @@ def shape_clearance(points: FloatArray, a: FloatArray, b: FloatArray, start: Int
                         inside = not inside
                 if inside:
                     best = 0.0
-        if centres.shape[0]:
+        c0, c1 = circle_ptr[w], circle_ptr[w + 1]
+        if c1 > c0:
             gap = np.inf
-            for c in range(centres.shape[0]):
+            for c in range(c0, c1):
                 dx, dy = px - centres[c, 0], py - centres[c, 1]
                 g = math.sqrt(dx * dx + dy * dy) - radii[c]
                 if g < gap:
