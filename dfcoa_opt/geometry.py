@@ -173,19 +173,21 @@ def point_segment_distance(points: ArrayLike, a: ArrayLike, b: ArrayLike) -> Flo
     return np.linalg.norm(p - closest_point_on_segment(p, a, b), axis=-1)
 
 
-def circle_polygon(center: ArrayLike, radius: float, n: int = 32) -> FloatArray:
-    """Counter-clockwise polygon with ``n`` vertices on a circle (for plotting).
+def circle_polygon(center: ArrayLike, radius: ArrayLike, n: int = 32) -> FloatArray:
+    """Counter-clockwise polygons with ``n`` vertices on circles.
 
     Args:
-        center: ``(2,)`` centre in m.
-        radius: Radius in m.
+        center: ``(2,)`` centre, or ``(..., 2)`` centres, in m.
+        radius: Radius (or ``(...)`` radii) in m.
         n: Number of vertices.
 
     Returns:
-        ``(n, 2)`` vertices in m.
+        ``(n, 2)`` vertices (``(..., n, 2)`` for several circles) in m.
     """
     a = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
-    return np.asarray(center, dtype=float) + radius * np.stack((np.cos(a), np.sin(a)), axis=1)
+    unit = np.stack((np.cos(a), np.sin(a)), axis=1)
+    c, r = np.asarray(center, dtype=float), np.asarray(radius, dtype=float)
+    return c[..., None, :] + r[..., None, None] * unit
 
 
 def pairwise_distances(points: ArrayLike) -> FloatArray:

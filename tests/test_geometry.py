@@ -79,3 +79,18 @@ def test_take_rows_picks_what_take_along_axis_picks():
     np.testing.assert_array_equal(take_rows(values[..., 0], index),
                                   np.take_along_axis(values[..., 0], index, axis=1))
     assert take_rows(values, index[:, :0]).shape == (6, 0, 2)
+
+
+def test_polygon_arrays_are_each_shapes_polygon_bit_for_bit():
+    from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle, polygon_arrays
+
+    rng = np.random.default_rng(4)
+    shapes = [Circle(tuple(rng.uniform(-50, 50, 2)), float(rng.uniform(0.05, 3.0)))
+              for _ in range(40)]
+    shapes.insert(3, Rectangle((0.0, 0.0), (2.0, 1.0)))
+    shapes.insert(10, Polygon(((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))))
+    got = polygon_arrays(shapes)
+    assert len(got) == len(shapes)
+    for shape, ring in zip(shapes, got, strict=True):
+        assert np.array_equal(ring, shape.to_polygon().as_array())
+    assert polygon_arrays([]) == []

@@ -110,17 +110,19 @@ def _count(ax, ay, dx, dy, x1, y1, x2, y2, lo, hi, eps):  # pragma: no cover - n
 
 
 @numba.njit(cache=True)
-def _splitter(members, pts, nxt, eps):  # pragma: no cover - numba
+def _splitter(members, pts, nxt, eps, scratch):  # pragma: no cover - numba
     """Index in ``members`` of RVO2's splitter edge.
 
     For each candidate edge, the other edges are counted left of its line,
     right of it or crossing it (:func:`_count`, one vectorisable pass over all
     edges, less the candidate's own count); the splitter has the fewest edges
-    on its larger side, then on its smaller side, the first such.
+    on its larger side, then on its smaller side, the first such. ``scratch``:
+    ``(4, >= len(members))`` room for the edges' end points.
     """
     m = members.shape[0]
-    x1, y1 = np.empty(m, pts.dtype), np.empty(m, pts.dtype)
-    x2, y2 = np.empty(m, pts.dtype), np.empty(m, pts.dtype)
+    if m == 1:
+        return 0
+    x1, y1, x2, y2 = scratch[0, :m], scratch[1, :m], scratch[2, :m], scratch[3, :m]
     for k in range(m):
         x1[k], y1[k] = pts[members[k], 0], pts[members[k], 1]
         x2[k], y2[k] = pts[nxt[members[k]], 0], pts[nxt[members[k]], 1]
@@ -157,12 +159,15 @@ def _build_tree(pts, points, nxt, prv, dirs, convex, eps):  # pragma: no cover -
     n_nodes = 0
     depth = 0
     todo = [(np.arange(n), -1, 0, 1)]
+    scratch = np.empty((4, n), pts.dtype)
     while len(todo) > 0:
         members, parent, side, level = todo.pop()
         m = members.shape[0]
         if m == 0:
             continue
-        best = _splitter(members, pts, nxt, eps)
+        if m > scratch.shape[1]:
+            scratch = np.empty((4, 2 * m), pts.dtype)
+        best = _splitter(members, pts, nxt, eps, scratch)
         i = members[best]
         ax, ay = pts[i, 0], pts[i, 1]
         bx, by = pts[nxt[i], 0], pts[nxt[i], 1]
@@ -257,29 +262,24 @@ def prepare_obstacles(polygons: Sequence[ArrayLike]) -> ObstacleSet:
     Raises:
         ValueError: If an obstacle has fewer than two vertices or a zero-length edge.
     """
-    parts = []
-    base = 0
-    for poly in polygons:
-        v = np.asarray(poly, dtype=np.float64).reshape(-1, 2)
-        m = len(v)
-        if m < 2:
-            raise ValueError("an obstacle needs at least two vertices")
-        if not np.all(np.any(np.roll(v, -1, axis=0) != v, axis=1)):
-            raise ValueError("an obstacle has a zero-length edge (repeated vertex)")
-        v32 = v.astype(np.float32)
-        k = np.arange(m)
-        edge = v[(k + 1) % m] - v[k]
-        length = np.array([math.hypot(x, y) for x, y in edge.tolist()])
-        convex = (np.ones(m, np.bool_) if m == 2 else
-                  _left_of(v32[(k - 1) % m], v32, v32[(k + 1) % m]) >= 0.0)
-        parts.append((v32, v, base + (k + 1) % m, base + (k - 1) % m, edge / length[:, None],
-                      convex))
-        base += m
-    empty = (np.zeros((0, 2), np.float32), np.zeros((0, 2)), np.zeros(0, np.int64),
-             np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros(0, np.bool_))
-    pts32, points, nxt, prv, dirs, convex = (
-        np.ascontiguousarray(np.concatenate([part[f] for part in parts]) if parts else empty[f],
-                             dtype=empty[f].dtype) for f in range(6))
+    rings = [np.asarray(poly, dtype=np.float64).reshape(-1, 2) for poly in polygons]
+    sizes = np.array([len(v) for v in rings], dtype=np.int64)
+    if (sizes < 2).any():
+        raise ValueError("an obstacle needs at least two vertices")
+    # every ring at once: vertex i's ring starts at first[i] and has size[i] vertices
+    size = np.repeat(sizes, sizes)
+    first = np.repeat(np.cumsum(sizes) - sizes, sizes)
+    local = np.arange(len(size)) - first
+    nxt = first + (local + 1) % size
+    prv = first + (local - 1) % size
+    points = np.concatenate(rings) if rings else np.zeros((0, 2))
+    if np.any(np.all(points[nxt] == points, axis=1)):
+        raise ValueError("an obstacle has a zero-length edge (repeated vertex)")
+    pts32 = points.astype(np.float32)
+    edge = points[nxt] - points
+    length = np.array([math.hypot(x, y) for x, y in edge.tolist()]).reshape(-1)
+    dirs = np.ascontiguousarray(edge / length[:, None]).reshape(-1, 2)
+    convex = (size == 2) | (_left_of(pts32[prv], pts32, pts32[nxt]) >= 0.0)
     pts32, points, nxt, prv, dirs, convex, nodes, depth = _build_tree(
         pts32, points, nxt, prv, dirs, convex, np.float32(EPSILON))
     bbox = (np.concatenate((points.min(axis=0), points.max(axis=0))) if len(points)

@@ -31,7 +31,7 @@ from comparisons.orca.ivo import IvoObstacles
 from comparisons.orca.ivo.ellipse import polygon_segments
 from comparisons.orca.ivo.polygons import FAR
 from comparisons.orca.obstacle_set import ObstacleSet, merge_obstacles, prepare_obstacles
-from dfcoa_opt.world.shapes import Circle
+from dfcoa_opt.world.shapes import Circle, polygon_arrays
 
 if TYPE_CHECKING:
     from dfcoa_opt.sim.scenario import Scenario
@@ -81,7 +81,7 @@ class StaticWorlds:
     @cached_property
     def polygons(self) -> list[list[FloatArray]]:
         """Per world, every shape as a polygon ``(M, 2)``, m (a circle as its 32-gon)."""
-        return [[shape.to_polygon().as_array() for shape in shapes] for shapes in self._shapes]
+        return [polygon_arrays(shapes) for shapes in self._shapes]
 
     @cached_property
     def segments(self) -> FloatArray:

@@ -8,6 +8,7 @@ its centre lies inside the shape.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -119,3 +120,22 @@ class Circle:
 
 
 Shape = Polygon | Rectangle | Circle
+
+
+def polygon_arrays(shapes: Sequence[Shape], n: int = 32) -> list[NDArray[np.float64]]:
+    """Each shape's ``to_polygon().as_array()`` (m), the circles' ``n``-gons made together.
+
+    The same numbers as one :meth:`Circle.to_polygon` per circle (the same
+    operations, element by element), without a :class:`Polygon` per circle:
+    a seeded clutter field has about a hundred.
+    """
+    out: list[NDArray[np.float64] | None] = [
+        None if isinstance(s, Circle) else s.to_polygon().as_array() for s in shapes]
+    disc = [k for k, s in enumerate(shapes) if isinstance(s, Circle)]
+    if disc:
+        circles = [shapes[k] for k in disc]
+        r_out = np.array([c.radius for c in circles]) / np.cos(np.pi / n)  # type: ignore[union-attr]
+        rings = circle_polygon([c.center for c in circles], r_out, n)  # type: ignore[union-attr]
+        for k, ring in zip(disc, rings, strict=True):
+            out[k] = ring
+    return out  # type: ignore[return-value]
