@@ -82,9 +82,15 @@ def _side(ax, ay, bx, by, cx, cy):  # pragma: no cover - numba
 
 @numba.njit(cache=True)
 def _grown(arr, size):  # pragma: no cover - numba
-    """A copy of ``arr`` with room for ``size`` rows (the first ``len(arr)`` copied)."""
+    """A copy of C-contiguous ``arr`` with room for ``size`` rows (the first ``len(arr)`` copied).
+
+    Copied element by element through flat views: a slice assignment would
+    compile numba's shape-mismatch error path, about a second per signature.
+    """
     out = np.empty((size,) + arr.shape[1:], arr.dtype)
-    out[:arr.shape[0]] = arr
+    src, dst = arr.reshape(arr.size), out.reshape(out.size)
+    for k in range(src.shape[0]):
+        dst[k] = src[k]
     return out
 
 
