@@ -49,9 +49,15 @@ def drive(path: Path, overrides: dict, controller: str, seeds: list[int], later:
     return digests, started
 
 
-@pytest.mark.parametrize("controller", ["goto_slot", "lf_vo"])
-def test_runs_started_in_freed_slots_are_the_runs_alone(controller):
-    """Clutter (a world per seed), stops at contact or deadlock: runs end apart and restart."""
+@pytest.mark.parametrize("controller, stacked", [("goto_slot", True), ("lf_vo", True),
+                                                  ("goto_slot", False)])
+def test_runs_started_in_freed_slots_are_the_runs_alone(controller, stacked, monkeypatch):
+    """Clutter (a world per seed), stops at contact or deadlock: runs end apart and restart.
+
+    The leader slots come from the stacked tracks, or (past the size limit) run by run.
+    """
+    if not stacked:
+        monkeypatch.setattr("dfcoa_opt.sim.lookups.TRACKS_STACKED_BYTES", 0)
     path = ROOT / "scenarios" / "bench" / "clutter.toml"
     overrides = {"stop_on_collision": True, "stop_on_deadlock": True, "t_max": 60.0,
                  "team.start_noise": 0.05}

@@ -34,10 +34,10 @@ from dfcoa_opt.robots.models import CommandKind, RobotState
 from dfcoa_opt.sim.comms import Comms, wanted
 from dfcoa_opt.sim.leader import leader_track
 from dfcoa_opt.sim.log import BatchLog
+from dfcoa_opt.sim.lookups import RunLookups
 from dfcoa_opt.sim.neighbours import batch_proximity, gather, new_contacts
 from dfcoa_opt.sim.observe import Observing
 from dfcoa_opt.world.lidar import LaserScan
-from dfcoa_opt.world.shape_clearance import shape_clearance_worlds
 
 if TYPE_CHECKING:
     from dfcoa_opt.sim.batch import BatchSimulator
@@ -67,7 +67,7 @@ class Ended:
     t_goal: float
 
 
-class Stepper(Observing):
+class Stepper(Observing, RunLookups):
     """The state of a batch's runs, stepped in two halves (module docstring).
 
     Args:
@@ -84,6 +84,7 @@ class Stepper(Observing):
         slots = len(sim.seeds)
         self.rngs = [np.random.default_rng(s) for s in sim.seeds]
         self.tracks = [leader_track(sc, self.dt, self.steps) for sc in sim.group_scenarios]
+        self._stacked: tuple[Any, ...] | None = None  # the tracks stacked, for _leader
         start = [sc.start_pose(rng) for sc, rng in zip(sim.scenarios, self.rngs, strict=True)]
         self.estimators = make_estimators(spec.localization.mode, sim.scenarios)
         if is_batched(self.estimators[0]):
@@ -159,6 +160,7 @@ class Stepper(Observing):
                 self.tracks[g] = track
             else:
                 self.tracks.append(track)
+            self._stacked = None
         rng = self.rngs[slot] = np.random.default_rng(seed)
         start = sc.start_pose(rng)
         self.estimators[slot] = make_estimators(self.spec.localization.mode, [sc])[0]
@@ -284,17 +286,6 @@ class Stepper(Observing):
             scans[j] = scan_all.take(slice(j * self.n, (j + 1) * self.n))
         return scans[j]
 
-    def _leader(self, active: NDArray[np.intp],
-                kk: NDArray[np.int64]) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
-        """Each active run's leader state ``(A, 5)``, slots ``(A, N, 2)``, at-goal flag ``(A,)``."""
-        if len(self.tracks) == 1:
-            tr = self.tracks[0]
-            return tr.state[kk], tr.slots[kk], tr.at_goal[kk]
-        runs = [self.tracks[self.sim.group[e]] for e in active]
-        return (np.stack([tr.state[k] for tr, k in zip(runs, kk, strict=True)]),
-                np.stack([tr.slots[k] for tr, k in zip(runs, kk, strict=True)]),
-                np.array([bool(tr.at_goal[k]) for tr, k in zip(runs, kk, strict=True)]))
-
     @property
     def t(self) -> FloatArray:
         """``(A,)`` each active run's time, s."""
@@ -385,29 +376,3 @@ class Stepper(Observing):
         self.prev_keys, self.prev_ptr = keys, ptr
         self.prev_static, self.prev_dyn, self.state = static_hit, dyn_hit, new_state
         return out
-
-    def _disturbance(self, kind: str, kk: NDArray[np.int64]) -> FloatArray | None:
-        """``(A*N, 2)`` disturbances of ``kind`` at each active run's time (None without any)."""
-        table = self.sim.disturbances[kind]
-        if not table:
-            return None
-        clocks = np.unique(kk)
-        out = np.zeros((len(clocks), self.n, 2))
-        for c, k in enumerate(clocks):
-            t = int(k) * self.dt
-            for robot, t0, t1, value in table:
-                if t0 <= t < t1:
-                    out[c, robot] += value
-        return out[np.searchsorted(clocks, kk)].reshape(-1, 2)
-
-    def _clearance(self, pos: FloatArray, active: NDArray[np.intp]) -> FloatArray:
-        """Every row's clearance to the static obstacles of its own run's world, m."""
-        sim, n, cap = self.sim, self.n, self.spec.metrics.clearance_cap
-        if len(sim.group_scenarios) == 1:
-            return sim.group_scenarios[0].world.clearance(pos, cap)
-        shapes = sim.world_shapes()
-        if shapes is not None:  # seeded worlds: one call, each row in its own run's world
-            return shape_clearance_worlds(np.ascontiguousarray(pos),
-                                          np.repeat(sim.group[active], n), *shapes, float(cap))
-        return np.concatenate([sim.group_scenarios[sim.group[e]].world.clearance(
-            pos[j * n:(j + 1) * n], cap) for j, e in enumerate(active)])

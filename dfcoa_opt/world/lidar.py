@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -130,6 +130,7 @@ class Lidar:
                               spec.range_max, self.angle_min, self.angle_increment])
         self._no_i = np.zeros(0, dtype=np.int64)
         self._no_discs = (np.zeros((0, 2)), np.zeros(0), self._no_i, self._no_i, self._no_i)
+        self._teams: tuple[Any, tuple[NDArray, ...]] = (None, ())  # _team_discs' last
 
     def scan(self, poses: ArrayLike, discs_xy: ArrayLike | None = None,
              discs_r: ArrayLike | None = None, owner: ArrayLike | None = None,
@@ -203,17 +204,13 @@ class Lidar:
         xy = np.empty((teams, per, 2))
         xy[:, :n] = p[:, :2].reshape(teams, n, 2)
         xy[:, n:] = extra_xy
-        rad = np.tile(np.concatenate((np.full(n, robot_r), extra_r)), teams)
-        own = np.full((teams, per), -1, dtype=np.int64)
-        own[:, :n] = np.arange(teams * n).reshape(teams, n)
-        team = np.repeat(np.arange(teams), n)
-        ptr = np.arange(teams * n + 1, dtype=np.int64) * per
-        idx = (team[:, None] * per + np.arange(per)[None, :]).astype(np.int64).ravel()
+        rad, own, ptr, idx = self._team_discs(teams, n, np.asarray(extra_r, dtype=np.float64),
+                                              float(robot_r))
         out = np.empty((len(p), self.spec.beams))
         fields, world = ((self._dist, self._no_i) if worlds is None
                          else (worlds[0], np.repeat(worlds[1], n)))
         _scan_kernel(p, self._cos, self._sin, fields, world, self._par, xy.reshape(-1, 2), rad,
-                     own.ravel(), ptr, idx, True, out)
+                     own, ptr, idx, True, out)
         spec = self.spec
         if spec.noise_std > 0.0:
             for j, rng in enumerate(rngs):
@@ -223,6 +220,24 @@ class Lidar:
                 rows[fin] = np.clip(rows[fin] + noise[fin], spec.range_min, spec.range_max)
         return LaserScan(self.angle_min, self.angle_increment, spec.range_min, spec.range_max,
                          out)
+
+    def _team_discs(self, teams: int, n: int, extra_r: NDArray[np.float64],
+                    robot_r: float) -> tuple[NDArray, ...]:
+        """Radii, owners and per-row candidate lists of :meth:`scan_teams`'s discs.
+
+        They depend on the sizes and radii only: the last ones are kept.
+        """
+        key = (teams, n, robot_r, extra_r.tobytes())
+        if self._teams[0] != key:
+            per = n + len(extra_r)
+            rad = np.tile(np.concatenate((np.full(n, robot_r), extra_r)), teams)
+            own = np.full((teams, per), -1, dtype=np.int64)
+            own[:, :n] = np.arange(teams * n).reshape(teams, n)
+            team = np.repeat(np.arange(teams), n)
+            ptr = np.arange(teams * n + 1, dtype=np.int64) * per
+            idx = (team[:, None] * per + np.arange(per)[None, :]).astype(np.int64).ravel()
+            self._teams = (key, (rad, own.ravel(), ptr, idx))
+        return self._teams[1]
 
     @staticmethod
     def stack(lidars: list[Lidar]) -> NDArray[np.float64] | None:
