@@ -32,7 +32,7 @@ $(VENV)/.bench-installed: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[dev,dask,bench]'
 	touch $(VENV)/.bench-installed
 
-# BENCH_FIGURES=0 leaves out row (f), a whole `dfcoa figures` in a fresh clone (about 6 min
+# BENCH_FIGURES=0 leaves out row (f), a whole `dfcoa figures` in a fresh clone (about 7 min
 # on 2 cores), and the numba compilation row.
 BENCH_FIGURES ?= 1
 
