@@ -10,9 +10,10 @@ import pytest
 
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.formation import slot_positions
-from dfcoa_opt.sim import loader
+from dfcoa_opt.sim import checks, loader
+from dfcoa_opt.sim.checks import final_leader_poses
 from dfcoa_opt.sim.leader import VirtualLeader
-from dfcoa_opt.sim.loader import final_leader_poses, load_scenario, read_toml, scenario_from_dict
+from dfcoa_opt.sim.loader import load_scenario, read_toml, scenario_from_dict
 from dfcoa_opt.sim.scenario import Scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,7 +49,7 @@ def test_the_final_poses_run_from_the_goal_to_where_the_simulated_leader_stops(n
     # to the exact goal: its direction (-135 and -90 degrees) is not the arrival heading
     sc = load_scenario(ROOT / "scenarios" / name)
     poses = final_leader_poses(sc.leader_path, sc.spec, sc.leader_heading)
-    assert poses.shape == (loader.GOAL_SAMPLES, 3)
+    assert poses.shape == (checks.GOAL_SAMPLES, 3)
     np.testing.assert_allclose(poses[0, :2], sc.spec.leader.goal, atol=1e-12)
     stop = _stop_pose(sc)
     assert np.hypot(*(stop[:2] - poses[-1, :2])) < 0.11
@@ -115,7 +116,7 @@ def test_the_original_large_100_breaks_the_goal_slot_rule_and_no_other(monkeypat
     original = CORPUS / "goal_slot_in_obstacle.toml"
     with pytest.raises(ScenarioError, match=r"leader\.goal: robot 64's formation slot"):
         load_scenario(original)
-    monkeypatch.setattr(loader, "_check_goal_clear", lambda *args: None)
+    monkeypatch.setattr(loader, "check_goal_clear", lambda *args: None)
     sc = load_scenario(original)
     assert sc.spec.leader.goal == (37.0, 20.0)
     at_goal = sc.world.clearance(slot_positions(np.array([37.0, 20.0, 0.0]), sc.offsets))
@@ -133,4 +134,4 @@ def test_the_original_large_100_breaks_the_goal_slot_rule_and_no_other(monkeypat
 @pytest.mark.parametrize("path", SHIPPED, ids=[str(p.relative_to(ROOT)) for p in SHIPPED])
 def test_every_shipped_scenario_has_clear_goal_slots(path):
     sc = load_scenario(path)
-    assert _goal_clearance(sc) > sc.spec.robots.radius + loader.GOAL_TOLERANCE
+    assert _goal_clearance(sc) > sc.spec.robots.radius + checks.GOAL_TOLERANCE
