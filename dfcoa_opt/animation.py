@@ -18,18 +18,15 @@ import numpy as np
 from matplotlib.figure import Figure
 from PIL import Image
 
+from dfcoa_opt.figure_layout import freeze_layout, legend_and_fit, map_figure, save_atomic
 from dfcoa_opt.plotting import (
     OBSTACLE_COLOR,
     _default_title,
     _Frame,
-    _legend_and_fit,
-    _map_figure,
     _robot_label,
     _robot_radius,
-    _save_atomic,
     _set_view,
     draw_world,
-    freeze_layout,
     robot_colors,
 )
 
@@ -67,8 +64,8 @@ def animate_run(log: RunLog, grid: OccupancyGrid, path: str | Path,
         max_frames: Largest number of frames, >= 1.
         start: Leader start ``(x, y)`` in m.
         shapes: Exact static shapes to outline.
-        figsize: ``(width, height)`` in inches; None: :data:`MAP_FIGURE_WIDTH` wide
-            and as tall as the map needs.
+        figsize: ``(width, height)`` in inches; None:
+            :data:`~dfcoa_opt.figure_layout.MAP_FIGURE_WIDTH` wide and as tall as the map needs.
         dpi: Pixels per inch (frames are ``figsize * dpi`` pixels).
         figure: When given, the animation's figure (at its last frame) is appended.
 
@@ -89,7 +86,7 @@ def animate_run(log: RunLog, grid: OccupancyGrid, path: str | Path,
         frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:],
                        duration=int(1000 / fps), loop=0)
 
-    out = _save_atomic(path, write, ".gif")
+    out = save_atomic(path, write, ".gif")
     anim.set_blitting(False)  # a plain figure again, at its last frame
     if figure is not None:
         figure.append(anim.fig)
@@ -137,7 +134,7 @@ class _RunAnimation:
         self.t = np.asarray(log.t, dtype=float)
         colors = robot_colors(log.n_robots)
         radius = _robot_radius(log, grid)
-        self.fig = fig = _map_figure(grid, figsize, dpi)
+        self.fig = fig = map_figure(grid, figsize, dpi)
         self.ax = ax = fig.add_subplot()
         draw_world(ax, grid, goal, start, shapes=shapes)
         self.trails = [ax.plot([], [], "-", color=c, linewidth=1.5, zorder=3,
@@ -153,7 +150,7 @@ class _RunAnimation:
         _set_view(ax, grid, log, radius, goal, start)
         self.head = _default_title(log)
         self.show(0)
-        _legend_and_fit(fig, ax, colors, fit=figsize is None)
+        legend_and_fit(fig, ax, colors, fit=figsize is None)
         # Lay the figure out once and freeze it, so frames do not jitter.
         freeze_layout(fig)
         moving = {*self.trails, self.lead_trail, self.lead_dot, *self.dyn_trails,

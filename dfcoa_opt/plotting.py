@@ -1,16 +1,11 @@
-"""Headless figures and animations of one run.
+"""Headless figures and animations of one run: the map, trajectories, time series.
 
-Every figure is a bare :class:`matplotlib.figure.Figure` with an Agg canvas
-attached, so neither :mod:`matplotlib.pyplot` nor a GUI backend is ever
-imported: the functions work under any ``MPLBACKEND`` setting and without a
-display. Files are written atomically (a temporary file in the target
-directory, then a rename), so a reader never sees a half-written image.
-
-Map figures whose ``figsize`` is not given are :data:`MAP_FIGURE_WIDTH` wide and as
-tall as the map's aspect needs, so the map fills them. Teams of more than
-:data:`MAX_LEGEND_ROBOTS` robots get a colour bar of robot indices, not a legend
-entry per robot. Animations draw the static map once and only the moving
-artists per frame (blitting), and write the GIF with Pillow.
+The figures are those of :mod:`dfcoa_opt.figure_layout` (an Agg canvas, no
+pyplot, laid out and drawn once, written atomically, map-sized; teams of more
+than :data:`~dfcoa_opt.figure_layout.MAX_LEGEND_ROBOTS` robots get a colour
+bar of indices). Animations (:mod:`dfcoa_opt.animation`) draw the static map
+once and only the moving artists per frame (blitting), and write the GIF with
+Pillow.
 
 All coordinates are world metres, angles radians and times seconds. Typical use
 with a loaded scenario::
@@ -21,32 +16,31 @@ with a loaded scenario::
 
 from __future__ import annotations
 
-import io
-import os
-import uuid
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import matplotlib as mpl
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.cm import ScalarMappable
 from matplotlib.collections import LineCollection, PatchCollection
-from matplotlib.colors import BoundaryNorm, ListedColormap, to_rgb
+from matplotlib.colors import ListedColormap, to_rgb
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle as CirclePatch
 from matplotlib.patches import Polygon as PolygonPatch
-from matplotlib.ticker import MaxNLocator
 
-from dfcoa_opt.atomic import atomic_write
+from dfcoa_opt.figure_layout import (
+    MAX_LEGEND_ROBOTS,
+    index_colorbar,
+    legend_and_fit,
+    map_figure,
+    new_figure,
+    save_png,
+)
 from dfcoa_opt.world.shapes import Circle
 
 if TYPE_CHECKING:
     from matplotlib.artist import Artist
     from matplotlib.axes import Axes
-    from matplotlib.colorbar import Colorbar
-    from matplotlib.legend import Legend
     from numpy.typing import ArrayLike, NDArray
 
     from dfcoa_opt.sim.log import RunLog
@@ -58,12 +52,6 @@ FREE_COLOR = "#ffffff"
 OCCUPIED_COLOR = "#404040"
 #: Colour of moving obstacles.
 OBSTACLE_COLOR = "#8c8c8c"
-
-#: Largest team (or number of time series) with a legend entry per robot (series);
-#: larger ones get a colour bar of indices instead.
-MAX_LEGEND_ROBOTS = 8
-#: Width (in) of a map figure whose ``figsize`` is not given; its height follows the map.
-MAP_FIGURE_WIDTH = 7.0
 
 _MAP_CMAP = ListedColormap([FREE_COLOR, OCCUPIED_COLOR])
 
@@ -85,49 +73,6 @@ def robot_colors(n: int) -> list[tuple[float, float, float]]:
     else:
         palette = list(mpl.colormaps["turbo"](np.linspace(0.05, 0.95, n)))  # one lookup
     return [tuple(float(v) for v in to_rgb(c)) for c in palette[:n]]  # type: ignore[misc]
-
-
-def new_figure(figsize: tuple[float, float] = (7.0, 6.0), dpi: float = 100.0,
-               layout: str | None = "constrained") -> Figure:
-    """Create a figure with an Agg canvas attached (no pyplot, no GUI backend).
-
-    Args:
-        figsize: ``(width, height)`` in inches.
-        dpi: Pixels per inch; the saved image is ``figsize * dpi`` pixels.
-        layout: Matplotlib layout engine name, or None.
-    """
-    fig = Figure(figsize=figsize, dpi=dpi, layout=layout)
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def freeze_layout(fig: Figure) -> None:
-    """Lay ``fig`` out once with its layout engine, then remove the engine.
-
-    The axes keep the computed positions. ``savefig`` of a figure that still
-    has a layout engine (ours: constrained) draws it twice: once with output
-    disabled, only to lay it out, then for real; a frozen figure is drawn once.
-    """
-    engine = fig.get_layout_engine()
-    if engine is not None:
-        engine.execute(fig)
-        fig.set_layout_engine(None)  # (None unless matplotlibrc asks for autolayout)
-
-
-def png_bytes(fig: Figure) -> bytes:
-    """``fig`` rendered as PNG, laid out once (:func:`freeze_layout`), drawn once.
-
-    The same image as ``fig.savefig``, which draws a laid-out figure twice.
-    """
-    freeze_layout(fig)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    return buf.getvalue()
-
-
-def save_png(fig: Figure, path: str | Path) -> Path:
-    """Write :func:`png_bytes` of ``fig`` to ``path`` atomically (folders are created)."""
-    return atomic_write(path, png_bytes(fig))
 
 
 def draw_world(ax: Axes, grid: OccupancyGrid, goal: ArrayLike | None = None,
@@ -190,8 +135,8 @@ def run_figure(log: RunLog, grid: OccupancyGrid, goal: ArrayLike | None = None,
         start: Leader start ``(x, y)`` in m.
         title: Figure title; default ``"{scenario} - {controller} - seed {seed}"``.
         shapes: Exact static shapes to outline.
-        figsize: ``(width, height)`` in inches; None: :data:`MAP_FIGURE_WIDTH` wide
-            and as tall as the map needs.
+        figsize: ``(width, height)`` in inches; None:
+            :data:`~dfcoa_opt.figure_layout.MAP_FIGURE_WIDTH` wide and as tall as the map needs.
         dpi: Pixels per inch (image is ``figsize * dpi`` pixels).
 
     Raises:
@@ -199,7 +144,7 @@ def run_figure(log: RunLog, grid: OccupancyGrid, goal: ArrayLike | None = None,
     """
     if log.n_steps == 0:
         raise ValueError("the log has no steps")
-    fig = _map_figure(grid, figsize, dpi)
+    fig = map_figure(grid, figsize, dpi)
     ax = fig.add_subplot()
     draw_world(ax, grid, goal, start, shapes=shapes)
     colors = robot_colors(log.n_robots)
@@ -219,7 +164,7 @@ def run_figure(log: RunLog, grid: OccupancyGrid, goal: ArrayLike | None = None,
     final.update(pose[-1], np.asarray(log.slots, dtype=float)[-1], dyn[-1])
     ax.set_title(_default_title(log) if title is None else title)
     _set_view(ax, grid, log, radius, goal, start)
-    _legend_and_fit(fig, ax, colors, fit=figsize is None)
+    legend_and_fit(fig, ax, colors, fit=figsize is None)
     return fig
 
 
@@ -278,7 +223,7 @@ def plot_timeseries(log: RunLog, series: Mapping[str, ArrayLike], path: str | Pa
     ax.set_ylabel(ylabel)
     ax.grid(True, alpha=0.3)
     if many:
-        _index_colorbar(fig, ax, colors, [str(k) for k in series])  # type: ignore[arg-type]
+        index_colorbar(fig, ax, colors, [str(k) for k in series])  # type: ignore[arg-type]
     elif series:
         ax.legend(fontsize="small")
     if title is not None:
@@ -327,89 +272,6 @@ def _robot_label(i: int, n: int) -> str | None:
     return f"robot {i}" if n <= MAX_LEGEND_ROBOTS else None
 
 
-def _map_figure(grid: OccupancyGrid, figsize: tuple[float, float] | None,
-                dpi: float) -> Figure:
-    """A figure of ``figsize``, or :data:`MAP_FIGURE_WIDTH` wide and tall for the map."""
-    if figsize is None:
-        xmin, xmax, ymin, ymax = grid.extent
-        aspect = (ymax - ymin) / (xmax - xmin) if xmax > xmin else 1.0
-        width = MAP_FIGURE_WIDTH
-        figsize = (width, float(np.clip(width * aspect + 1.5, 0.4 * width, 1.6 * width)))
-    return new_figure(figsize, dpi)
-
-
-def _legend_and_fit(fig: Figure, ax: Axes, colors: Sequence[tuple[float, float, float]],
-                    fit: bool) -> None:
-    """The figure legend (robots' entries, or a colour bar of their indices), then the fit.
-
-    Up to :data:`MAX_LEGEND_ROBOTS` robots, the legend (robots and the other
-    labelled artists) is right of the map; for more, the robots get a colour bar
-    and the other artists a one-row legend under the map. With ``fit``, the
-    figure is trimmed to the map (:func:`_fit_to_map`).
-    """
-    if len(colors) <= MAX_LEGEND_ROBOTS:
-        legend = fig.legend(loc="outside right upper", fontsize="small")
-    else:
-        _index_colorbar(fig, ax, colors, [str(i) for i in range(len(colors))], "robot")
-        n_entries = len(ax.get_legend_handles_labels()[0])
-        legend = fig.legend(loc="outside lower center", fontsize="small",
-                            ncols=max(n_entries, 1))
-    if fit:
-        _fit_to_map(fig, ax, legend)
-
-
-def _index_colorbar(fig: Figure, ax: Axes, colors: Sequence[tuple[float, float, float]],
-                    labels: Sequence[str], title: str = "") -> Colorbar:
-    """A colour bar right of ``ax``: one band per colour, some ticked with ``labels[i]``.
-
-    About 0.15 in thick: its length (the axes' height) is guessed as the figure's
-    height less 1.5 in of labels and title.
-    """
-    n = len(colors)
-    norm = BoundaryNorm(np.arange(n + 1) - 0.5, n)
-    length = max(float(fig.get_size_inches()[1]) - 1.5, 1.0)
-    bar = fig.colorbar(ScalarMappable(norm, ListedColormap(list(colors))), ax=ax,
-                       pad=0.02, aspect=length / 0.15)
-    ticks = [int(v) for v in MaxNLocator(6, integer=True).tick_values(0, n - 1) if 0 <= v < n]
-    bar.set_ticks(ticks, labels=[labels[i] for i in ticks])
-    bar.minorticks_off()
-    bar.ax.tick_params(labelsize="small")
-    bar.set_label(title, fontsize="small")
-    return bar
-
-
-def _fit_to_map(fig: Figure, ax: Axes, legend: Legend) -> None:
-    """Resize ``fig`` (same width or narrower) so that the map ``ax`` fills its layout box.
-
-    Lays ``fig`` out with its layout engine (kept) with the map's aspect off, so
-    the axes box is the space left by the decorations (labels, title, legend,
-    colour bar; their size in inches barely depends on the figure's), then sets
-    the height for which that box has the map's aspect (at most 1.6 times the
-    width; for a taller map the width shrinks). The legend keeps room.
-    """
-    engine = fig.get_layout_engine()
-    if engine is None:
-        return
-    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
-    aspect = abs((y1 - y0) / (x1 - x0))
-    width = float(fig.get_size_inches()[0])
-    to_inches = fig.dpi_scale_trans.inverted()
-    ax.set_aspect("auto")
-    for _ in range(4):  # later passes correct for tick labels that came or went, and for
-        # the colour bar, whose thickness follows the height
-        engine.execute(fig)
-        w, h = fig.get_size_inches()
-        box = ax.get_position()
-        deco_w, deco_h = w * (1.0 - box.width), h * (1.0 - box.height)
-        leg = legend.get_window_extent(fig.canvas.get_renderer()).transformed(to_inches)
-        new_h = float(np.clip(deco_h + (w - deco_w) * aspect, leg.height + 0.2, 1.6 * width))
-        new_w = min(width, max(deco_w + (new_h - deco_h) / aspect, leg.width + 0.2))
-        if max(abs(new_w - w), abs(new_h - h)) * fig.dpi < 0.5:
-            break
-        fig.set_size_inches(new_w, new_h)
-    ax.set_aspect("equal")
-
-
 def _robot_radius(log: RunLog, grid: OccupancyGrid) -> float:
     """``meta["robot_radius"]`` in m, or 1 % of the map width when missing or invalid."""
     r = float(log.meta.get("robot_radius", 0.0) or 0.0)
@@ -444,15 +306,3 @@ def _set_view(ax: Axes, grid: OccupancyGrid, log: RunLog, radius: float,
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
 
 
-def _save_atomic(path: str | Path, write: Callable[[str], object], suffix: str) -> Path:
-    """Call ``write(tmp)`` on a temporary file next to ``path``, then rename it to ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = str(path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp{suffix}"))
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path

@@ -16,7 +16,7 @@ from matplotlib.colors import to_rgb
 from matplotlib.figure import Figure
 from PIL import Image
 
-from dfcoa_opt import animation, plotting
+from dfcoa_opt import animation, figure_layout, plotting
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.shapes import Circle, Rectangle
@@ -144,7 +144,7 @@ def test_png_bytes_draws_once_and_gives_savefigs_image(draws: list[int]) -> None
     _boxplot_figure().savefig(buf, format="png")
     assert len(draws) == 2  # savefig alone draws a laid-out figure twice
     fig = _boxplot_figure()
-    data = plotting.png_bytes(fig)
+    data = figure_layout.png_bytes(fig)
     assert len(draws) == 3
     assert fig.get_layout_engine() is None
     ours = mpimg.imread(io.BytesIO(data))
@@ -176,7 +176,7 @@ def test_plot_run_no_moving_obstacles_custom_title_shapes(tmp_path: Path) -> Non
     out = plotting.plot_run(log, make_grid(), tmp_path / "a.png", title="custom", dpi=50,
                             shapes=shapes)
     height, width = mpimg.imread(out).shape[:2]
-    assert width == plotting.MAP_FIGURE_WIDTH * 50 and height < width  # height fits the map
+    assert width == figure_layout.MAP_FIGURE_WIDTH * 50 and height < width  # height fits the map
 
 
 def test_plot_run_overwrites_atomically(tmp_path: Path) -> None:
@@ -265,7 +265,7 @@ def test_works_without_display_under_any_backend(tmp_path: Path, backend: str | 
     assert proc.returncode == 0, proc.stderr
     with Image.open(files["gif"]) as im:
         assert im.n_frames == 3
-    assert mpimg.imread(files["png"]).shape[1] == plotting.MAP_FIGURE_WIDTH * 30
+    assert mpimg.imread(files["png"]).shape[1] == figure_layout.MAP_FIGURE_WIDTH * 30
 
 
 # ------------------------------------------------------------- legends and layout
@@ -286,7 +286,7 @@ def test_per_robot_legend_up_to_8_robots_then_a_colour_bar(tmp_path: Path, n_rob
         texts = _legend_texts(f)
         robots = [t for t in texts if t.startswith("robot")]
         assert {"start", "goal", "leader", "slots", "moving obstacle"} <= set(texts)
-        if n_robots <= plotting.MAX_LEGEND_ROBOTS:
+        if n_robots <= figure_layout.MAX_LEGEND_ROBOTS:
             assert robots == [f"robot {i}" for i in range(n_robots)]
             assert len(f.axes) == 1
         else:
@@ -323,7 +323,7 @@ def test_map_figure_is_sized_to_the_map(tmp_path: Path, cells: tuple[int, int],
     out = plotting.plot_run(log, grid, tmp_path / "m.png", dpi=50)
     png = mpimg.imread(out)
     height, width = png.shape[:2]
-    assert width == plotting.MAP_FIGURE_WIDTH * 50
+    assert width == figure_layout.MAP_FIGURE_WIDTH * 50
     assert height <= 1.6 * width
     rows, cols = _longest_blank(png)
     assert rows <= 10 and cols <= 10, (rows, cols)

@@ -16,7 +16,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.plotting import new_figure, robot_colors, save_png
+from dfcoa_opt.figure_layout import new_figure, save_png
+from dfcoa_opt.plotting import robot_colors
 from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.log import RunLog
 

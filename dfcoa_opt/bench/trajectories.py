@@ -21,7 +21,8 @@ from dfcoa_opt.bench.plots import save_png, scenario_for_row, variant_name
 from dfcoa_opt.bench.store import file_sha256
 from dfcoa_opt.bench.sweep import safe_name
 from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.plotting import draw_world, new_figure, robot_colors
+from dfcoa_opt.figure_layout import new_figure
+from dfcoa_opt.plotting import draw_world, robot_colors
 from dfcoa_opt.sim.log import RunLog
 
 if TYPE_CHECKING:
