@@ -166,10 +166,10 @@ def test_the_facade_sweep_keeps_policy_files_on_worker_processes(tmp_path, monke
     assert [r["status"] for r in res.rows] == ["ok", "ok"]
 
 
-def test_the_code_fingerprint_of_a_policy_covers_the_policy_module_only(tmp_path):
+def test_the_code_fingerprint_of_a_policy_covers_the_policy_modules_only(tmp_path):
     core = set(store.fingerprint_sources("goto_slot")) - {"dfcoa_opt/control/goto_slot.py"}
     own = set(store.fingerprint_sources(f"policy:{linear_policy(tmp_path)}")) - core
-    assert own == {"dfcoa_opt/control/policy.py"}
+    assert own == {"dfcoa_opt/control/policy.py", "dfcoa_opt/control/policy_file.py"}
 
 
 # -- bad files -----------------------------------------------------------------------------------
