@@ -21,9 +21,20 @@ def wrap_angle(a: ArrayLike) -> FloatArray:
     Returns:
         The wrapped angles in rad, same shape.
     """
-    a = np.asarray(a, dtype=float)
-    w = np.mod(a + np.pi, 2.0 * np.pi) - np.pi
+    w = wrap_angle_fast(a)
     return np.where(w == -np.pi, np.pi, w)
+
+
+def wrap_angle_fast(a: ArrayLike) -> FloatArray:
+    """Wrap angles to [-pi, pi) (:func:`wrap_angle` without moving -pi to pi).
+
+    Args:
+        a: Angles in rad, any shape.
+
+    Returns:
+        The wrapped angles in rad, same shape.
+    """
+    return np.mod(np.asarray(a, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
 
 
 def rotate(v: ArrayLike, theta: ArrayLike) -> FloatArray:

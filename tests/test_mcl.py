@@ -9,6 +9,7 @@ import pytest
 
 from benchmarks.bench_mcl import numpy_sensor_update
 from dfcoa_opt.errors import DfcoaError, ScenarioError
+from dfcoa_opt.geometry import wrap_angle_fast
 from dfcoa_opt.localization import estimator_names, make_estimator
 from dfcoa_opt.localization import mcl_models as mm
 from dfcoa_opt.localization.mcl import MonteCarloLocalization
@@ -87,7 +88,7 @@ def test_registered_with_paper_defaults():
 def test_mcl_beats_dead_reckoning(circle_run):
     poses, (est, odom, _, _) = circle_run
     mcl_err, dr_err = rmse(est, poses), rmse(odom, poses)
-    heading = np.abs(mm.wrap(est[..., 2] - poses[..., 2]))
+    heading = np.abs(wrap_angle_fast(est[..., 2] - poses[..., 2]))
     assert mcl_err < 0.06, mcl_err
     assert dr_err > 0.3, dr_err  # the odometry noise is large (paper alphas)
     assert mcl_err < 0.1 * dr_err
@@ -160,7 +161,7 @@ def test_odometry_model_noise_free_is_exact_and_noise_matches_alphas():
         m = mm.decompose_motion(prev, cur, mode)
         out = mm.sample_motion(prev, m, (0, 0, 0, 0), rng.standard_normal((50, 3)))
         np.testing.assert_allclose(out[:, :2], cur[:, :2], atol=1e-12)
-        np.testing.assert_allclose(mm.wrap(out[:, 2] - cur[:, 2]), 0.0, atol=1e-12)
+        np.testing.assert_allclose(wrap_angle_fast(out[:, 2] - cur[:, 2]), 0.0, atol=1e-12)
     # straight 1 m drive: translation variance alpha3 * 1, heading variance 2 * alpha2 * 1
     start = np.zeros((200_000, 3))
     end = np.tile([1.0, 0.0, 0.0], (200_000, 1))
@@ -309,7 +310,7 @@ def test_end_to_end_goto_slot_with_mcl():
         "localization": "mcl"}, "<e2e>")
     log = run_scenario(sc, "goto_slot")
     err = np.hypot(*(log.pose_est[..., :2] - log.pose[..., :2]).transpose(2, 0, 1))
-    heading = np.abs(mm.wrap(log.pose_est[..., 2] - log.pose[..., 2]))
+    heading = np.abs(wrap_angle_fast(log.pose_est[..., 2] - log.pose[..., 2]))
     assert log.meta["steps"] > 150
     assert not np.array_equal(log.pose_est, log.pose)
     assert np.sqrt(np.mean(err ** 2)) < 0.08, np.sqrt(np.mean(err ** 2))

@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.errors import DfcoaError, ScenarioError
-from dfcoa_opt.geometry import wrap_angle
+from dfcoa_opt.geometry import wrap_angle, wrap_angle_fast
 from dfcoa_opt.localization import estimator_options, register_estimator
 from dfcoa_opt.localization import mcl_models as mm
 from dfcoa_opt.localization.mcl_setup import Maps
@@ -216,7 +216,7 @@ class MonteCarloLocalization:
         m = self.params.particle_limits[1]
         std = np.sqrt(np.asarray(self.params.initial_covariance, dtype=float))
         parts = np.repeat(true, m, axis=0) + normals * std
-        parts[:, 2] = mm.wrap(parts[:, 2])
+        parts[:, 2] = wrap_angle_fast(parts[:, 2])
         counts = np.diff(self._ptr)
         counts[robots] = m
         ptr = np.zeros_like(self._ptr)
@@ -247,7 +247,7 @@ class MonteCarloLocalization:
         self._odom[robots] = odom
         self._prev_true[robots] = true
         delta = np.abs(odom - self._odom_u[robots])
-        delta[:, 2] = np.abs(mm.wrap(delta[:, 2]))
+        delta[:, 2] = np.abs(wrap_angle_fast(delta[:, 2]))
         return np.asarray((delta > self._thresholds).any(axis=1))
 
     def _filter(self, sense: NDArray[np.bool_], move: NDArray[np.bool_],

@@ -31,6 +31,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dfcoa_opt.geometry import wrap_angle_fast
 from dfcoa_opt.world.grid import OccupancyGrid
 
 FloatArray = NDArray[np.float64]
@@ -41,11 +42,6 @@ FloatArray = NDArray[np.float64]
 MIN_TRANSLATION = 0.01
 _KEY_OFFSET = 1 << 19  # bin indices are shifted by this and packed 21 bits each in an int64
 _KEY_MAX = (1 << 21) - 1  # (clipped: far-away bins merge, which only lowers k)
-
-
-def wrap(a: ArrayLike) -> FloatArray:
-    """Angles wrapped to ``[-pi, pi)`` rad (fast; the sign of ``pi`` does not matter here)."""
-    return np.mod(np.asarray(a, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
 
 
 def decompose_motion(prev: FloatArray, cur: FloatArray, rotation_noise: str = "heading_change"
@@ -71,10 +67,10 @@ def decompose_motion(prev: FloatArray, cur: FloatArray, rotation_noise: str = "h
     """
     dx = cur[:, 0] - prev[:, 0]
     dy = cur[:, 1] - prev[:, 1]
-    dth = wrap(cur[:, 2] - prev[:, 2])
+    dth = wrap_angle_fast(cur[:, 2] - prev[:, 2])
     trans = np.hypot(dx, dy)
-    rot1 = wrap(np.arctan2(dy, dx) - prev[:, 2])
-    rot2 = wrap(dth - rot1)
+    rot1 = wrap_angle_fast(np.arctan2(dy, dx) - prev[:, 2])
+    rot2 = wrap_angle_fast(dth - rot1)
     moving = trans >= MIN_TRANSLATION
     if rotation_noise == "decomposition":
         n1 = np.minimum(np.abs(rot1), np.pi - np.abs(rot1))
@@ -114,7 +110,7 @@ def sample_motion(poses: FloatArray, motion: tuple[FloatArray, ...], alphas: Arr
     out = np.empty_like(poses)
     out[:, 0] = poses[:, 0] + tr * np.cos(head)
     out[:, 1] = poses[:, 1] + tr * np.sin(head)
-    out[:, 2] = wrap(head + r2)
+    out[:, 2] = wrap_angle_fast(head + r2)
     return out
 
 
@@ -133,7 +129,7 @@ def compose_relative(base: FloatArray, frm: FloatArray, to: FloatArray) -> Float
     out = np.empty_like(base)
     out[:, 0] = base[:, 0] + cb * lx - sb * ly
     out[:, 1] = base[:, 1] + sb * lx + cb * ly
-    out[:, 2] = wrap(base[:, 2] + to[:, 2] - frm[:, 2])
+    out[:, 2] = wrap_angle_fast(base[:, 2] + to[:, 2] - frm[:, 2])
     return out
 
 

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from dfcoa_opt.geometry import wrap_angle_fast
 from dfcoa_opt.sim.schema import ScenarioSpec
 
 FloatArray = NDArray[np.float64]
@@ -112,7 +113,7 @@ class Comms:
         n = self.n
         noise = np.concatenate([self.rngs[e].normal(size=(n, 3)) for e in active])
         out = pose + noise * self.pose_sigma
-        out[:, 2] = np.mod(out[:, 2] + np.pi, 2.0 * np.pi) - np.pi
+        out[:, 2] = wrap_angle_fast(out[:, 2])
         return out
 
     def neighbours(self, kk: IntArray, active: IntArray, pose: FloatArray, velocity: FloatArray,
