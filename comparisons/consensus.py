@@ -155,11 +155,12 @@ class Consensus(BatchedController):
         """Parameters of ``consensus`` (paper 001 eq 14, eq 21)."""
 
         k1: float = param(0.25, doc="Position gain k1 of eq 14 (paper: 0.25).", unit="1/s^2",
-                          gt=0.0)
+                          gt=0.0, tune=(0.05, 2.0), scale="log")
         k2: float = param(0.45, doc="Velocity gain k2 of eq 14 (paper: 0.45).", unit="1/s",
-                          gt=0.0)
+                          gt=0.0, tune=(0.1, 3.0), scale="log")
         b: float = param(1.0, doc="Leader weight b_i of every robot (eq 21: B = 1); 0 = no "
-                                  "robot uses the leader's state beyond its offsets.", ge=0.0)
+                                  "robot uses the leader's state beyond its offsets.", ge=0.0,
+                         tune=(0.0, 3.0))
         topology: Literal["complete"] = param(
             "complete", doc="a_ij = 1 for every robot within communication range (eq 21's A "
                             "when every robot is within range of the others).")

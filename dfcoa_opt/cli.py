@@ -59,6 +59,18 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--rerun", action="store_true", help="run again the runs that have a row")
     b.add_argument("--seeds", type=int, help="override the sweep's number of seeds")
 
+    t = sub.add_parser("tune", help="tune variants of a tuning sweep with Optuna on its "
+                       "training seeds (the same budget for each); resumes")
+    t.add_argument("sweep", help="tuning sweep .toml (split = \"train\", a [tune] table)")
+    t.add_argument("--variant", action="append", required=True, metavar="NAME",
+                   help="variant to tune (repeatable); '*' = every variant of the sweep")
+    t.add_argument("--out", default="results/tune", help="folder of the trials' runs and "
+                   "journals (default results/tune)")
+    t.add_argument("--variants-out", metavar="DIR", help="folder of the variants files "
+                   "(default: [tune] out, beside the sweep file)")
+    t.add_argument("--trials", type=int, help="override [tune] trials (quick runs)")
+    _executor_args(t)
+
     rp = sub.add_parser("report", help="tables (Markdown, CSV) and figures from a results "
                         "folder; never re-simulates")
     rp.add_argument("results", help="results folder written by dfcoa bench")
@@ -72,6 +84,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--cache", default=".dfcoa-cache", help="result cache (default .dfcoa-cache)")
     f.add_argument("--only", action="append", help="only this recipe (repeatable)")
     f.add_argument("--seeds", type=int, help="override every recipe's seed count (quick runs)")
+    f.add_argument("--keep-logs", action="store_true", help="keep every run's full log in the "
+                   "cache (default: compact the logs no figure reads)")
     _executor_args(f)
     return p
 
@@ -127,6 +141,30 @@ def _cmd_bench(a: argparse.Namespace) -> int:
     result = run_sweep(sweep, out, config, rerun=a.rerun, progress=a.progress)
     print(result.summary())
     print(f"report: dfcoa report {out}")
+    return 0
+
+
+def _cmd_tune(a: argparse.Namespace) -> int:
+    from dfcoa_opt.bench.executors import kept_workers
+    from dfcoa_opt.bench.tune import tune_variant, tuning_sweep
+
+    if a.trials is not None and a.trials < 1:
+        raise DfcoaError(f"--trials: must be >= 1, got {a.trials}")
+    if a.set:
+        raise DfcoaError("--set: dfcoa tune runs the tuning sweep as written (its settings are "
+                         "part of what the tuned variants mean)")
+    config = _executor(a)
+    sweep, spec = tuning_sweep(a.sweep, a.trials)
+    names = [v.name for v in sweep.variants]
+    wanted = names if "*" in a.variant else list(dict.fromkeys(a.variant))
+    with kept_workers(config):  # one pool of workers for every trial of every variant
+        for name in wanted:
+            result = tune_variant(sweep, spec, name, Path(a.out), config, a.variants_out,
+                                  a.progress)
+            best, first = result.best, result.trials[0]
+            print(f"{name}: best trial {best.number} of {len(result.trials)}: "
+                  f"{best.successes}/{best.runs} succeeded on training seeds (defaults: "
+                  f"{first.successes}/{first.runs}); ran {result.ran} runs -> {result.path}")
     return 0
 
 
@@ -259,7 +297,7 @@ def _cmd_figures(a: argparse.Namespace) -> int:
         raise DfcoaError(f"--seeds: must be >= 1, got {a.seeds}")
     index = make_figures(Path(a.scenarios), Path(a.out), Path(a.cache), _executor(a),
                          only=a.only, seeds=a.seeds, progress=a.progress,
-                         overrides=_overrides(a.set))
+                         overrides=_overrides(a.set), compact=not a.keep_logs)
     print(index)
     return 0
 
@@ -268,10 +306,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     args = _parser().parse_args(argv)
     handlers = {"run": _cmd_run, "list": _cmd_list, "schema": _cmd_schema,
-                "bench": _cmd_bench, "report": _cmd_report, "figures": _cmd_figures}
+                "bench": _cmd_bench, "tune": _cmd_tune, "report": _cmd_report,
+                "figures": _cmd_figures}
     # bench and figures: SIGTERM too stops them with one line (and SIGINT raises
     # Interrupted rather than KeyboardInterrupt) from the start, imports included
-    stoppable = interruptible() if args.cmd in ("bench", "figures") else contextlib.nullcontext()
+    stoppable = (interruptible() if args.cmd in ("bench", "tune", "figures")
+                 else contextlib.nullcontext())
     try:
         with stoppable:
             return handlers[args.cmd](args)

@@ -48,8 +48,14 @@ __all__ = ["RECIPE_MODULES", "Artefact", "Recipe", "make_figures", "recipe", "re
 def make_figures(scenarios: Path, out: Path, cache: Path,
                  config: ExecutorConfig | None = None, only: Sequence[str] | None = None,
                  seeds: int | None = None, progress: bool | None = None,
-                 overrides: dict[str, Any] | None = None) -> Path:
+                 overrides: dict[str, Any] | None = None, compact: bool = True) -> Path:
     """Run every recipe's sweep (reusing cached runs) and render its artefacts.
+
+    After the last render, the logs that no renderer read are compacted
+    (:func:`~dfcoa_opt.bench.logs.compact_store`: trajectories only, about 3 %
+    of a full log); rows stay whole, so every table is the same. A renderer
+    that asks for a compacted log (its code changed since) gets those runs
+    simulated again and renders once more.
 
     Args:
         scenarios: Scenario root; recipe sweeps are relative to it.
@@ -61,6 +67,7 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
         overrides: Dotted scenario keys set in every run (e.g. ``{"t_max": 5.0}``);
             with ``seeds``, a reduced configuration for smoke tests.
         progress: Progress bars; default when stdout is a terminal.
+        compact: Compact the logs no figure reads (False: keep every full log).
 
     Returns:
         Path of the index ``README.md``.
@@ -97,22 +104,64 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
             renderer.submit(r, result.store.root, dest,
                             f"{result.ran} runs ({result.failed} failed), {result.skipped} "
                             f"cached{reused}, simulated in {time.perf_counter() - t0:.1f} s")
+        renderer.finish()
+        for r, dest in renderer.redo:  # a compacted log was wanted: those runs again
+            restored = restore_logs(cache / r.name)
+            result = run_sweep(scenarios / str(r.sweep), cache / r.name, config, seeds=seeds,
+                               progress=progress, overrides=overrides)
+            renderer.render_now(r, result.store.root, dest, f"{restored} compacted runs "
+                                                            "simulated again for their logs")
+    if compact:
+        _compact(cache, renderer.reads)
     print(f"figures: {time.perf_counter() - start:.1f} s in all", file=sys.stderr)
     return write_index(out, names)
 
 
+def _compact(cache: Path, reads: dict[str, set[str]]) -> None:
+    """Compact the logs of each rendered recipe's store that its renderer did not read."""
+    from dfcoa_opt.bench.logs import compact_store
+
+    count = saved = 0
+    for name, keys in reads.items():
+        if (cache / name / "logs").is_dir():
+            c, b = compact_store(cache / name, keys)
+            count, saved = count + c, saved + b
+    total = sum(p.stat().st_size for p in cache.rglob("*") if p.is_file())
+    print(f"cache: {count} logs no figure reads compacted ({saved / 2**20:.0f} MB saved); "
+          f"{cache} holds {total / 2**20:.0f} MB", file=sys.stderr)
+
+
+def restore_logs(root: Path) -> int:
+    """Drop the rows of the runs whose logs are compacted, so that the sweep runs them again.
+
+    Returns:
+        How many rows were dropped.
+    """
+    from dfcoa_opt.sim.log import is_compact
+
+    count = 0
+    for path in sorted((root / "logs").glob("*.npz")):
+        if is_compact(path):
+            (root / "rows" / f"{path.stem}.json").unlink(missing_ok=True)
+            path.unlink()
+            count += 1
+    return count
+
+
 def _render(render: Renderer, source: Path, is_store: bool,
-            dest: Path) -> tuple[list[Artefact], float]:
+            dest: Path) -> tuple[list[Artefact], float, set[str]]:
     """Run one renderer (in the render process or inline); ``source``: store root or scenarios.
 
     Returns:
-        The artefacts and the rendering's wall time, s.
+        The artefacts, the rendering's wall time (s) and the runs whose logs it read.
     """
+    from dfcoa_opt.bench.logs import tracing
     from dfcoa_opt.bench.store import ResultsStore
 
     t0 = time.perf_counter()
-    arts = render(ResultsStore(source) if is_store else source, dest)
-    return arts, time.perf_counter() - t0
+    with tracing() as keys:
+        arts = render(ResultsStore(source) if is_store else source, dest)
+    return arts, time.perf_counter() - t0, keys
 
 
 class _Renderer:
@@ -132,7 +181,11 @@ class _Renderer:
             ctx = forkserver_context(WORKER_PRELOAD)
             self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
                                             initializer=init_worker, initargs=(None,))
-        self.pending: list[tuple[Recipe, Path, str, Future[tuple[list[Artefact], float]]]] = []
+        self.pending: list[tuple[Recipe, Path, str, Future[tuple[Any, float, set[str]]]]] = []
+        #: Recipe -> the runs whose logs its render read (recipes with a sweep).
+        self.reads: dict[str, set[str]] = {}
+        #: Recipes whose render wanted a compacted log, to render again.
+        self.redo: list[tuple[Recipe, Path]] = []
 
     def __enter__(self) -> _Renderer:
         return self
@@ -143,7 +196,7 @@ class _Renderer:
         ``done`` (what the sweep did) starts the recipe's progress line.
         """
         args = (r.render, source, r.sweep is not None, dest)
-        fut: Future[tuple[list[Artefact], float]] = Future()
+        fut: Future[tuple[Any, float, set[str]]] = Future()
         if self.pool is not None and _picklable(r.render):
             with deferred():  # the first submit starts the render process
                 fut = self.pool.submit(_render, *args)
@@ -153,11 +206,31 @@ class _Renderer:
         with deferred():  # takes the futures' locks, which the pool's manager thread needs
             self._collect(block=False)
 
+    def render_now(self, r: Recipe, source: Path, dest: Path, done: str) -> None:
+        """Render ``r`` in this process and write its artefact list at once."""
+        fut: Future[tuple[Any, float, set[str]]] = Future()
+        fut.set_result(_render(r.render, source, True, dest))
+        self.pending.append((r, dest, done, fut))
+        self._collect(block=True)
+
+    def finish(self) -> None:
+        """Wait for every render and write their artefact lists."""
+        self._collect(block=True)
+
     def _collect(self, block: bool) -> None:
         """Write the artefact lists of finished renders, in submission order."""
+        from dfcoa_opt.bench.logs import LogCompacted
+
         while self.pending and (block or self.pending[0][3].done()):
             r, dest, done, fut = self.pending.pop(0)
-            arts, seconds = fut.result()
+            try:
+                arts, seconds, keys = fut.result()
+            except LogCompacted as exc:
+                print(f"{r.name}: {exc}; rendering again after its sweep", file=sys.stderr)
+                self.redo.append((r, dest))
+                continue
+            if r.sweep is not None:
+                self.reads[r.name] = keys
             atomic_write(dest / "artefacts.json", json.dumps(
                 {"recipe": r.name, "title": r.title, "sweep": r.sweep,
                  "artefacts": [asdict(a) for a in arts]}, indent=1) + "\n")

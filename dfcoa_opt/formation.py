@@ -121,3 +121,17 @@ def slot_positions(leader_pose: NDArray[np.float64],
         out[..., 1] = lp[1] + (s * off[..., 0] + c * off[..., 1])
         return out
     return body_to_world(lp[..., None, :], offsets)
+
+
+def team_width(offsets: NDArray[np.float64], radius: float) -> float:
+    """The formation's width across the leader's heading, bodies included, m.
+
+    The spread of the slots' lateral offsets (the leader frame's y) plus one
+    body diameter: the narrowest gap the rigid formation passes head-on.
+
+    Args:
+        offsets: ``(N, 2)`` slot offsets in the leader frame, m.
+        radius: Robot body radius, m.
+    """
+    y = np.asarray(offsets, dtype=float).reshape(-1, 2)[:, 1]
+    return float(y.max() - y.min() + 2.0 * radius) if len(y) else 2.0 * radius

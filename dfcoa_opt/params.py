@@ -25,7 +25,8 @@ _MISSING = dataclasses.MISSING
 
 def param(default: Any = _MISSING, *, doc: str, unit: str = "", ge: float | None = None,
           gt: float | None = None, le: float | None = None, lt: float | None = None,
-          finite: bool = True, default_factory: Any = _MISSING) -> Any:
+          finite: bool = True, default_factory: Any = _MISSING,
+          tune: tuple[Any, Any] | None = None, scale: str = "linear") -> Any:
     """A dataclass field with documentation and validation metadata.
 
     Args:
@@ -38,8 +39,21 @@ def param(default: Any = _MISSING, *, doc: str, unit: str = "", ge: float | None
         lt: Exclusive upper bound.
         finite: Reject NaN and infinities (default). ``False`` still rejects NaN.
         default_factory: Factory for mutable defaults.
+        tune: ``(low, high)``: the range ``dfcoa tune`` searches for this key (a
+            float or int field), or ``(False, True)`` for a boolean one (:func:`tunables`).
+        scale: ``"linear"`` or ``"log"`` (low > 0): how the range is searched.
+
+    Raises:
+        ValueError: A tuning range out of order, or a log scale that reaches 0.
     """
-    meta = {"doc": doc, "unit": unit, "ge": ge, "gt": gt, "le": le, "lt": lt, "finite": finite}
+    if tune is not None:
+        if scale not in ("linear", "log") or not tune[0] < tune[1]:
+            raise ValueError(f"tune={tune!r}, scale={scale!r}: need low < high and a linear or "
+                             "log scale")
+        if scale == "log" and not tune[0] > 0:
+            raise ValueError(f"tune={tune!r}: a log scale needs low > 0")
+    meta = {"doc": doc, "unit": unit, "ge": ge, "gt": gt, "le": le, "lt": lt, "finite": finite,
+            "tune": tune, "scale": scale}
     if default_factory is not _MISSING:
         return dataclasses.field(default_factory=default_factory, metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
@@ -242,3 +256,47 @@ def describe(cls: type, prefix: str = "") -> list[tuple[str, str, str, str, str]
         rows.append((key, _typename(tp), default, f.metadata.get("unit", ""),
                      f.metadata.get("doc", "")))
     return rows
+
+
+@dataclasses.dataclass(frozen=True)
+class Tunable:
+    """A parameter that ``dfcoa tune`` searches (declared by ``param(tune=...)``).
+
+    Attributes:
+        key: Dotted key below the table that holds it (``k1``, ``vfh.target_weight``).
+        low: Smallest value searched.
+        high: Largest value searched.
+        scale: ``linear`` or ``log``.
+        kind: ``float``, ``int`` or ``bool`` (``bool``: the two values, no scale).
+        default: The field's default.
+        unit: Its unit.
+    """
+
+    key: str
+    low: Any
+    high: Any
+    scale: str
+    kind: str
+    default: Any
+    unit: str = ""
+
+
+def tunables(cls: type, prefix: str = "") -> list[Tunable]:
+    """The tunable fields of a ``Params`` dataclass, nested tables included, in field order."""
+    out: list[Tunable] = []
+    hints = get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        key = f"{prefix}{f.name}"
+        tp = hints[f.name]
+        if dataclasses.is_dataclass(tp):
+            out += tunables(tp, key + ".")
+            continue
+        rng = f.metadata.get("tune")
+        if rng is None:
+            continue
+        args = [a for a in get_args(tp) if a is not type(None)] or [tp]
+        kind = {bool: "bool", int: "int", float: "float"}[args[0] if get_origin(tp) else tp]
+        default = f.default if f.default is not _MISSING else None
+        out.append(Tunable(key, rng[0], rng[1], f.metadata.get("scale", "linear"), kind,
+                           default, f.metadata.get("unit", "")))
+    return out

@@ -3,7 +3,9 @@
 - ``scenario-keys.md``: the scenario key reference (``scenarios/README.md``,
   made by ``dfcoa schema``);
 - ``controller-params.md``: every registered controller's and filter's
-  ``Params`` (the ``[controllers.<id>]`` keys), from their field metadata.
+  ``Params`` (the ``[controllers.<id>]`` keys), from their field metadata,
+  with the ranges ``dfcoa tune`` searches;
+- ``world-families.md``: every world family's options (``[world.generate.options]``).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def _params_page() -> str:
     import dfcoa_opt  # noqa: F401 - first: pins numpy's SIMD dispatch
     from dfcoa_opt.control import registry
-    from dfcoa_opt.params import describe
+    from dfcoa_opt.params import describe, tunables
 
     out = ["# Controller parameters", "",
            "Every registered controller's and safety filter's parameters: the keys of a "
@@ -38,6 +40,37 @@ def _params_page() -> str:
         out += ["| key | type | default | unit | meaning |", "|---|---|---|---|---|"]
         out += [f"| `{k}` | {t} | `{d}` | {u} | {doc} |" for k, t, d, u, doc in rows]
         out.append("")
+        tuned = tunables(cls.Params)
+        if tuned:
+            out += ["Searched by `dfcoa tune` (docs: [held-out benchmark](heldout.md)): "
+                    + "; ".join(_range(t) for t in tuned) + ".", ""]
+    return "\n".join(out)
+
+
+def _range(t) -> str:  # noqa: ANN001 - a dfcoa_opt.params.Tunable
+    if t.kind == "bool":
+        return f"`{t.key}` false or true"
+    return f"`{t.key}` [{t.low:g}, {t.high:g}]" + (" (log)" if t.scale == "log" else "")
+
+
+def _families_page() -> str:
+    import dfcoa_opt  # noqa: F401 - first: pins numpy's SIMD dispatch
+    from dfcoa_opt.params import describe
+    from dfcoa_opt.world import generate
+
+    out = ["# World families", "",
+           "The options of each family of generated worlds: the keys of a scenario's "
+           "`[world.generate.options]` table, with `[world.generate] family = \"<name>\"` "
+           "([held-out benchmark](heldout.md)). A range `[low, high]` is drawn anew for every "
+           "world. Generated from the code by the documentation build.", ""]
+    for name in generate.family_names():
+        cls = generate.family_params(name)
+        module = __import__(f"dfcoa_opt.world.generate.{name}", fromlist=["x"])
+        out += [f"## `{name}`", "", " ".join((module.__doc__ or "").split("\n\n")[1].split()),
+                "", "| key | type | default | unit | meaning |", "|---|---|---|---|---|"]
+        out += [f"| `{k}` | {t} | `{d}` | {u} | {doc} |"
+                for k, t, d, u, doc in describe(cls, "world.generate.options")]
+        out.append("")
     return "\n".join(out)
 
 
@@ -46,4 +79,5 @@ def on_files(files, config):  # noqa: ANN001, ANN201 - mkdocs hook signature
     text = (ROOT / "scenarios" / "README.md").read_text(encoding="utf-8")
     files.append(File.generated(config, "scenario-keys.md", content=text))
     files.append(File.generated(config, "controller-params.md", content=_params_page()))
+    files.append(File.generated(config, "world-families.md", content=_families_page()))
     return files

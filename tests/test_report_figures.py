@@ -13,6 +13,7 @@ from test_metrics import make_log
 from dfcoa_opt.bench import plots, report, trajectories
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
+from dfcoa_opt.bench.logs import read_log
 from dfcoa_opt.bench.sweep import load_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -149,7 +150,7 @@ def _capture(monkeypatch, module):
 
 def _save_edited(res, row, key, edit):
     """A copy of ``row`` whose log is the row's log changed by ``edit(log)``, saved anew."""
-    log = trajectories.load_log(res.store.root, row)
+    log = read_log(res.store.root, row)
     edit(log)
     log.save(res.store.root / "logs" / f"{key}.npz")
     return {**row, "key": key, "log": f"logs/{key}.npz"}
@@ -216,7 +217,7 @@ def test_snapshot_draws_the_nearest_step_and_marks_exactly_the_robots_in_contact
 
     row = _save_edited(res, row, "touching", touch)
     figs = _capture(monkeypatch, trajectories)
-    log = trajectories.load_log(res.store.root, row)
+    log = read_log(res.store.root, row)
     t = float(log.t[k]) + 0.4 * float(log.meta["dt"])  # nearer to step k than to k + 1
     path = trajectories.snapshot_figure(row, res.store.root, tmp_path / "s.png", t)
     assert path.read_bytes()[:8] == PNG_MAGIC

@@ -71,7 +71,7 @@ def test_a_seeded_world_without_its_file_data_stops_with_one_line():
 
     bare = replace(d.load(CLUTTER), data=None)
     assert bare.for_seed(bare.spec.seed) is bare
-    with pytest.raises(DfcoaError, match=r"clutter\.toml: its clutter field follows the seed, "
+    with pytest.raises(DfcoaError, match=r"clutter\.toml: its world follows the seed, "
                                          r"so load it with seed 3") as err:
         d.run(bare, "goto_slot", seed=3)
     assert "\n" not in str(err.value)

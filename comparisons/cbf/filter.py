@@ -86,9 +86,9 @@ class CbfFilter(BatchedController):
         """Parameters of the ``cbf`` filter."""
 
         gamma: float = param(2.0, doc="Class-K gain gamma of dh/dt >= -gamma h.", unit="1/s",
-                             gt=0.0)
+                             gt=0.0, tune=(0.3, 10.0), scale="log")
         margin: float = param(0.05, doc="Extra distance kept beyond contact.", unit="m",
-                              ge=0.0)
+                              ge=0.0, tune=(0.0, 0.3))
         mode: Literal["distributed", "centralized"] = param(
             "distributed", doc="'distributed': one QP per robot, half of every pair's "
                                "decrease each; 'centralized': one QP for all robots.")
@@ -98,7 +98,8 @@ class CbfFilter(BatchedController):
                                               "default the robots' v_max / sqrt 2 (the box "
                                               "inside the speed disc).", unit="m/s", gt=0.0)
         obstacle_range: float = param(3.0, doc="Static obstacles farther than this (signed "
-                                               "distance) get no row.", unit="m", gt=0.0)
+                                               "distance) get no row.", unit="m", gt=0.0,
+                                      tune=(1.0, 5.0))
         max_obstacles: int = param(6, doc="Most static obstacles per robot (nearest first).",
                                    ge=0)
         infeasible: Literal["least_violation", "stop", "pass_through"] = param(

@@ -68,6 +68,12 @@ class Learned(PolicyController):
         policy: str = param("", doc="Another policy file (JSON spec) to run instead of the "
                                     "shipped comparisons/learned/learned.json; relative to "
                                     "the working folder. Empty: the shipped one.")
+        gain_forward: float = param(1.0, doc="Factor on the network's forward velocity (body "
+                                             "x); 1: the network's own command.", ge=0.0,
+                                    tune=(0.5, 2.0), scale="log")
+        gain_lateral: float = param(1.0, doc="Factor on the network's lateral velocity (body "
+                                             "y); 1: the network's own command.", ge=0.0,
+                                    tune=(0.5, 2.0), scale="log")
 
     def __init__(self, params: Params | None = None) -> None:
         super().__init__(params)
@@ -80,5 +86,11 @@ class Learned(PolicyController):
         self.uses_scan = self.spec.beams > 0
 
     def forward(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Actions ``(R, 2)`` (m/s, :attr:`frame`) for observation vectors ``(R, D)``."""
-        return self.policy.forward(x)
+        """Actions ``(R, 2)`` (m/s, :attr:`frame`) for observation vectors ``(R, D)``.
+
+        The network's rows, times ``(gain_forward, gain_lateral)`` when those are not 1.
+        """
+        y = self.policy.forward(x)
+        if self.p.gain_forward != 1.0 or self.p.gain_lateral != 1.0:
+            y = y * np.array([self.p.gain_forward, self.p.gain_lateral])
+        return y

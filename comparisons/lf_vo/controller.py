@@ -137,7 +137,8 @@ class LeaderFollowerVO(BatchedController):
                                                 "read as 0.65).", unit="m/s", gt=0.0)
         w_max: float = param(1.0, doc="Largest turn rate (Table I).", unit="rad/s", gt=0.0)
         reach_time: float = param(0.5, doc="Time interval t of eq 4, v = min(l/t, v_max) "
-                                           "(not given by the paper).", unit="s", gt=0.0)
+                                           "(not given by the paper).", unit="s", gt=0.0,
+                                  tune=(0.2, 3.0), scale="log")
         arrival_radius: float = param(0.1, doc="Within this distance of its target a robot "
                                                "prefers (0, 0) and holds its place: it does not "
                                                "give way to other robots (not in the paper).",
@@ -152,20 +153,23 @@ class LeaderFollowerVO(BatchedController):
                                        "0).", ge=2)
         include_preferred: bool = param(True, doc="Add the eq 4 preferred command as a sample.")
         horizon: float = param(5.0, doc="Prediction horizon of the velocity obstacle "
-                                        "against static discs and humans.", unit="s", gt=0.0)
+                                        "against static discs and humans.", unit="s", gt=0.0,
+                               tune=(1.0, 8.0))
         turn_time: float = param(1.0, doc="A sample turns at omega for this long, then goes "
                                            "straight (rollout and heading penalty).", unit="s",
                                  gt=0.0)
         robot_horizon: float = param(2.0, doc="Prediction horizon against the other robots "
-                                              "(at most horizon).", unit="s", gt=0.0)
+                                              "(at most horizon).", unit="s", gt=0.0,
+                                     tune=(0.5, 4.0))
         horizon_steps: int = param(50, doc="Prediction steps over the horizon.", ge=1)
         safety_margin: float = param(0.05, doc="Clearance added to robot + obstacle radii.",
-                                     unit="m", ge=0.0)
+                                     unit="m", ge=0.0, tune=(0.0, 0.3))
         avoid_robots: bool = param(True, doc="Treat neighbours as constant-velocity obstacles.")
         pref_weight: float = param(1.0, doc="Weight of the distance to the preferred "
                                             "velocity.", unit="s/m", ge=0.0)
         heading_weight: float = param(1.0, doc="Weight of the progress shortfall towards the "
-                                               "target direction.", unit="s/m", ge=0.0)
+                                               "target direction.", unit="s/m", ge=0.0,
+                                      tune=(0.1, 10.0), scale="log")
         turn_weight: float = param(0.01, doc="Weight of the turn-rate distance to eq 4's "
                                              "(breaks ties: a stopped robot does not spin).",
                                    unit="s/rad", ge=0.0)

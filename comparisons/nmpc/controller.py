@@ -120,13 +120,14 @@ class Nmpc(PlanBuffers, BatchedController):
     class Params:
         """Parameters of ``nmpc``."""
 
-        horizon: int = param(10, doc="Prediction horizon H (stages).", ge=2, le=100)
+        horizon: int = param(10, doc="Prediction horizon H (stages).", ge=2, le=100,
+                             tune=(5, 15))
         step: float | None = param(None, doc="Prediction step tau; default the scenario's dt.",
                                    unit="s", gt=0.0)
         w_track: float = param(1.0, doc="Slot tracking weight of stages 1..H-1.",
-                               unit="1/m^2", ge=0.0)
+                               unit="1/m^2", ge=0.0, tune=(0.1, 10.0), scale="log")
         w_terminal: float = param(10.0, doc="Slot tracking weight of the last stage.",
-                                  unit="1/m^2", ge=0.0)
+                                  unit="1/m^2", ge=0.0, tune=(1.0, 100.0), scale="log")
         w_heading: float = param(0.1, doc="Weight of 1 - cos(heading error to the slot's "
                                           "path).", ge=0.0)
         w_effort: float = param(0.1, doc="Weight of the squared deviation of (v, omega) from "
@@ -138,13 +139,14 @@ class Nmpc(PlanBuffers, BatchedController):
                                                 "the distance constraints.", unit="1/m", gt=0.0)
         margin: float = param(0.1, doc="Extra distance kept from obstacles (beyond the robot "
                                        "radius) and between robots (beyond 2 radii).",
-                              unit="m", ge=0.0)
+                              unit="m", ge=0.0, tune=(0.0, 0.3))
         max_neighbours: int = param(4, doc="Neighbour constraints per stage K (nearest first).",
                                     ge=0, le=50)
         max_obstacles: int = param(4, doc="Obstacle constraints per stage M (nearest first).",
                                    ge=0, le=50)
         reach: float = param(1.5, doc="Obstacles and neighbours farther than this from the "
-                                      "linearisation point are left out.", unit="m", gt=0.0)
+                                      "linearisation point are left out.", unit="m", gt=0.0,
+                             tune=(0.8, 3.0))
         solver: Literal["sqp", "ipopt"] = param(
             "sqp", doc="'sqp' (casadi sqpmethod, faster) or 'ipopt' (interior point).")
         qp_solver: Literal["daqp", "qrqp"] = param(

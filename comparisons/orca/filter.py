@@ -67,7 +67,7 @@ class OrcaFilter(BatchedController):
         """Parameters of the ``orca`` filter."""
 
         time_horizon: float = param(2.0, doc="ORCA horizon tau between robots.", unit="s",
-                                    gt=0.0)
+                                    gt=0.0, tune=(0.5, 6.0), scale="log")
         v_max: float | None = param(None, doc="Speed limit of the new velocity; default the "
                                               "robots' v_max.", unit="m/s", gt=0.0)
         infeasible: Literal["least_violation", "stop", "pass_through"] = param(
@@ -83,7 +83,8 @@ class OrcaFilter(BatchedController):
                         "(comparisons/orca/safe.py); 'none': ignored.")
         time_horizon_obst: float = param(2.0, doc="ORCA horizon of static obstacles (mode "
                                                   "'orca'); with v_max it also sets the 'ivo' "
-                                                  "range.", unit="s", gt=0.0)
+                                                  "range.", unit="s", gt=0.0, tune=(0.3, 6.0),
+                                         scale="log")
         ivo_tau: Literal["center", "gap"] = param(
             "center", doc="Eq 9 horizon of mode 'ivo': distance from the robot's centre "
                           "('center') or from its rim ('gap') to the ellipse, over the speed.")
@@ -320,7 +321,8 @@ class OrcaNavigator(Filtered):
     class Params(OrcaFilter.Params):
         """Parameters of the ``orca_nav`` navigator (the filter's, plus the preferred speed)."""
 
-        speed: float = param(0.3, doc="Preferred speed towards the slot.", unit="m/s", gt=0.0)
+        speed: float = param(0.3, doc="Preferred speed towards the slot.", unit="m/s", gt=0.0,
+                             tune=(0.15, 0.6))
 
     def __init__(self, params: Params) -> None:
         fields = {k: getattr(params, k) for k in OrcaFilter.Params.__dataclass_fields__}

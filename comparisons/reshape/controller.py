@@ -117,7 +117,8 @@ class Reshape(BatchedController):
 
         replan_period: float = param(0.5, doc="Time between two plans.", unit="s", gt=0.0)
         lookahead: float = param(3.0, doc="Look-ahead along the leader's path beyond the "
-                                          "formation's progress.", unit="m", gt=0.0)
+                                          "formation's progress.", unit="m", gt=0.0,
+                                 tune=(1.0, 6.0))
         s_min: float = param(0.5, doc="Smallest scale of a template (raised so that the "
                                       "scaled slots keep 0.3 m between robots).", gt=0.0, le=1.0)
         scales: int = param(4, doc="Scales tried in [s_min, 1].", ge=1)
@@ -130,17 +131,20 @@ class Reshape(BatchedController):
                                                "'line' (abreast), 'column' (single file).")
         template_cost: float = param(1.0, doc="Cost of a template other than the scenario's.")
         margin: float = param(0.1, doc="Clearance kept beyond the robot radius in the region.",
-                              unit="m", ge=0.0)
+                              unit="m", ge=0.0, tune=(0.0, 0.3))
         horizon: float = param(2.0, doc="Moving discs are swept over this time.", unit="s",
                                ge=0.0)
         hysteresis: float = param(0.1, doc="A new assignment must be this fraction cheaper.",
                                   ge=0.0, lt=1.0)
         gamma: float = param(5.0, doc="Class-K gain of the CBF tracking filter (the filter "
-                                      "caps it at 1/dt).", unit="1/s", gt=0.0)
-        kp: float = param(1.0, doc="Proportional gain towards the target.", unit="1/s", gt=0.0)
+                                      "caps it at 1/dt).", unit="1/s", gt=0.0, tune=(1.0, 10.0),
+                             scale="log")
+        kp: float = param(1.0, doc="Proportional gain towards the target.", unit="1/s", gt=0.0,
+                          tune=(0.3, 3.0), scale="log")
         weight_progress: float = param(1.0, doc="Cost weight of |t - g|^2.", unit="1/m^2",
                                        ge=0.0)
-        weight_scale: float = param(4.0, doc="Cost weight of (1 - s)^2.", ge=0.0)
+        weight_scale: float = param(4.0, doc="Cost weight of (1 - s)^2.", ge=0.0,
+                                    tune=(0.5, 20.0), scale="log")
         weight_rotation: float = param(0.5, doc="Cost weight of the rotation squared.",
                                        unit="1/rad^2", ge=0.0)
         switch_cost: float = param(0.5, doc="Cost of changing template.", ge=0.0)

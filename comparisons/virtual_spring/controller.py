@@ -137,15 +137,17 @@ class VirtualSpring(BatchedController):
         v_max: float | None = param(None, doc="Largest speed of eq 6, 12-13 and the final "
                                               "cap; default robots.v_max.", unit="m/s", gt=0.0)
         alpha: float = param(0.2, doc="Eq 6 coefficient: leader speed = min(alpha d, v_max).",
-                             unit="1/s", gt=0.0)
+                             unit="1/s", gt=0.0, tune=(0.05, 1.0), scale="log")
         beta: float = param(0.15, doc="Eq 10 adjustment coefficient: v_fi = beta u_i.",
-                            unit="1/s", gt=0.0)
+                            unit="1/s", gt=0.0, tune=(0.03, 1.0), scale="log")
         velocity_weight: float = param(1.0, doc="Weight k_v of the velocity differences in "
-                                                "eq 4 (printed: 1).", unit="s", ge=0.0)
+                                                "eq 4 (printed: 1).", unit="s", ge=0.0,
+                                       tune=(0.0, 3.0))
         spring_gain: float = param(0.02, doc="Eq 7 gain: f = gain (p_i - p_k)/d^3.",
-                                   unit="m^3/s", ge=0.0)
+                                   unit="m^3/s", ge=0.0, tune=(0.002, 0.2), scale="log")
         spring_range: float = param(1.0, doc="Sources with a body clearance above this add no "
-                                             "eq 7 force.", unit="m", gt=0.0, finite=False)
+                                             "eq 7 force.", unit="m", gt=0.0, finite=False,
+                                    tune=(0.3, 3.0))
         spring_min_distance: float = param(0.05, doc="Eq 7's d is at least this (contact and "
                                                      "overlap).", unit="m", gt=0.0)
         speed_limit: bool = param(True, doc="Apply eq 12-13's dynamic speed limit to the "

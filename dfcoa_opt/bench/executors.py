@@ -137,8 +137,8 @@ def run_all(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome
         yield from _dask(runs, config)
 
 
-def _processes(work: Sequence[Sequence[RunSpec]], jobs: int) -> Iterator[Outcome]:
-    """At most ``2 * jobs`` batches in flight, so finished logs never pile up in memory.
+class WorkerPool:
+    """Worker processes that execute batches and stream each run's outcome back.
 
     Workers start from a fork server, not by forking this process: once this
     process has run a parallel numba kernel, GNU OpenMP's threads are up and a
@@ -146,47 +146,105 @@ def _processes(work: Sequence[Sequence[RunSpec]], jobs: int) -> Iterator[Outcome
     OpenMP"); ``make figures`` runs such kernels between sweeps. The server
     starts with SIGINT blocked (:func:`~dfcoa_opt.bench.lifecycle.forkserver_context`)
     and each worker runs :func:`~dfcoa_opt.bench.lifecycle.init_worker` (one
-    numba thread, SIGINT ignored, exit with the main process). An interrupt or
-    an abandoned generator terminates the workers at once instead of waiting
-    for their runs.
+    numba thread, SIGINT ignored, exit with the main process).
 
     Each worker puts a run's outcome on a pipe as soon as the run ends; a
     thread of this process moves them to ``finished``, where the futures of
     the batches also arrive when a batch is done (its result: how many
     outcomes it sent), so a batch counts as finished once both are in.
+
+    Args:
+        jobs: Worker processes.
     """
-    queue = iter(enumerate(work))
-    ctx = forkserver_context(WORKER_PRELOAD)
-    results = ctx.SimpleQueue()
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(work)), mp_context=ctx,
-                               initializer=_init_batch_worker, initargs=(results,))
-    finished: SimpleQueue[Any] = SimpleQueue()
-    threading.Thread(target=_forward, args=(results, finished), name="outcomes",
-                     daemon=True).start()
-    sent: dict[int, int] = {}
-    got: dict[int, int] = {}
-    try:
-        with deferred():
-            in_flight = _submit(pool, itertools.islice(queue, 2 * jobs), finished)
-        while in_flight:
-            item = finished.get()  # waits in C and holds no lock when interrupted
+
+    def __init__(self, jobs: int) -> None:
+        self.jobs = jobs
+        ctx = forkserver_context(WORKER_PRELOAD)
+        self.results = ctx.SimpleQueue()
+        self.pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx,
+                                        initializer=_init_batch_worker, initargs=(self.results,))
+        self.finished: SimpleQueue[Any] = SimpleQueue()
+        threading.Thread(target=_forward, args=(self.results, self.finished), name="outcomes",
+                         daemon=True).start()
+
+    def run(self, work: Sequence[Sequence[RunSpec]]) -> Iterator[Outcome]:
+        """Execute the batches, at most ``2 * jobs`` in flight (finished logs never pile up).
+
+        An interrupt or an abandoned generator terminates the workers at once
+        instead of waiting for their runs.
+        """
+        queue = iter(enumerate(work))
+        sent: dict[int, int] = {}
+        got: dict[int, int] = {}
+        try:
             with deferred():
-                if isinstance(item, Future):
-                    b = item.batch  # type: ignore[attr-defined]
-                    sent[b] = item.result()
-                else:
-                    b, outcome = item
-                    got[b] = got.get(b, 0) + 1
-                if sent.get(b) == got.get(b, 0):
-                    in_flight += _submit(pool, itertools.islice(queue, 1), finished) - 1
-            if not isinstance(item, Future):
-                yield outcome
-    except BaseException:  # an interrupt, or the consumer stopped: stop the workers now
-        terminate(pool)
-        results._writer.close()  # type: ignore[attr-defined]  # the thread gets end of file
+                in_flight = _submit(self.pool, itertools.islice(queue, 2 * self.jobs),
+                                    self.finished)
+            while in_flight:
+                item = self.finished.get()  # waits in C and holds no lock when interrupted
+                with deferred():
+                    if isinstance(item, Future):
+                        b = item.batch  # type: ignore[attr-defined]
+                        sent[b] = item.result()
+                    else:
+                        b, outcome = item
+                        got[b] = got.get(b, 0) + 1
+                    if sent.get(b) == got.get(b, 0):
+                        in_flight += _submit(self.pool, itertools.islice(queue, 1),
+                                             self.finished) - 1
+                if not isinstance(item, Future):
+                    yield outcome
+        except BaseException:  # an interrupt, or the consumer stopped: stop the workers now
+            self.terminate()
+            raise
+
+    def terminate(self) -> None:
+        """Stop the workers at once (their runs in progress are abandoned)."""
+        terminate(self.pool)
+        self.results._writer.close()  # type: ignore[attr-defined]  # the thread gets EOF
+
+    def close(self) -> None:
+        """Let the workers finish and exit."""
+        self.pool.shutdown(wait=True)
+        self.results.put(None)  # ends the thread
+
+
+#: Pools kept for the sweeps of a :func:`kept_workers` block, by worker count.
+_KEPT: dict[int, WorkerPool] = {}
+
+
+@contextlib.contextmanager
+def kept_workers(config: ExecutorConfig) -> Iterator[None]:
+    """One process pool for every sweep of the block (with the process executor).
+
+    ``dfcoa tune`` runs one short sweep per trial; starting workers for each
+    (their imports, numba caches and compiled solvers) took seconds a trial.
+    Other executors are unchanged.
+    """
+    jobs = config.jobs or os.cpu_count() or 1
+    if config.kind != "process" or jobs == 1 or jobs in _KEPT:
+        yield
+        return
+    pool = _KEPT[jobs] = WorkerPool(jobs)
+    try:
+        yield
+    except BaseException:
+        _KEPT.pop(jobs, None)
+        pool.terminate()
         raise
-    pool.shutdown(wait=True)
-    results.put(None)  # ends the thread
+    _KEPT.pop(jobs, None)
+    pool.close()
+
+
+def _processes(work: Sequence[Sequence[RunSpec]], jobs: int) -> Iterator[Outcome]:
+    """The batches on worker processes: the kept pool's, or a pool of their own."""
+    kept = _KEPT.get(jobs)
+    if kept is not None:
+        yield from kept.run(work)
+        return
+    pool = WorkerPool(min(jobs, len(work)))
+    yield from pool.run(work)  # (it terminates its workers when interrupted)
+    pool.close()
 
 
 _RESULTS: Any = None

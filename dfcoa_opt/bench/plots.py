@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from dfcoa_opt.bench.logs import read_log
 from dfcoa_opt.bench.store import ResultsStore
 from dfcoa_opt.figure_layout import new_figure, save_png
 from dfcoa_opt.plotting import robot_colors
@@ -74,7 +75,7 @@ def ok_runs(store: ResultsStore) -> list[tuple[Row, RunLog]]:
     """The successful rows of a store with their logs, by controller, overrides, seed."""
     rows = sorted((r for r in store.rows() if r["status"] == "ok"),
                   key=lambda r: (r["controller"], r.get("overrides_hash", ""), r["seed"]))
-    return [(r, RunLog.load(store.root / r["log"])) for r in rows]
+    return [(r, read_log(store.root, r)) for r in rows]
 
 
 def variant_name(row: Row) -> str:

@@ -18,7 +18,8 @@ Row fields (JSON):
 - ``metrics``: :func:`dfcoa_opt.metrics.summary` with NaN/inf as null; among
   them ``outcome`` (success, collision, deadlock or timeout,
   :mod:`dfcoa_opt.outcome`) and ``reached`` (the goal condition, whatever the
-  contacts);
+  contacts); and the world's difficulty along the leader's path, the
+  ``world_*`` keys of :func:`dfcoa_opt.metrics_world.world_difficulty`;
 - ``digest``: SHA-256 over the log arrays (bit-identical runs <=> equal);
 - ``log``: the ``.npz`` path relative to the results folder, or null;
 - ``provenance``: wall time, finish time, host, numpy's SIMD level, pid,
@@ -96,10 +97,12 @@ def _row(run: RunSpec) -> dict[str, Any]:
 def _outcome(run: RunSpec, log: RunLog, scenario: Scenario, wall: float) -> Outcome:
     """The row of a run that ran to its end (metrics, digest, log bytes)."""
     from dfcoa_opt import metrics
+    from dfcoa_opt.metrics_world import world_difficulty
 
     t0 = time.perf_counter()
     row = _row(run)
-    row["metrics"] = jsonable(metrics.summary(log, scenario.spec.metrics))
+    row["metrics"] = jsonable({**metrics.summary(log, scenario.spec.metrics),
+                               **world_difficulty(scenario)})
     row["digest"] = log.digest()
     row["log"] = f"logs/{run.key}.npz"
     row["status"] = "ok"

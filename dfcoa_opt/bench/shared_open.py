@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dfcoa_opt.bench.logs import read_log
 from dfcoa_opt.bench.plots import scenario_for_row, variant_name
 from dfcoa_opt.bench.report import load_rows
 from dfcoa_opt.metrics import (
@@ -107,8 +108,8 @@ def shared_open_table(results_dir: str | Path, a: str, b: str,
         if not seeds:
             continue
         cfg = scenario_for_row(by[(scen, a, seeds[0])]).spec.metrics
-        pairs = [_PairErrors(RunLog.load(root / by[(scen, a, k)]["log"]),
-                             RunLog.load(root / by[(scen, b, k)]["log"])) for k in seeds]
+        pairs = [_PairErrors(read_log(root, by[(scen, a, k)]),
+                             read_log(root, by[(scen, b, k)])) for k in seeds]
         for c in clearances:
             res = [p.at(replace(cfg, open_clearance=c)) for p in pairs]
             used = [r for r in res if not math.isnan(r.fce[0])]

@@ -213,3 +213,37 @@ def verdict(difference: float, adjusted_p: float, higher_is_better: bool,
     if adjusted_p >= alpha:
         return "no difference"
     return "better" if (difference > 0) == higher_is_better else "worse"
+
+
+def cvar(values: Sequence[float], alpha: float = 0.9) -> float:
+    """Conditional value at risk: the mean of the worst ``1 - alpha`` of ``values`` (upper tail).
+
+    The discrete definition of Rockafellar and Uryasev (2002) with equal weights:
+    the ``m = (1 - alpha) n`` largest values are averaged, the last of them
+    counted with its fractional weight ``m - floor(m)``; with ``m <= 1`` it is
+    the largest value. Larger is worse (errors, times); NaN counts as ``inf``
+    (a run with no value is a worst case).
+
+    Args:
+        values: The sample (at least one value).
+        alpha: Confidence level in ``[0, 1)``.
+
+    Returns:
+        The CVaR, in the values' unit.
+
+    Raises:
+        ValueError: No values, or ``alpha`` outside ``[0, 1)``.
+    """
+    if not 0.0 <= alpha < 1.0:
+        raise ValueError(f"alpha must be in [0, 1), got {alpha}")
+    x = np.sort(np.nan_to_num(np.asarray(values, dtype=float), nan=np.inf))[::-1]
+    if len(x) == 0:
+        raise ValueError("cvar needs at least one value")
+    m = (1.0 - alpha) * len(x)
+    if m <= 1.0:
+        return float(x[0])
+    whole = int(math.floor(m))
+    total = float(x[:whole].sum())
+    if m > whole:
+        total += (m - whole) * float(x[whole])
+    return total / m

@@ -286,7 +286,7 @@ def file_sha256(path: str) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 
 
-def _display_path(path: str) -> str:
+def display_path(path: str) -> str:
     """``path`` relative to the working folder when inside it (no machine paths in reports)."""
     p = Path(path).resolve()
     try:
@@ -391,7 +391,7 @@ class ResultsStore:
         atomic_write(self.root / "sweep.toml", sweep.text)
         code = {c: run_fingerprint(c) for c in sorted({r.controller for r in sweep.runs})}
         manifest = {
-            "name": sweep.name, "sweep_file": _display_path(sweep.source),
+            "name": sweep.name, "sweep_file": display_path(sweep.source),
             "sweep_sha256": sweep.sha256, "code": code,
             "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "keys": [r.key for r in sweep.runs], **sweep.describe(),

@@ -31,6 +31,7 @@ that names its result files.
 
 from __future__ import annotations
 
+import fnmatch
 import glob
 import hashlib
 import itertools
@@ -39,7 +40,7 @@ import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from dfcoa_opt.bench.variants import (
     Ladder,
@@ -92,6 +93,18 @@ class SweepSpec:
                                   "statistics).")
     ladder: Any = param(None, doc="[ladder] (key and values, or [[ladder.rungs]]) or [[ladder]] "
                                   "(each with its own scenarios): a difficulty ladder.")
+    variant_files: tuple[str, ...] = param((), doc="Files or globs (relative to the sweep file) "
+                                                  "whose [variants] tables join this sweep's, "
+                                                  "e.g. the tuned variants of dfcoa tune.")
+    variant_seeds: dict[str, int] = param(default_factory=dict, doc="Variant name or glob -> its "
+                                                                    "number of seeds instead of "
+                                                                    "seeds (the first pattern "
+                                                                    "that matches).", ge=1)
+    tune: Any = param(None, doc="[tune]: the budget of dfcoa tune (dfcoa_opt.bench.tune."
+                                "TuneSpec); dfcoa bench ignores it.")
+    split: Literal["", "train", "validation", "test"] = param(
+        "", doc="Every run's seed must lie in this range of its scenario's [splits] "
+                "(docs/heldout.md); empty: no check.")
 
 
 @dataclass(frozen=True)
@@ -224,13 +237,19 @@ def _grid(spec: SweepSpec, src: str) -> tuple[list[dict[str, Any]], list[str]]:
     return [{**v, **p} for v in sets for p in points], varying
 
 
-def _variants(spec: SweepSpec, src: str) -> list[Variant]:
-    """Plain controllers (named by id) and the ``[variants]`` table, in file order."""
+def _variants(spec: SweepSpec, src: str, base: Path) -> list[Variant]:
+    """Plain controllers (named by id), the ``[variants]`` table and the variant files' tables."""
     from dfcoa_opt.control.registry import available, controller_class
     from dfcoa_opt.errors import UnknownNameError
 
     named = (named_variants(spec.variants, _flatten, src)
              if isinstance(spec.variants, Mapping) else [])
+    for path in _scenario_files(spec.variant_files, src, base, "variant_files"):
+        table = read_toml(path).get("variants")
+        if not isinstance(table, Mapping) or not table:
+            raise ScenarioError(str(path), "variants", "is required: a table of named variants "
+                                                       "([variants.<name>] controller = ...)")
+        named += named_variants(table, _flatten, str(path))
     if spec.variants is not None and not isinstance(spec.variants, (Mapping, list)):
         raise ScenarioError(src, "variants", "must be a table ([variants]) or an array of "
                                              "tables ([[variants]])")
@@ -254,6 +273,23 @@ def _variants(spec: SweepSpec, src: str) -> list[Variant]:
             raise ScenarioError(src, f"variants.{v.name}", "is also a plain controller of "
                                                            "this sweep; choose another name")
         out.append(v)
+    return out
+
+
+def _variant_seeds(spec: SweepSpec, variants: Sequence[Variant], src: str) -> dict[str, int]:
+    """Each variant's seed count from ``[variant_seeds]`` (only those a pattern names).
+
+    Raises:
+        ScenarioError: A pattern that names no variant of the sweep.
+    """
+    out: dict[str, int] = {}
+    for pattern, count in spec.variant_seeds.items():
+        hits = [v.name for v in variants if fnmatch.fnmatchcase(v.name, pattern)]
+        if not hits:
+            raise ScenarioError(src, f"variant_seeds.{pattern}", "names no variant of this sweep"
+                                + did_you_mean(pattern, [v.name for v in variants]))
+        for name in hits:
+            out.setdefault(name, count)
     return out
 
 
@@ -325,7 +361,8 @@ def expand_sweep(data: dict[str, Any], src: str, base: Path, text: str,
     if spec.max_seeds and spec.max_seeds < spec.seeds:
         raise ScenarioError(src, "max_seeds", f"must be 0 or >= seeds ({spec.seeds}), got "
                                               f"{spec.max_seeds}")
-    variants = _variants(spec, src)
+    variants = _variants(spec, src, base)
+    seeds_of = _variant_seeds(spec, variants, src)
     ladders = parse_ladders(spec.ladder, _flatten, src)
     points, varying = _grid(spec, src)
     groups: list[tuple[list[Path], Ladder | None]] = []
@@ -341,7 +378,7 @@ def expand_sweep(data: dict[str, Any], src: str, base: Path, text: str,
     n_seeds = spec.seeds if seeds is None else seeds
     climbers = ladder_variants(ladders, variants, src)
     names: dict[str, Path] = {}
-    probed: dict[tuple[str, str], str] = {}
+    probed: dict[tuple[str, str], Scenario] = {}
     runs: list[RunSpec] = []
     for files, lad in groups:
         for f, rung, point, v in itertools.product(files, lad.rungs if lad else (None,), points,
@@ -350,15 +387,21 @@ def expand_sweep(data: dict[str, Any], src: str, base: Path, text: str,
             _probe(f, base, spec.first_seed, src, probed)  # every grid key, whoever it reaches
             ov = {k: x for k, x in {**base, **dict(v.overrides)}.items()
                   if reaches(k, v.controller)}
-            scen = _probe(f, ov, spec.first_seed, src, probed)
+            probe = _probe(f, ov, spec.first_seed, src, probed)
+            scen = probe.name
+            if spec.split:  # the seeds that max_seeds may add included
+                most = max([n_seeds, *(seeds_of.values() if seeds is None else ())])
+                last = spec.first_seed + max(most, spec.max_seeds if seeds is None else 0)
+                check_split(probe, spec.split, range(spec.first_seed, last), src)
             if names.setdefault(scen, f) != f:
                 raise ScenarioError(src, "scenarios", f"two scenarios are named '{scen}': "
                                                       f"{names[scen]} and {f}")
             name = v.name + suffix({k: x for k, x in point.items() if reaches(k, v.controller)},
                                    varying)
+            count = n_seeds if seeds is not None else seeds_of.get(v.name, n_seeds)
             runs += [RunSpec(str(f), scen, v.controller, seed, canonical(ov), name,
                              lad.label if lad else "", rung.value if rung else None)
-                     for seed in range(spec.first_seed, spec.first_seed + n_seeds)]
+                     for seed in range(spec.first_seed, spec.first_seed + count)]
     unique = list(dict.fromkeys(runs))  # controller-specific keys can make duplicates
     _check_unique(unique, src)
     sweep = Sweep(spec, src, hashlib.sha256(text.encode()).hexdigest(), text,
@@ -372,16 +415,38 @@ def expand_sweep(data: dict[str, Any], src: str, base: Path, text: str,
     return sweep
 
 
-def _probe(file: Path, overrides: Mapping[str, Any], seed: int, src: str,
-           probed: dict[tuple[str, str], str]) -> str:
-    """Load ``file`` with ``overrides`` once (validation); the scenario's name.
+def check_split(scenario: Scenario, split: str, seeds: Iterable[int], src: str) -> None:
+    """Every seed of ``seeds`` lies in ``split``'s range of the scenario's ``[splits]``.
 
-    ``probed`` caches the names of the (file, overrides) pairs already loaded.
+    Raises:
+        ScenarioError: The scenario declares no such range, or a seed lies outside
+            it (the message names the split the seed belongs to, if any).
+    """
+    splits = scenario.spec.splits
+    bounds = splits.range_of(split)
+    if bounds is None:
+        raise ScenarioError(src, "split", f"'{split}': scenario {scenario.name} "
+                                          f"({scenario.source}) declares no [splits] {split} "
+                                          "seed range")
+    for seed in seeds:
+        if not bounds[0] <= seed <= bounds[1]:
+            other = splits.split_of(seed)
+            where = f"a '{other}' seed" if other else "in no split"
+            raise ScenarioError(src, "split", f"'{split}': seed {seed} of scenario "
+                                              f"{scenario.name} is {where}, outside its "
+                                              f"{split} seeds [{bounds[0]}, {bounds[1]}]")
+
+
+def _probe(file: Path, overrides: Mapping[str, Any], seed: int, src: str,
+           probed: dict[tuple[str, str], Scenario]) -> Scenario:
+    """Load ``file`` with ``overrides`` once (validation); the scenario.
+
+    ``probed`` caches the scenarios of the (file, overrides) pairs already loaded.
     """
     probe = RunSpec(str(file), file.stem, "", seed, canonical(overrides))
     if (str(file), probe.overrides) not in probed:
         try:
-            probed[(str(file), probe.overrides)] = load_run_scenario(probe).name
+            probed[(str(file), probe.overrides)] = load_run_scenario(probe)
         except DfcoaError as exc:
             hint = f" (with overrides {json.dumps(dict(overrides))})" if overrides else ""
             raise ScenarioError(src, "scenarios", f"{exc}{hint}") from None

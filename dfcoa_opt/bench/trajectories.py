@@ -17,6 +17,7 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.patches import Circle as CirclePatch
 
+from dfcoa_opt.bench.logs import read_log
 from dfcoa_opt.bench.plots import save_png, scenario_for_row, variant_name
 from dfcoa_opt.bench.store import file_sha256
 from dfcoa_opt.bench.sweep import safe_name
@@ -36,18 +37,6 @@ COLUMNS = 4
 PANEL_IN = 3.4
 #: Robot radius assumed for logs that do not record it (``RobotSpec`` default), m.
 DEFAULT_RADIUS = 0.2
-
-
-def load_log(results_dir: Path, row: Row) -> RunLog:
-    """The row's saved log; a one-line :class:`DfcoaError` when it cannot be read."""
-    path = Path(results_dir) / str(row["log"])
-    try:
-        return RunLog.load(path)
-    except FileNotFoundError:
-        raise DfcoaError(f"{path}: log file not found") from None
-    except Exception as exc:  # noqa: BLE001 - numpy/zip/json errors of a damaged file
-        problem = " ".join(str(exc).split()) or type(exc).__name__
-        raise DfcoaError(f"{path}: cannot read the log ({problem})") from None
 
 
 def outcome_text(row: Row) -> str:
@@ -115,7 +104,7 @@ def panels_figure(rows: Sequence[Row], results_dir: str | Path) -> Figure:
     if len(set(names)) < len(names):
         raise ValueError(f"rows repeat a variant (e.g. ladder rungs): {sorted(names)}")
     sc = scenario_for_row(next((r for r in rows if r.get("log")), rows[0]))
-    logs = {variant_name(r): load_log(Path(results_dir), r) for r in rows if r.get("log")}
+    logs = {variant_name(r): read_log(results_dir, r) for r in rows if r.get("log")}
     view = _view(list(logs.values()), sc.world.grid.extent)
     cols = min(COLUMNS, len(rows))
     nrows = math.ceil(len(rows) / cols)
@@ -237,7 +226,7 @@ def snapshot_figure(row: Row, results_dir: str | Path, path: str | Path, t: floa
     Raises:
         DfcoaError: The scenario file or the log cannot be read.
     """
-    log = load_log(Path(results_dir), row)
+    log = read_log(results_dir, row)
     sc = scenario_for_row(row)
     k = nearest_step(log, t)
     fig = new_figure((7.0, 6.0))

@@ -44,7 +44,7 @@ from typing import Any
 from dfcoa_opt.errors import ScenarioError, did_you_mean
 
 #: Characters a variant name may hold (it becomes part of file names).
-_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_+-.=[],")
+_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_+-.=[],@")
 
 
 @dataclass(frozen=True)
@@ -100,7 +100,7 @@ def _items(mapping: Mapping[str, Any]) -> tuple[tuple[str, Any], ...]:
 def _check_name(name: str, src: str, key: str) -> None:
     if not name or not set(name) <= _NAME_CHARS:
         raise ScenarioError(src, key, f"variant name '{name}' must be non-empty and use only "
-                                      "letters, digits and _ + - . = [ ] ,")
+                                      "letters, digits and _ + - . = [ ] , @")
 
 
 def named_variants(table: Mapping[str, Any], flatten: Any, src: str) -> list[Variant]:

@@ -66,10 +66,12 @@ class DFCOA(BatchedController):
     class Params:
         """Parameters of ``dfcoa`` (Tables 3 and 4 for k1, k2, d)."""
 
-        k1: float = param(2.8, doc="Longitudinal gain k1 of eq 24.", unit="1/s", gt=0.0)
-        k2: float = param(0.7, doc="Lateral gain k2 of eq 24.", unit="1/s", gt=0.0)
+        k1: float = param(2.8, doc="Longitudinal gain k1 of eq 24.", unit="1/s", gt=0.0,
+                          tune=(0.5, 8.0), scale="log")
+        k2: float = param(0.7, doc="Lateral gain k2 of eq 24.", unit="1/s", gt=0.0,
+                          tune=(0.1, 3.0), scale="log")
         d: float = param(0.98, doc="Distance from the robot centre to its tracking point "
-                                   "(eq 15).", unit="m", gt=0.0)
+                                   "(eq 15).", unit="m", gt=0.0, tune=(0.2, 1.5))
         compensate_tracking_offset: bool = param(
             False, doc="Aim the tracking point d ahead of the slot so that the robot centre, "
                        "not the tracking point, sits on the slot (the paper does not).")

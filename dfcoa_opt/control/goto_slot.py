@@ -31,8 +31,9 @@ class GotoSlot(BatchedController):
     class Params:
         """Parameters of ``goto_slot``."""
 
-        kp: float = param(1.0, doc="Proportional gain.", unit="1/s", gt=0.0)
-        feedforward: bool = param(True, doc="Add the leader's velocity.")
+        kp: float = param(1.0, doc="Proportional gain.", unit="1/s", gt=0.0, tune=(0.2, 5.0),
+                          scale="log")
+        feedforward: bool = param(True, doc="Add the leader's velocity.", tune=(False, True))
 
     def __init__(self, params: Params) -> None:
         self.p = params

@@ -30,11 +30,12 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 from importlib.metadata import entry_points
 from typing import Any, TypeVar
 
 from dfcoa_opt.errors import ScenarioError, UnknownNameError, did_you_mean
-from dfcoa_opt.params import build
+from dfcoa_opt.params import Tunable, build, tunables
 
 ENTRY_POINT_GROUP = "dfcoa_opt.controllers"
 #: Controller ids ``policy:PATH`` name a policy file; its classes come from this module.
@@ -248,6 +249,25 @@ def component_classes(controller_id: str) -> list[type]:
     if filt is not None:
         classes.append(_FILTERS[filt])
     return classes
+
+
+def controller_tunables(controller_id: str) -> list[Tunable]:
+    """What ``dfcoa tune`` searches for an id: its parts' ``param(tune=...)`` fields.
+
+    Each key is the dotted override of a scenario or sweep file,
+    ``controllers.<part>.<field>`` (``controllers.dfcoa.vfh.target_weight``);
+    ``"a+filter"`` has the controller's and then the filter's. A policy file has
+    none (its parameters are in its spec).
+
+    Raises:
+        UnknownNameError: Unknown controller or filter (:func:`controller_class`).
+    """
+    base, filt = _parts(controller_id)
+    parts = [p for p in (base, filt) if p is not None and not p.startswith(POLICY_PREFIX)]
+    out = []
+    for part, cls in zip(parts, component_classes(controller_id), strict=False):
+        out += [replace(t, key=f"controllers.{part}.{t.key}") for t in tunables(cls.Params)]
+    return out
 
 
 def make_controller(controller_id: str, overrides: Mapping[str, Any] | None = None,

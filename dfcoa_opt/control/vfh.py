@@ -55,7 +55,7 @@ class VFHParams:
                                          "robots.radius.", unit="m", ge=0.0)
     safety_distance: float = param(0.1, doc="Extra clearance s for the enlargement (MATLAB "
                                             "SafetyDistance; not Table 2's d_safe).",
-                                   unit="m", ge=0.0)
+                                   unit="m", ge=0.0, tune=(0.0, 0.4))
     min_turning_radius: float = param(0.1, doc="Minimum turning radius of the masked "
                                                "histogram.", unit="m", ge=0.0)
     use_turning_mask: bool = param(True, doc="Apply the VFH+ minimum-turning-radius mask.")
@@ -69,14 +69,15 @@ class VFHParams:
     obstacle_weight: float = param(1.0, doc="alpha of eq 29, on C_obs = H / high threshold.",
                                    ge=0.0)
     target_weight: float = param(5.0, doc="beta of eq 29 (MATLAB TargetDirectionWeight).",
-                                 unit="1/rad", ge=0.0)
+                                 unit="1/rad", ge=0.0, tune=(1.0, 10.0), scale="log")
     current_weight: float = param(2.0, doc="gamma of eq 29, deviation from the heading "
                                            "(MATLAB CurrentDirectionWeight).",
                                   unit="1/rad", ge=0.0)
     previous_weight: float = param(2.0, doc="Deviation from the previous choice (MATLAB "
                                             "PreviousDirectionWeight).", unit="1/rad", ge=0.0)
     blend_start: float = param(1.0, doc="Nearest return at which the VFH command starts to "
-                                        "take over (danger 0 beyond).", unit="m", gt=0.0)
+                                        "take over (danger 0 beyond).", unit="m", gt=0.0,
+                               tune=(0.6, 2.0))
     blend_full: float = param(0.5, doc="Nearest return at which the VFH command fully "
                                        "overrides (danger 1 below).", unit="m", ge=0.0)
     heading_gain: float = param(2.0, doc="omega = gain * steering angle in the VFH command.",

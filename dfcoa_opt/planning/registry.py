@@ -27,7 +27,7 @@ from dfcoa_opt.world.grid import OccupancyGrid
 Planner = Callable[[OccupancyGrid, NDArray[np.float64], NDArray[np.float64], LeaderSpec, Any],
                    NDArray[np.float64]]
 #: Modules of this distribution that register planners when imported.
-PLANNER_MODULES: tuple[str, ...] = ("dfcoa_opt.planning.astar",
+PLANNER_MODULES: tuple[str, ...] = ("dfcoa_opt.planning.astar", "dfcoa_opt.planning.clearance",
                                      "dfcoa_opt.planning.astar_improved")
 _PLANNERS: dict[str, Planner] = {}
 _PARAMS: dict[str, type | None] = {}

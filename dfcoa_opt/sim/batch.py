@@ -72,6 +72,8 @@ class BatchSimulator:
         #: The scenario as given; each run's is ``template.for_seed(seed)``.
         self.template = scenario
         self.scenarios = [scenario.for_seed(s) for s in self.seeds]
+        for sc in self.scenarios[1:]:
+            self._same_movers(sc)
         if isinstance(controller, Sequence):
             self.controllers = list(controller)
         elif is_batched(controller) or len(self.seeds) == 1:
@@ -117,6 +119,7 @@ class BatchSimulator:
         Returns:
             Whether the world is new to the batch (the caller builds its leader track).
         """
+        self._same_movers(scenario)
         self.seeds[slot], self.scenarios[slot] = seed, scenario
         for g, sc in enumerate(self.group_scenarios):
             if sc is scenario:
@@ -133,6 +136,18 @@ class BatchSimulator:
         self.group_scenarios.append(scenario)
         self.lidars.append(lidar)
         return True
+
+    def _same_movers(self, scenario: Scenario) -> None:
+        """A batch's runs move as many discs (their worlds may move them differently).
+
+        Raises:
+            DfcoaError: ``scenario`` has another number of moving discs than the first run.
+        """
+        m, m0 = len(scenario.world.dynamic), len(self.scenarios[0].world.dynamic)
+        if m != m0:
+            raise DfcoaError(f"{scenario.source}: seed {scenario.spec.seed} has {m} moving "
+                             f"discs and seed {self.seeds[0]} has {m0}: a batch steps runs with "
+                             "as many moving discs; run them apart")
 
     def lidar_fields(self) -> NDArray[np.float64] | None:
         """Every group's LiDAR grid in one array (:meth:`Lidar.stack`), kept until a world changes.

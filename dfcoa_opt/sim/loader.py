@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from dfcoa_opt.errors import DfcoaError, ScenarioError
-from dfcoa_opt.formation import formation_offsets, slot_positions
+from dfcoa_opt.formation import formation_offsets, slot_positions, team_width
 from dfcoa_opt.params import build
 from dfcoa_opt.sim.checks import (
     MAX_EXTENT,
@@ -162,24 +162,9 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
     spec = build(ScenarioSpec, data, source)
     offsets = formation_offsets(spec.formation, spec.team.n)
     check_extents(spec, offsets, source)
-    world = _build_world(spec, source, Path(base_dir), offsets)
-    check_free(world.grid, spec.leader.start, source, "leader.start")
-    check_free(world.grid, spec.leader.goal, source, "leader.goal")
     check_names(spec, source)
     check_waypoints(spec, source)
-
-    from dfcoa_opt.planning.registry import get_planner, planner_options
-
-    options = planner_options(spec.leader.planner, spec.leader.planner_options, source)
-    try:
-        path = get_planner(spec.leader.planner)(world.grid, np.asarray(spec.leader.start, float),
-                                                np.asarray(spec.leader.goal, float), spec.leader,
-                                                options)
-    except DfcoaError as exc:
-        raise ScenarioError(source, "leader.goal", str(exc)) from None
-    if path is None or len(path) == 0:
-        raise ScenarioError(source, "leader.goal", f"unreachable from leader.start with planner "
-                                                   f"'{spec.leader.planner}'")
+    world, path = _build_world(spec, source, Path(base_dir), offsets)
     heading = spec.leader.heading
     if heading is None:
         away = [p for p in np.asarray(path, float) if np.hypot(*(p - path[0])) > 1e-9]
@@ -241,7 +226,34 @@ def _clutter(spec: ScenarioSpec, offsets: np.ndarray, extent: tuple[float, ...],
                         np.asarray(points, float), np.asarray(radius, float), cl.gap)
 
 
-def _build_world(spec: ScenarioSpec, source: str, base_dir: Path, offsets: np.ndarray) -> World:
+def _plan_leader(world: World, spec: ScenarioSpec, source: str) -> np.ndarray | None:
+    """The leader's path on ``world`` by its planner; None when the goal is unreachable.
+
+    Raises:
+        ScenarioError: The start or the goal is not free, or the planner fails.
+    """
+    from dfcoa_opt.planning.registry import get_planner, planner_options
+
+    check_free(world.grid, spec.leader.start, source, "leader.start")
+    check_free(world.grid, spec.leader.goal, source, "leader.goal")
+    options = planner_options(spec.leader.planner, spec.leader.planner_options, source)
+    try:
+        path = get_planner(spec.leader.planner)(world.grid, np.asarray(spec.leader.start, float),
+                                                np.asarray(spec.leader.goal, float), spec.leader,
+                                                options)
+    except DfcoaError as exc:
+        raise ScenarioError(source, "leader.goal", str(exc)) from None
+    return None if path is None or len(path) == 0 else np.asarray(path, dtype=float)
+
+
+def _unreachable(spec: ScenarioSpec, source: str) -> ScenarioError:
+    return ScenarioError(source, "leader.goal", f"unreachable from leader.start with planner "
+                                                f"'{spec.leader.planner}'")
+
+
+def _build_world(spec: ScenarioSpec, source: str, base_dir: Path, offsets: np.ndarray
+                 ) -> tuple[World, np.ndarray]:
+    """The world of the file (map, shapes, clutter, a generated world) and the leader's path."""
     ws = spec.world
     if ws.map_ascii is not None:
         try:
@@ -273,7 +285,69 @@ def _build_world(spec: ScenarioSpec, source: str, base_dir: Path, offsets: np.nd
     raster = grid if ws.map_ascii is not None or ws.map_image is not None else None
     shapes = tuple(_shape(o, source, f"world.obstacles[{i}]") for i, o in enumerate(ws.obstacles))
     shapes += _clutter(spec, offsets, grid.extent, source)
-    grid = grid.with_shapes(shapes)
     discs = tuple(MovingDisc(d.radius, d.speed, d.waypoints, d.start_time, d.end)
                   for d in ws.dynamic_obstacles)
-    return World(grid=grid, shapes=shapes, dynamic=DynamicObstacles(discs), raster=raster)
+    if ws.generate.family:
+        return _generated(spec, source, offsets, grid, raster, shapes, discs)
+    world = World(grid=grid.with_shapes(shapes), shapes=shapes, dynamic=DynamicObstacles(discs),
+                  raster=raster)
+    path = _plan_leader(world, spec, source)
+    if path is None:
+        raise _unreachable(spec, source)
+    return world, path
+
+
+def _generated(spec: ScenarioSpec, source: str, offsets: np.ndarray, grid: OccupancyGrid,
+               raster: OccupancyGrid | None, shapes: tuple[Shape, ...],
+               discs: tuple[MovingDisc, ...]) -> tuple[World, np.ndarray]:
+    """Draw ``[world.generate]`` until a passage one robot wide joins start and goal.
+
+    The family draws inside the walls that enclose the map (``walls`` thick).
+    Each draw continues the world's generator (:func:`~dfcoa_opt.world.generate.world_rng`
+    of the seed), so the accepted draw is a pure function of the seed. A draw is
+    kept when :func:`~dfcoa_opt.world.generate.passage_exists` finds a passage
+    keeping ``robots.radius + margin`` from every obstacle and the leader's planner
+    finds a path.
+
+    Raises:
+        ScenarioError: No draw of ``tries`` is kept (one line: the seed and what to loosen).
+    """
+    from dfcoa_opt.world import generate as gen
+
+    g = spec.world.generate
+    params = gen.family_options(g.family, g.options, source)
+    reach = float(np.max(np.hypot(*offsets.T))) + spec.robots.radius
+    x0, x1, y0, y1 = grid.extent
+    if g.walls:
+        t = g.walls
+        if not (x1 - x0 > 2 * t and y1 - y0 > 2 * t):
+            raise ScenarioError(source, "world.generate.walls", f"{t:g} m walls leave no room "
+                                f"inside the {x1 - x0:g} x {y1 - y0:g} m map")
+        shapes += (Rectangle((x0, y0), (x1, y0 + t)), Rectangle((x0, y1 - t), (x1, y1)),
+                   Rectangle((x0, y0 + t), (x0 + t, y1 - t)),
+                   Rectangle((x1 - t, y0 + t), (x1, y1 - t)))
+        x0, x1, y0, y1 = x0 + t, x1 - t, y0 + t, y1 - t
+    layout = gen.Layout(extent=(x0, x1, y0, y1), start=tuple(spec.leader.start),
+                        goal=tuple(spec.leader.goal), start_clear=reach + g.keep_clear,
+                        goal_clear=reach + g.keep_clear, robot_radius=spec.robots.radius,
+                        team_width=team_width(offsets, spec.robots.radius), t_max=spec.t_max)
+    seed = spec.seed if g.seed is None else g.seed
+    rng = gen.world_rng(seed)
+    clearance = spec.robots.radius + g.margin
+    for _ in range(g.tries):
+        try:
+            drawn = gen.generate(g.family, params, rng, layout)
+        except ValueError as exc:
+            raise ScenarioError(source, "world.generate.options", str(exc)) from None
+        all_shapes = shapes + drawn.shapes
+        world = World(grid=grid.with_shapes(all_shapes), shapes=all_shapes,
+                      dynamic=DynamicObstacles(discs + drawn.discs), raster=raster,
+                      facts=dict(drawn.facts))
+        if not gen.passage_exists(world.grid, spec.leader.start, spec.leader.goal, clearance):
+            continue
+        path = _plan_leader(world, spec, source)
+        if path is not None:
+            return world, path
+    raise ScenarioError(source, "world.generate", f"family '{g.family}' drew no world with a "
+                        f"passage {2 * clearance:g} m wide from leader.start to leader.goal in "
+                        f"{g.tries} draws (world seed {seed}); raise tries or loosen the options")

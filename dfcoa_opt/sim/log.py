@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.atomic import atomic_write
+from dfcoa_opt.errors import DfcoaError
 
 FloatArray = NDArray[np.float64]
 
@@ -32,6 +33,17 @@ UNCHANGED_TOL = 1e-9
 
 #: Log fields that are measured wall-clock times (not part of a run's result).
 TIMING_FIELDS = ("filter_time",)
+#: The ``format`` member of a compact log (:mod:`dfcoa_opt.bench.logs`): trajectories only.
+COMPACT_FORMAT = "dfcoa-compact-log/1"
+
+
+def is_compact(path: str | Path) -> bool:
+    """Whether a log file is a compact log (trajectories only), not a :class:`RunLog`."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            return "format.npy" in z.namelist()
+    except zipfile.BadZipFile:
+        return False
 
 
 @dataclass
@@ -201,8 +213,17 @@ class RunLog:
 
     @classmethod
     def load(cls, path: str | Path) -> RunLog:
-        """Read a log written by :meth:`save` (a left-out ``pose_est`` is ``pose``)."""
+        """Read a log written by :meth:`save` (a left-out ``pose_est`` is ``pose``).
+
+        Raises:
+            DfcoaError: ``path`` is a compact log (``make figures`` compacts the logs
+                no figure reads; :func:`dfcoa_opt.bench.logs.load_compact` reads them).
+        """
         with np.load(path, allow_pickle=False) as z:
+            if "format" in z.files:
+                raise DfcoaError(f"{path}: a compact log (trajectories only, "
+                                 f"{str(z['format'])}); read it with "
+                                 "dfcoa_opt.bench.logs.load_compact")
             data = {k: z[k] for k in z.files}
         meta = json.loads(str(data.pop("meta")))
         if "pose_est" not in data:

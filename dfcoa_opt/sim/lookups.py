@@ -1,9 +1,9 @@
-"""Per-run lookups of a batch's stepper: each active run's leader, disturbances, clearances.
+"""Per-run lookups of a batch's stepper: each run's leader, moving discs, disturbances, clearance.
 
 A mixin of :class:`~dfcoa_opt.sim.stepper.Stepper`. Runs whose worlds follow
-their seed (a seeded clutter field) have a world, a leader track and shapes of
-their own; these lookups serve every active run in one array operation where
-they can, with each run's own numbers.
+their seed (a seeded clutter field, a generated world) have a world, a leader
+track, shapes and moving discs of their own; these lookups serve every active
+run in one array operation where they can, with each run's own numbers.
 """
 
 from __future__ import annotations
@@ -34,7 +34,9 @@ class RunLookups:
     n: int
     dt: float
     tracks: list[LeaderTrack]
+    movers: list[tuple[FloatArray, FloatArray, FloatArray]]
     _stacked: tuple[Any, ...] | None
+    _movers_stacked: tuple[FloatArray, ...] | None = None
 
     def _leader(self, active: NDArray[np.intp],
                 kk: NDArray[np.int64]) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
@@ -54,6 +56,29 @@ class RunLookups:
             return states[g, kk], np.stack([self.tracks[w].slots[k] for w, k in
                                             zip(g, kk, strict=True)]), at_goal[g, kk]
         return states[g, kk], slots[g, kk], at_goal[g, kk]
+
+    def _moving(self, active: NDArray[np.intp], kk: NDArray[np.int64]
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Each active run's moving discs: positions and velocities ``(A, M, 2)``, radii ``(A, M)``.
+
+        One world (or worlds whose discs the file sets, the same in every run)
+        reads its one table; worlds drawn with moving discs of their own
+        (``[world.generate]`` family ``crowd``) read each run's row of the
+        stacked tables.
+        """
+        if len(self.movers) == 1:
+            pos, vel, radii = self.movers[0]
+            return pos[kk], vel[kk], np.broadcast_to(radii, (len(active), len(radii)))
+        if self._movers_stacked is None:
+            self._movers_stacked = tuple(np.stack([mv[f] for mv in self.movers])
+                                         for f in range(3))
+        pos, vel, radii = self._movers_stacked
+        g = self.sim.group[active]
+        return pos[g, kk], vel[g, kk], radii[g]
+
+    def _moving_rows(self, radii: FloatArray) -> FloatArray:
+        """:meth:`_moving`'s radii per robot row: ``(1, M)`` for one world, else ``(A*N, M)``."""
+        return radii[:1] if len(self.movers) == 1 else np.repeat(radii, self.n, axis=0)
 
     def _disturbance(self, kind: str, kk: NDArray[np.int64]) -> FloatArray | None:
         """``(A*N, 2)`` disturbances of ``kind`` at each active run's time (None without any)."""

@@ -35,12 +35,15 @@ class World:
         shapes: Exact static shapes (polygons, rectangles, circles), in file order.
         dynamic: Moving discs.
         raster: Grid of the map file alone (``map_ascii``/``map_image``); None without one.
+        facts: The realised statistics of a generated world (``[world.generate]``,
+            :class:`~dfcoa_opt.world.generate.Generated`); None otherwise.
     """
 
     grid: OccupancyGrid
     shapes: tuple[Shape, ...]
     dynamic: DynamicObstacles
     raster: OccupancyGrid | None = None
+    facts: Mapping[str, Any] | None = None
 
     @cached_property
     def _edges(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -198,11 +201,13 @@ class Scenario:
     def seed_dependent(self) -> bool:
         """Whether the world is drawn from the scenario's ``seed``.
 
-        True for a ``[world.clutter]`` field without a seed of its own: each
-        seed draws another field (and the leader's path around it).
+        True for a ``[world.clutter]`` field or a ``[world.generate]`` world
+        without a seed of its own: each seed draws another world (and the
+        leader's path through it).
         """
-        clutter = self.spec.world.clutter
-        return clutter.density > 0.0 and clutter.seed is None
+        clutter, generate = self.spec.world.clutter, self.spec.world.generate
+        return ((clutter.density > 0.0 and clutter.seed is None)
+                or (bool(generate.family) and generate.seed is None))
 
     def for_seed(self, seed: int) -> Scenario:
         """This scenario as loaded with ``seed``: what the seed draws is drawn again.
@@ -228,7 +233,7 @@ class Scenario:
         if int(seed) == self.spec.seed or not self.seed_dependent:
             return self
         if self.data is None:
-            raise DfcoaError(f"{self.source}: its clutter field follows the seed, so load it with "
+            raise DfcoaError(f"{self.source}: its world follows the seed, so load it with "
                              f"seed {seed} (dfcoa_opt.load(path, seed={seed})) to run that seed")
         from dfcoa_opt.sim.loader import scenario_from_dict
 

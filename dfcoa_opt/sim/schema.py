@@ -17,6 +17,7 @@ from dfcoa_opt.params import param
 from dfcoa_opt.sim.schema_world import (  # noqa: F401 - re-exported: the schema is one module
     ClutterSpec,
     DynamicObstacleSpec,
+    GenerateSpec,
     ObstacleSpec,
     Vec2,
     WorldSpec,
@@ -288,6 +289,47 @@ class MetricSpec:
                                          unit="m", gt=0.0)
 
 
+#: The seed ranges a scenario may declare (``[splits]``), in the order tuning uses them.
+SPLITS = ("train", "validation", "test")
+
+
+@dataclass(frozen=True)
+class SplitSpec:
+    """Disjoint seed ranges: what tuning may see, and what only the final evaluation sees."""
+
+    train: tuple[int, int] | None = param(None, doc="Inclusive [first, last] seeds that tuning "
+                                                    "(dfcoa tune) draws its worlds from.", ge=0)
+    validation: tuple[int, int] | None = param(None, doc="Inclusive [first, last] seeds kept "
+                                                         "for choosing between tuned "
+                                                         "configurations.", ge=0)
+    test: tuple[int, int] | None = param(None, doc="Inclusive [first, last] seeds of the "
+                                                   "held-out evaluation: never tuned on.", ge=0)
+
+    def range_of(self, split: str) -> tuple[int, int] | None:
+        """The ``[first, last]`` seeds of ``split`` (None when not declared)."""
+        return getattr(self, split)
+
+    def split_of(self, seed: int) -> str | None:
+        """The split whose range holds ``seed`` (None: no split does)."""
+        return next((name for name in SPLITS if (r := self.range_of(name)) is not None
+                     and r[0] <= seed <= r[1]), None)
+
+    def check(self, src: str, key: str) -> None:
+        """Each range in order; no two ranges share a seed."""
+        for name in SPLITS:
+            r = self.range_of(name)
+            if r is not None and r[0] > r[1]:
+                raise ScenarioError(src, f"{key}.{name}", f"[{r[0]}, {r[1]}]: the first seed "
+                                                          "must not exceed the last")
+        for i, a in enumerate(SPLITS):
+            for b in SPLITS[i + 1:]:
+                ra, rb = self.range_of(a), self.range_of(b)
+                if ra is not None and rb is not None and ra[0] <= rb[1] and rb[0] <= ra[1]:
+                    raise ScenarioError(src, f"{key}.{b}", f"[{rb[0]}, {rb[1]}] overlaps "
+                                                           f"{key}.{a} [{ra[0]}, {ra[1]}]: a seed "
+                                                           "may belong to one split only")
+
+
 @dataclass(frozen=True)
 class ScenarioSpec:
     """A whole scenario file."""
@@ -316,6 +358,9 @@ class ScenarioSpec:
     controllers: dict[str, dict[str, Any]] = param(
         default_factory=dict, doc="Per-controller parameter overrides: [controllers.<id>] key = "
                                   "value.")
+    splits: SplitSpec = field(default_factory=SplitSpec,
+                              metadata={"doc": "Disjoint train / validation / test seed ranges "
+                                               "(docs/heldout.md)."})
 
     def robot_index(self, robot_id: int) -> int:
         """Row index of the robot with this id (``team.ids``), or the id itself."""

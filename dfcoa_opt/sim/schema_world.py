@@ -1,4 +1,4 @@
-"""Scenario schema, the map's sections: ``[world]``, its obstacles, moving discs and clutter.
+"""Scenario schema, the map's sections: ``[world]``, obstacles, moving discs, clutter, generators.
 
 Part of :mod:`dfcoa_opt.sim.schema` (which re-exports every class here).
 """
@@ -110,6 +110,34 @@ class ClutterSpec:
 
 
 @dataclass(frozen=True)
+class GenerateSpec:
+    """A world drawn from the seed by a registered family (docs/heldout.md)."""
+
+    family: str = param("", doc="World family: 'cellular', 'rooms', 'corridors' or 'crowd' "
+                                "(dfcoa_opt.world.generate); empty: none.")
+    options: dict[str, Any] = param(default_factory=dict, doc="The family's parameters, checked "
+                                                              "against its Params.")
+    seed: int | None = param(None, doc="Seed of the world; default: the scenario seed, so every "
+                                       "run seed draws a new world.", ge=0)
+    tries: int = param(20, doc="Draws before giving up when no passage one robot wide joins "
+                               "the leader's start and goal, or the leader's planner finds no "
+                               "path.", ge=1, le=1000)
+    keep_clear: float = param(0.5, doc="Free margin around the leader's start and goal, beyond "
+                                       "the formation's reach.", unit="m", ge=0.0)
+    margin: float = param(0.05, doc="The passage keeps robots.radius plus this from every "
+                                    "obstacle.", unit="m", ge=0.0)
+    walls: float = param(0.2, doc="Thickness of the walls that enclose the map along its edges "
+                                  "(0: none); the family draws inside them.", unit="m", ge=0.0)
+
+    def check(self, src: str, key: str) -> None:
+        """Options and a seed only with a family."""
+        if not self.family and (self.options or self.seed is not None):
+            what = "options" if self.options else "seed"
+            raise ScenarioError(src, f"{key}.{what}", "applies only with a family (world."
+                                                      "generate.family = 'rooms', ...)")
+
+
+@dataclass(frozen=True)
 class WorldSpec:
     """The map: occupancy grid plus exact and moving obstacles."""
 
@@ -127,6 +155,8 @@ class WorldSpec:
     dynamic_obstacles: tuple[DynamicObstacleSpec, ...] = param((), doc="Moving discs.")
     clutter: ClutterSpec = field(default_factory=ClutterSpec,
                                  metadata={"doc": "Seeded random disc obstacles."})
+    generate: GenerateSpec = field(default_factory=GenerateSpec,
+                                   metadata={"doc": "A world drawn from the seed."})
 
     def check(self, src: str, key: str) -> None:
         """Exactly one source of the grid extent."""

@@ -96,9 +96,10 @@ class Stepper(Observing, RunLookups):
         self.scanning = sim.lidars[0] is not None and (
             scan_wanted or getattr(self.estimators[0], "uses_scan", True))
         self.state = RobotState.at_rest(np.concatenate(start))
-        dyn = sim.scenarios[0].world.dynamic
-        self.dyn, self.m = dyn, len(dyn)
-        self.dyn_pos_all, self.dyn_vel_all = dyn.state(np.arange(self.steps) * self.dt)
+        self.m = len(sim.scenarios[0].world.dynamic)
+        #: each world group's moving discs over the run: positions, velocities ``(K, M, 2)``
+        #: and radii ``(M,)``
+        self.movers = [self._movers(sc) for sc in sim.group_scenarios]
         self.goal = np.asarray(spec.leader.goal, dtype=float)
         self.robot_ids = np.arange(n)
         self.robot_ids.flags.writeable = False  # the same rows every step
@@ -121,12 +122,16 @@ class Stepper(Observing, RunLookups):
         self._tick = time.perf_counter()  # run wall times count from start_clock()
         self._s: dict[str, Any] = {}  # what sense() saw, for apply()
         self._owners = np.concatenate((np.arange(n), np.full(self.m, -1)))  # a run's LiDAR discs
-        self._disc_r = np.concatenate((np.full(n, sim.radius), dyn.radii))
         self._rows: tuple[Any, ...] = (None,)  # per-row constants of the last active set
 
     def start_clock(self) -> None:
         """Start counting the runs' wall times (after the controllers' resets)."""
         self._tick = time.perf_counter()
+
+    def _movers(self, scenario: Any) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """A world's moving discs at every instant: positions, velocities and radii."""
+        dyn = scenario.world.dynamic
+        return (*dyn.state(np.arange(self.steps) * self.dt), dyn.radii)
 
     def _monitor(self, scenario: Any) -> StallMonitor | None:
         spec = self.spec
@@ -154,13 +159,14 @@ class Stepper(Observing, RunLookups):
             raise DfcoaError("a batched estimator cannot restart one run of its batch")
         sc = sim.template.for_seed(seed)
         fresh = sim.place(slot, seed, sc)
-        if fresh:  # a world of its own: its leader track too
+        if fresh:  # a world of its own: its leader track and moving discs too
             track, g = leader_track(sc, self.dt, self.steps), int(sim.group[slot])
             if g < len(self.tracks):  # the freed world's group, reused
-                self.tracks[g] = track
+                self.tracks[g], self.movers[g] = track, self._movers(sc)
             else:
                 self.tracks.append(track)
-            self._stacked = None
+                self.movers.append(self._movers(sc))
+            self._stacked = self._movers_stacked = None
         rng = self.rngs[slot] = np.random.default_rng(seed)
         start = sc.start_pose(rng)
         self.estimators[slot] = make_estimators(self.spec.localization.mode, [sc])[0]
@@ -187,7 +193,8 @@ class Stepper(Observing, RunLookups):
         active, kk = self.active, self.k[self.active]
         a, m = len(active), self.m
         pos = st.pose[:, :2]
-        dyn_pos, dyn_vel = self.dyn_pos_all[kk], self.dyn_vel_all[kk]  # (A, M, 2)
+        dyn_pos, dyn_vel, dyn_r = self._moving(active, kk)  # (A, M, 2) twice, (A, M)
+        row_r = self._moving_rows(dyn_r)  # the radii of each row's discs, (1 or A*N, M)
         # centre distances robot -> moving obstacle, (rows, M); sensing and contacts
         dyn_dist = (np.linalg.norm(pos.reshape(a, n, 1, 2) - dyn_pos[:, None], axis=3)
                     .reshape(a * n, m) if m else np.zeros((a * n, 0)))
@@ -197,14 +204,15 @@ class Stepper(Observing, RunLookups):
         fields = sim.lidar_fields() if self.scanning and len(sim.lidars) > 1 else None
         if self.scanning and a > 1 and (len(sim.lidars) == 1 or fields is not None):
             scan_all = sim.lidars[0].scan_teams(
-                st.pose, n, dyn_pos, self.dyn.radii, sim.radius, self._row_constants()[6],  # rngs
-                None if fields is None else (fields, sim.group[active]))
+                st.pose, n, dyn_pos, dyn_r[0] if len(self.movers) == 1 else dyn_r, sim.radius,
+                self._row_constants()[6], None if fields is None else (fields, sim.group[active]))
         elif self.scanning:
             for j, e in enumerate(active):
                 rows = slice(j * n, (j + 1) * n)
                 scans[j] = sim.lidars[sim.group[e]].scan(
-                    st.pose[rows], np.vstack((pos[rows], dyn_pos[j])), self._disc_r,
-                    self._owners, self.rngs[e])
+                    st.pose[rows], np.vstack((pos[rows], dyn_pos[j])),
+                    np.concatenate((np.full(n, sim.radius), dyn_r[j])), self._owners,
+                    self.rngs[e])
         if self.scanning and scan_all is None:  # (one call per run: one run, or unlike grids)
             scan_all = scans[0] if a == 1 else LaserScan(
                 scans[0].angle_min, scans[0].angle_increment, scans[0].range_min,
@@ -232,18 +240,19 @@ class Stepper(Observing, RunLookups):
             nb_pos, nb_vel, nb_heading = gather(row_index, est, st.velocity)
         moving = rows[5]  # no moving obstacle: the same empty arrays every step
         if m:
-            mask = dyn_dist - self.dyn.radii[None, :] <= sim.obstacle_range
+            mask = dyn_dist - row_r <= sim.obstacle_range
             w = mask[..., None]
             rows_pos, rows_vel = np.repeat(dyn_pos, n, axis=0), np.repeat(dyn_vel, n, axis=0)
             moving = MovingObstacles(np.where(w, rows_pos, 0.0), np.where(w, rows_vel, 0.0),
-                                     np.where(mask, self.dyn.radii[None, :], 0.0), mask)
+                                     np.where(mask, row_r, 0.0), mask)
         heard, heard_slots = lead, slots  # the leader state and slots the robots received
         if comms is not None and comms.leader_on:
             stamp, self.leader_ages[active] = comms.leader(kk, active)
             heard, heard_slots, _ = self._leader(active, stamp)
             self.leaders_now[active] = lead
         self.leaders[active] = heard
-        self._s = dict(pos=pos, dyn_pos=dyn_pos, dyn_dist=dyn_dist, lead=lead, slots=slots,
+        self._s = dict(pos=pos, dyn_pos=dyn_pos, dyn_dist=dyn_dist, dyn_r=row_r, lead=lead,
+                       slots=slots,
                        at_goal=at_goal, scans=scans, scan_all=scan_all, est=est, prox=prox,
                        row_index=row_index, nb=(nb_index, nb_pos, nb_vel, nb_heading, nb_dist,
                                                 nb_age), moving=moving, heard=heard,
@@ -320,7 +329,7 @@ class Stepper(Observing, RunLookups):
         # -- contacts at t_k
         clearance = self._clearance(pos, active)
         static_hit = clearance < sim.radius
-        dyn_hit = s["dyn_dist"] < sim.radius + self.dyn.radii[None, :]
+        dyn_hit = s["dyn_dist"] < sim.radius + s["dyn_r"]
         pairs = prox.key_ptr[1:] - prox.key_ptr[:-1]
         events = (new_contacts(self.prev_keys, self.prev_ptr, prox.contact_keys, prox.key_ptr)
                   + (static_hit & ~self.prev_static).reshape(a, n).sum(axis=1))

@@ -191,7 +191,7 @@ class Lidar:
             poses: ``(T*n, 3)`` robot poses, team after team.
             n: Robots per team.
             extra_xy: ``(M, 2)`` discs every team sees, or ``(T, M, 2)`` each team's, m.
-            extra_r: ``(M,)`` their radii, m.
+            extra_r: ``(M,)`` their radii, or ``(T, M)`` each team's, m.
             robot_r: Robot radius, m.
             rngs: One generator per team (used when ``spec.noise_std > 0``).
             worlds: Each team in its own grid: ``(fields, world)`` with ``fields`` of
@@ -227,10 +227,11 @@ class Lidar:
 
         They depend on the sizes and radii only: the last ones are kept.
         """
-        key = (teams, n, robot_r, extra_r.tobytes())
+        key = (teams, n, robot_r, extra_r.shape, extra_r.tobytes())
         if self._teams[0] != key:
-            per = n + len(extra_r)
-            rad = np.tile(np.concatenate((np.full(n, robot_r), extra_r)), teams)
+            per = n + extra_r.shape[-1]
+            rad = np.concatenate((np.full((teams, n), robot_r),
+                                  np.broadcast_to(extra_r, (teams, per - n))), axis=1).ravel()
             own = np.full((teams, per), -1, dtype=np.int64)
             own[:, :n] = np.arange(teams * n).reshape(teams, n)
             team = np.repeat(np.arange(teams), n)

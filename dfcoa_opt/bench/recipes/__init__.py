@@ -11,6 +11,8 @@ group registers its recipes, in index order (:data:`RECIPE_MODULES`):
 - :mod:`~dfcoa_opt.bench.recipes.beyond`: ``nmpc`` and ``cbf`` beside the papers' methods;
 - :mod:`~dfcoa_opt.bench.recipes.reshape`: the reshaping formation, with the corridor GIF;
 - :mod:`~dfcoa_opt.bench.recipes.ladders`: difficulty ladders (where each method breaks);
+- :mod:`~dfcoa_opt.bench.recipes.heldout`: every method, defaults and tuned, on unseen
+  generated worlds;
 - :mod:`~dfcoa_opt.bench.recipes.dfcoa`: paper 000 Table 5 and its figures;
 - :mod:`~dfcoa_opt.bench.recipes.astar`: traditional vs improved A* (paper 000 §4.1);
 - :mod:`~dfcoa_opt.bench.recipes.paper001`, :mod:`~dfcoa_opt.bench.recipes.paper002`,

@@ -14,10 +14,10 @@ import numpy as np
 
 from dfcoa_opt import metrics
 from dfcoa_opt.atomic import atomic_write
+from dfcoa_opt.bench.logs import read_log
 from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.recipes.comparison import report_artefacts
 from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.sim.log import RunLog
 
 
 def solve_time_table(store: ResultsStore) -> list[str]:
@@ -27,7 +27,7 @@ def solve_time_table(store: ResultsStore) -> list[str]:
     for row in store.rows():
         if row["status"] != "ok":
             continue
-        log = RunLog.load(store.root / row["log"])
+        log = read_log(store.root, row)
         key = (row["controller"], row["scenario"])
         used = (log.filter_time > 0.0) | (log.filter_status != 0)
         times[key].append(log.filter_time[used])

@@ -18,6 +18,7 @@ import numpy as np
 
 from dfcoa_opt import metrics, plotting
 from dfcoa_opt.atomic import atomic_write
+from dfcoa_opt.bench.logs import read_log
 from dfcoa_opt.bench.plots import save_png, scenario_for_row, variant_name
 from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.report import aggregate
@@ -262,7 +263,7 @@ def render_dfcoa(store: ResultsStore, dest: Path) -> list[Artefact]:
             if not pick:
                 continue
             row = pick[0]
-            log = RunLog.load(store.root / row["log"])
+            log = read_log(store.root, row)
             sc = scenario_for_row(row)
             tag = f"{scen}_{mode}_s{row['seed']}"
             title = f"{scen}, {mode}, seed {row['seed']}"

@@ -7,10 +7,10 @@ from typing import Any
 
 from dfcoa_opt import plotting
 from dfcoa_opt.atomic import atomic_write
+from dfcoa_opt.bench.logs import read_log
 from dfcoa_opt.bench.plots import scenario_for_row
 from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.sim.log import RunLog
 
 #: Columns of the example table.
 EXAMPLE_COLUMNS = ("outcome", "reached", "time_to_goal", "fce_rms", "fse_rms", "stability_pct",
@@ -48,7 +48,7 @@ def render_examples(store: ResultsStore, dest: Path) -> list[Artefact]:
                      + " |")
         sc = scenario_for_row(row)
         png = f"{name}-{cid}.png"
-        plotting.plot_run(RunLog.load(store.root / row["log"]), sc.world.grid, dest / png,
+        plotting.plot_run(read_log(store.root, row), sc.world.grid, dest / png,
                           goal=sc.spec.leader.goal, start=sc.spec.leader.start,
                           shapes=sc.world.shapes)
         arts.append(Artefact(png, "-", f"{name} with {cid}: trajectories, slots, map"))

@@ -12,10 +12,10 @@ from pathlib import Path
 
 from dfcoa_opt import animation, plotting
 from dfcoa_opt.atomic import atomic_write
+from dfcoa_opt.bench.logs import read_log
 from dfcoa_opt.bench.plots import scenario_for_row
 from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.sim.log import RunLog
 
 #: The scenario whose run is animated.
 ANIMATED = "corridor"
@@ -44,7 +44,7 @@ def render_reshape(store: ResultsStore, dest: Path) -> list[Artefact]:
         lines.append(f"| {name} | {m['outcome']} | {t_text} | "
                      + " | ".join(str(m.get(f"ctl_{c}", "—")) for c in COUNTERS) + " |")
         sc = scenario_for_row(row)
-        log = RunLog.load(store.root / row["log"])
+        log = read_log(store.root, row)
         kw = {"goal": sc.spec.leader.goal, "start": sc.spec.leader.start,
               "shapes": sc.world.shapes}
         png = f"reshape_{name}.png"

@@ -1,0 +1,278 @@
+"""Figure recipe "heldout": every method on unseen generated worlds, with defaults and tuned.
+
+The sweep (``scenarios/sweeps/heldout.toml``) runs every variant with its
+defaults, and every ``<variant>@tuned`` of ``dfcoa tune`` (the variants files
+of ``scenarios/sweeps/tuned/``), on test seeds of the generated families
+(``scenarios/heldout/``); the renderer reads the rows (and one seed's logs
+per family for the pictures) and writes ``paper_figures/heldout/``:
+
+- ``heldout.md``: how well the difficulty index predicts failure (Spearman's
+  rho), the ranking of the tuned variants over every test world with Wilson
+  intervals and paired tests, success and outcomes by family and by
+  difficulty, BARN's score, the CVaR(0.9) of the formation error and of the
+  time to goal, the generalisation gap (training against test success) and
+  defaults against tuned;
+- ``success_vs_difficulty.png``: success against the difficulty index, one line
+  per tuned method;
+- ``traj_<family>_s<seed>.png``: every tuned variant on the first test world of
+  each family;
+- ``heldout.csv``, ``by_family.csv``, ``worlds.csv``: the numbers of the tables.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from dfcoa_opt.atomic import atomic_write
+from dfcoa_opt.bench import heldout as ho
+from dfcoa_opt.bench import paired, stats
+from dfcoa_opt.bench.plots import ladder_figure, variant_name
+from dfcoa_opt.bench.recipes import Artefact, recipe
+from dfcoa_opt.bench.report import aggregate, environment_header
+from dfcoa_opt.bench.runner import is_success
+from dfcoa_opt.bench.store import ResultsStore
+from dfcoa_opt.bench.sweep import safe_name
+from dfcoa_opt.bench.tables import md_escape, ranking_table, rate_cell
+from dfcoa_opt.bench.trajectories import panels_figure
+from dfcoa_opt.figure_layout import save_png
+from dfcoa_opt.outcome import OUTCOMES
+
+#: The paired tests' baseline: the paper's method with its tuned parameters.
+BASELINE = "dfcoa@tuned"
+
+
+def _pct(k: int, n: int) -> str:
+    lo, hi = stats.wilson_interval(k, n)
+    return rate_cell(k / n, (lo, hi), k, n) if n else "—"
+
+
+def _num(x: float, digits: int = 2) -> str:
+    return f"{x:.{digits}f}" if math.isfinite(x) else "—"
+
+
+def _t_max(rows: Sequence[Mapping[str, Any]]) -> dict[str, float]:
+    """Each scenario's time limit, from its file (rows hold only the run's own)."""
+    from dfcoa_opt.sim.loader import read_toml
+
+    out = {}
+    for r in rows:
+        if str(r["scenario"]) not in out:
+            data = read_toml(r["scenario_file"])
+            out[str(r["scenario"])] = float(data.get("t_max", 60.0))
+    return out
+
+
+def _variant_table(names: Sequence[str], rows: Sequence[Mapping[str, Any]],
+                   t_max: Mapping[str, float]) -> tuple[list[str], list[ho.VariantStats]]:
+    out = [ho.variant_stats(n, [r for r in rows if variant_name(r) == n], t_max)
+           for n in names]
+    out = [s for s in out if s.runs]
+    lines = ["| variant | worlds | success | collision | deadlock | timeout | failed | "
+             "BARN score | CVaR(0.9) FCE (m) | CVaR(0.9) time to goal (s) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for s in sorted(out, key=lambda s: (-s.success, s.variant)):
+        cells = [_pct(s.outcomes.get(o, 0), s.runs) for o in OUTCOMES]
+        lines.append(f"| {md_escape(s.variant)} | {s.runs} | " + " | ".join(cells)
+                     + f" | {s.outcomes.get('failed', 0)} | {_num(s.barn)} | "
+                     f"{_num(s.cvar_fce)} | {_num(s.cvar_time, 1)} |")
+    return lines, out
+
+
+def _family_tables(names: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    scen = sorted({str(r["scenario"]) for r in rows})
+    head = "| variant | " + " | ".join(scen) + " |"
+    lines = [head, "|---|" + "---|" * len(scen)]
+    outc = [head.replace("| variant |", "| variant (S/C/D/T %) |"), lines[1]]
+    for n in names:
+        mine = [r for r in rows if variant_name(r) == n]
+        cells, classes = [], []
+        for s in scen:
+            runs = [r for r in mine if str(r["scenario"]) == s]
+            wins = sum(is_success(r) for r in runs)
+            cells.append(_pct(wins, len(runs)))
+            g = aggregate(runs, ())[0] if runs else None
+            classes.append("—" if g is None else "/".join(
+                f"{100 * g[f'{o}_rate']:.0f}" for o in OUTCOMES))
+        lines.append(f"| {md_escape(n)} | " + " | ".join(cells) + " |")
+        outc.append(f"| {md_escape(n)} | " + " | ".join(classes) + " |")
+    return ["Success by family:", "", *lines, "", "Outcome classes by family (success / "
+            "collision / deadlock / timeout, % of runs):", "", *outc]
+
+
+def _bins_section(names: Sequence[str], rows: Sequence[Mapping[str, Any]],
+                  ws: Sequence[ho.World], dest: Path) -> tuple[list[str], Path]:
+    bins = ho.difficulty_bins(ws)
+    bin_of = {(w.scenario, w.seed): ho.bin_of(w.metrics["world_difficulty"], bins)
+              for w in ws}
+    series: dict[str, list[tuple[float, float, float, float, int]]] = {}
+    centre = [(a + b) / 2 for a, b in bins]
+    head = "| variant | " + " | ".join(f"{a:.2f}–{b:.2f}" for a, b in bins) + " |"
+    lines = [head, "|---|" + "---|" * len(bins)]
+    for n in names:
+        cells = []
+        for i in range(len(bins)):
+            runs = [r for r in rows if variant_name(r) == n
+                    and bin_of.get(ho.world_key(r)) == i]
+            wins = sum(is_success(r) for r in runs)
+            cells.append(_pct(wins, len(runs)))
+            if runs:
+                lo, hi = stats.wilson_interval(wins, len(runs))
+                series.setdefault(ho.method_of(n), []).append(
+                    (centre[i], wins / len(runs), lo, hi, len(runs)))
+        lines.append(f"| {md_escape(n)} | " + " | ".join(cells) + " |")
+    path = ladder_figure(series, "difficulty index (bin centre)",
+                         dest / "success_vs_difficulty.png",
+                         "Tuned methods on the test worlds: success against difficulty")
+    return lines, path
+
+
+def _gap_and_defaults(methods: Sequence[str], rows: Sequence[Mapping[str, Any]],
+                      tuned: Mapping[str, Mapping[str, Any]]) -> tuple[list[str], list[str]]:
+    """The generalisation gap of each tuned variant, and defaults against tuned."""
+    gap = ["| method | training success (tuned) | test success (tuned) | gap (points) |",
+           "|---|---|---|---|"]
+    base = {m: {ho.world_key(r): r for r in rows if variant_name(r) == m} for m in methods}
+    tune = {m: {ho.world_key(r): r for r in rows if variant_name(r) == m + ho.TUNED}
+            for m in methods}
+    cells, ps = [], []
+    for m in methods:
+        info = tuned.get(m + ho.TUNED, {})
+        test = list(tune[m].values())
+        if info and test:
+            k, n = int(info["train_success"]), int(info["train_runs"])
+            t = sum(is_success(r) for r in test)
+            gap.append(f"| {md_escape(m)} | {_pct(k, n)} | {_pct(t, len(test))} | "
+                       f"{100 * (k / n - t / len(test)):+.0f} |")
+        shared = sorted(set(base[m]) & set(tune[m]))
+        if not shared:
+            continue
+        a = [is_success(tune[m][w]) for w in shared]
+        b = [is_success(base[m][w]) for w in shared]
+        mc = stats.mcnemar_exact(a, b)
+        cells.append((m, info, shared, sum(b), sum(a), mc))
+        ps.append(mc.p_value)
+    adjusted = stats.holm(ps)
+    dvt = ["| method | training: defaults | training: tuned | test: defaults | test: tuned "
+           "(same worlds) | tuned − defaults | McNemar p (Holm) |",
+           "|---|---|---|---|---|---|---|"]
+    for (m, info, shared, kb, ka, mc), p in zip(cells, adjusted, strict=True):
+        n_tr = int(info.get("train_runs", 0))
+        tr_d = _pct(int(info["default_train_success"]), n_tr) if info else "—"
+        tr_t = _pct(int(info["train_success"]), n_tr) if info else "—"
+        verdict = stats.verdict(mc.difference, float(p), True)
+        mark = f" **{verdict}**" if verdict != "no difference" else ""
+        dvt.append(f"| {md_escape(m)} | {tr_d} | {tr_t} | {_pct(kb, len(shared))} | "
+                   f"{_pct(ka, len(shared))} | {100 * mc.difference:+.0f} pts | "
+                   f"{float(p):.3g}{mark} |")
+    return gap, dvt
+
+
+def _variant_files(store: ResultsStore) -> list[Path]:
+    """The sweep's variants files (``variant_files``, relative to the sweep file)."""
+    from dfcoa_opt.sim.loader import read_toml
+
+    sweep_file = Path(str(store.manifest().get("sweep_file", "")))
+    patterns = read_toml(store.root / "sweep.toml").get("variant_files", [])
+    return sorted({p for pat in patterns for p in sweep_file.parent.glob(pat)})
+
+
+def _csv(rows: Sequence[Sequence[Any]]) -> str:
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(rows)
+    return buf.getvalue()
+
+
+@recipe("heldout", sweep="sweeps/heldout.toml",
+        title="Held-out benchmark: generated worlds, test seeds, every method tuned alike")
+def render_heldout(store: ResultsStore, dest: Path) -> list[Artefact]:
+    """The tables and figures of the module docstring."""
+    rows = store.rows()
+    names = list(dict.fromkeys(variant_name(r) for r in rows))
+    tuned_names = [n for n in names if ho.is_tuned(n)]
+    methods = [ho.method_of(n) for n in tuned_names if ho.method_of(n) in names]
+    tuned_rows = [r for r in rows if variant_name(r) in tuned_names]
+    t_max = _t_max(rows)
+    tuned_info = ho.read_tuned(_variant_files(store))
+    ws = ho.worlds(rows, tuned_names)
+    rho, p_rho, n_rho = ho.spearman(ws)
+    cpu = sum(float((r.get("provenance") or {}).get("wall_time") or 0.0) for r in rows)
+    per_scen = {}
+    for r in tuned_rows:
+        per_scen.setdefault(str(r["scenario"]), set()).add(int(r["seed"]))
+    defaults_worlds = {ho.world_key(r) for r in rows if not ho.is_tuned(variant_name(r))}
+    md = ["# Held-out benchmark: unseen generated worlds", "",
+          environment_header(store.root).rstrip("\n"), "",
+          "Every method runs on test seeds of the generated families (scenarios/heldout/, "
+          "docs/heldout.md), which no tuning saw: with its defaults, and as `<method>@tuned`, "
+          "the best of the same tuning budget on training seeds (`dfcoa tune`, "
+          "scenarios/sweeps/tune.toml). No paper has these tables.", "",
+          f"- Test worlds: {len(ws)} for the tuned variants ("
+          + ", ".join(f"{s}: {len(v)}" for s, v in sorted(per_scen.items()))
+          + f"); {len(defaults_worlds)} for the defaults (the first seeds of each family).",
+          f"- Runs: {len(rows)} in {cpu:.0f} CPU-s (the runs' own wall times).",
+          f"- Spearman's rho between the difficulty index and the failure rate averaged over "
+          f"the {len(tuned_names)} tuned variants, over the {n_rho} test worlds: "
+          f"**{_num(rho)}** (p = {p_rho:.2g}).", ""]
+    table, _ = _variant_table(tuned_names, tuned_rows, t_max)
+    md += ["## Tuned variants over every test world", "", *table, "",
+           "BARN score: success × T_ref / clip(T, T_ref, 2 T_ref), T_ref the leader's time "
+           "along its reference path; CVaR(0.9): the mean of the worst 10 % of runs (time to "
+           "goal: failures count as the time limit; FCE: a run that raised counts as "
+           "infinite).", ""]
+    pool = ho.pooled(tuned_rows)
+    groups = aggregate(pool, ("time_to_goal",))
+    comps = [c for c in paired.compare(pool, BASELINE, ()) if c.metric == "success"]
+    if any(ho.is_tuned(n) and n == BASELINE for n in tuned_names):
+        md += ["### Ranking", "", ranking_table(groups, comps, BASELINE),
+               f"Paired over the test worlds against `{BASELINE}` (McNemar exact, Holm).", ""]
+    md += ["## By family", "", *_family_tables(tuned_names, tuned_rows), ""]
+    bins, figure = _bins_section(tuned_names, tuned_rows, ws, dest)
+    md += ["## By difficulty", "", "Success of the tuned variants in four bins of the "
+           "difficulty index (quartiles of the test worlds):", "", *bins, "",
+           f"![success against difficulty]({figure.name})", ""]
+    gap, dvt = _gap_and_defaults(methods, rows, tuned_info)
+    md += ["## Generalisation gap", "", "Training success of the best trial (the tuning "
+           "seeds it was chosen on) against test success:", "", *gap, "",
+           "## Defaults against tuned", "", "On the test worlds both ran (paired by world); "
+           "training columns from the variants files:", "", *dvt, ""]
+    default_table, _ = _variant_table(methods, [r for r in rows if variant_name(r) in methods],
+                                      t_max)
+    md += ["### Defaults over their test worlds", "", *default_table, ""]
+    arts = [Artefact("success_vs_difficulty.png", "-", "success against the difficulty "
+                     "index, one line per tuned method (Wilson 95 %)")]
+    for scen, seeds in sorted(per_scen.items()):
+        first = min(seeds)
+        chosen = [r for r in tuned_rows if str(r["scenario"]) == scen and int(r["seed"]) == first]
+        name = f"traj_{safe_name(scen)}_s{first}.png"
+        save_png(panels_figure(chosen, store.root), dest / name)
+        md += [f"![{scen}]({name})", ""]
+        arts.append(Artefact(name, "-", f"every tuned variant on the first test world of "
+                                        f"{scen}"))
+    atomic_write(dest / "heldout.md", "\n".join(md).rstrip("\n") + "\n")
+    atomic_write(dest / "worlds.csv", _csv(
+        [["scenario", "seed", "failure_rate", *sorted(ws[0].metrics)] if ws else []]
+        + [[w.scenario, w.seed, w.failure, *(w.metrics[k] for k in sorted(w.metrics))]
+           for w in ws]))
+    _, every = _variant_table(names, rows, t_max)
+    atomic_write(dest / "heldout.csv", _csv(
+        [["variant", "runs", "success", "ci_low", "ci_high", *OUTCOMES, "failed", "barn_score",
+          "cvar_fce", "cvar_time_to_goal"]]
+        + [[s.variant, s.runs, s.success, *s.interval, *(s.outcomes.get(o, 0) for o in OUTCOMES),
+            s.outcomes.get("failed", 0), s.barn, s.cvar_fce, s.cvar_time] for s in every]))
+    fam = aggregate(rows, ())
+    atomic_write(dest / "by_family.csv", _csv(
+        [["scenario", "variant", "runs", *[f"{o}_rate" for o in OUTCOMES]]]
+        + [[g["scenario"], g["variant"], g["runs"], *(g[f"{o}_rate"] for o in OUTCOMES)]
+           for g in fam]))
+    return [Artefact("heldout.md", "no paper (held-out benchmark)", "Spearman's rho, ranking, "
+                     "success and outcomes by family and difficulty, BARN score, CVaR, "
+                     "generalisation gap, defaults against tuned"),
+            Artefact("heldout.csv", "-", "every variant over its test worlds"),
+            Artefact("by_family.csv", "-", "outcome rates by family and variant"),
+            Artefact("worlds.csv", "-", "every test world: difficulty metrics and failure rate "
+                                        "over the tuned variants"), *arts]

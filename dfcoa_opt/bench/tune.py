@@ -1,0 +1,360 @@
+"""``dfcoa tune``: the same tuning budget for every method, on training seeds only.
+
+A *tuning sweep* is a sweep file with ``split = "train"`` and a ``[tune]`` table
+(:class:`TuneSpec`); its variants are the methods to tune and its runs for
+one variant (scenarios x training seeds, with the sweep's settings) are what
+every trial of that variant simulates. For each variant:
+
+1. the tunable parameters are those its classes declare
+   (:func:`~dfcoa_opt.control.registry.controller_tunables`; a key the variant
+   sets itself stays fixed);
+2. trial 0 runs the defaults, then Optuna's TPE sampler proposes the next
+   parameters from the finished trials. The sampler of trial ``k`` is seeded
+   with ``sampler_seed * 100003 + k`` and rebuilt from the journal of finished
+   trials, so the proposals are a pure function of the seed and the results:
+   a killed ``dfcoa tune`` resumes where it stopped and proposes what an
+   uninterrupted one would have;
+3. a trial's runs go through the sweep executors (:func:`run_sweep`: batches,
+   ``--jobs``, Dask) into ``RESULTS/<variant>/``, where finished runs are kept
+   (their logs compacted: tuning reads rows only);
+4. the objective (:func:`objective`) is the collision-free success rate, with
+   one tie breaker that never outweighs a success: the CVaR(0.9) of the
+   formation centroid error;
+5. the best trial (the highest objective, the earliest on a tie) becomes the
+   variant ``<variant>@tuned`` in the variants file ``<out>/<variant>.toml``
+   (:func:`variants_file_text`), with the budget, the seeds and the training
+   success that produced it. Sweeps name it through ``variant_files``.
+
+Every variant gets ``trials x runs per trial`` simulated runs: the budget is
+counted in runs, not in seconds (docs/heldout.md).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from dfcoa_opt.atomic import atomic_write
+from dfcoa_opt.bench.executors import ExecutorConfig, kept_workers
+from dfcoa_opt.bench.harness import run_sweep
+from dfcoa_opt.bench.logs import compact_log
+from dfcoa_opt.bench.plots import as_number
+from dfcoa_opt.bench.runner import is_success
+from dfcoa_opt.bench.stats import cvar
+from dfcoa_opt.bench.store import ResultsStore, display_path
+from dfcoa_opt.bench.sweep import RunSpec, Sweep, canonical, load_sweep, safe_name
+from dfcoa_opt.bench.variants import Variant
+from dfcoa_opt.errors import DfcoaError, ScenarioError, did_you_mean
+from dfcoa_opt.params import Tunable, build, param
+
+#: The metric of the tie breaker and its scale: the CVaR of the formation centroid error
+#: (m) over a trial's runs; a CVaR of this many metres or more costs the most.
+TIE_METRIC, TIE_SCALE, TIE_ALPHA = "fce_rms", 1.0, 0.9
+#: Suffix of a tuned variant's name.
+TUNED = "@tuned"
+
+
+@dataclass(frozen=True)
+class TuneSpec:
+    """The ``[tune]`` table of a tuning sweep."""
+
+    trials: int = param(40, doc="Trials per variant, the defaults' included (each runs the "
+                                "variant's runs of the sweep).", ge=1, le=10_000)
+    sampler_seed: int = param(0, doc="Seed of the TPE sampler.", ge=0)
+    startup_trials: int = param(8, doc="Trials drawn at random before TPE models the results "
+                                       "(the defaults' trial included).", ge=1)
+    out: str = param("../heldout/tuned", doc="Folder of the variants files, relative to the "
+                                             "sweep file.")
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One finished trial.
+
+    Attributes:
+        number: 0 (the defaults), 1, 2, ...
+        params: Dotted key -> value.
+        value: :func:`objective`.
+        successes: Collision-free successes.
+        runs: Runs of the trial.
+        cvar_fce: The tie breaker's CVaR, m (``inf`` when a run has no value).
+    """
+
+    number: int
+    params: dict[str, Any]
+    value: float
+    successes: int
+    runs: int
+    cvar_fce: float
+
+
+@dataclass(frozen=True)
+class TuneResult:
+    """What :func:`tune_variant` did: the trials and the written variants file."""
+
+    variant: str
+    trials: tuple[Trial, ...]
+    best: Trial
+    path: Path
+    ran: int
+
+
+def objective(rows: Sequence[Mapping[str, Any]]) -> tuple[float, int, float]:
+    """A trial's score from its rows: ``(value, successes, cvar_fce)``.
+
+    ``value = s / n - min(CVaR_0.9(FCE) / 1 m, 1) / (2 n)`` with ``s`` the
+    collision-free successes of the ``n`` runs: the success rate decides, and
+    the tie breaker, below half a success, only orders trials with as many
+    successes (a smaller worst-case formation error is better).
+    """
+    n = len(rows)
+    if n == 0:
+        raise DfcoaError("a trial with no runs has no score")
+    wins = sum(is_success(r) for r in rows)
+    fce = [as_number((r.get("metrics") or {}).get(TIE_METRIC)) for r in rows]
+    tail = cvar(fce, TIE_ALPHA)
+    value = wins / n - min(tail / TIE_SCALE, 1.0) / (2.0 * n)
+    return value, wins, tail
+
+
+def tuning_sweep(path: str | Path, trials: int | None = None) -> tuple[Sweep, TuneSpec]:
+    """Read a tuning sweep: the sweep, checked to run on training seeds, and its ``[tune]``.
+
+    Raises:
+        ScenarioError: Not ``split = "train"``, a seed outside the training
+            range, or a bad ``[tune]`` table (one line, naming the file and key).
+    """
+    sweep = load_sweep(path)
+    src = sweep.source
+    if sweep.spec.split != "train":
+        raise ScenarioError(src, "split", f"dfcoa tune tunes on training seeds only: set "
+                                          f"split = \"train\" (got '{sweep.spec.split}')")
+    table = sweep.spec.tune
+    if not isinstance(table, Mapping):
+        raise ScenarioError(src, "tune", "is required: a [tune] table (trials, sampler_seed, "
+                                         "out)")
+    spec = build(TuneSpec, table, src, "tune")
+    return sweep, (spec if trials is None else replace(spec, trials=trials))
+
+
+def tunables_of(variant: Variant) -> list[Tunable]:
+    """The keys a variant's trials search: its classes' tunables but those it sets itself."""
+    from dfcoa_opt.control.registry import controller_tunables
+
+    fixed = {k for k, _ in variant.overrides}
+    return [t for t in controller_tunables(variant.controller) if t.key not in fixed]
+
+
+def _distributions(params: Sequence[Tunable]) -> dict[str, Any]:
+    from optuna.distributions import (
+        CategoricalDistribution,
+        FloatDistribution,
+        IntDistribution,
+    )
+
+    out: dict[str, Any] = {}
+    for t in params:
+        if t.kind == "bool":
+            out[t.key] = CategoricalDistribution([False, True])
+        elif t.kind == "int":
+            out[t.key] = IntDistribution(int(t.low), int(t.high), log=t.scale == "log")
+        else:
+            out[t.key] = FloatDistribution(float(t.low), float(t.high), log=t.scale == "log")
+    return out
+
+
+def propose(number: int, done: Sequence[Trial], params: Sequence[Tunable],
+            spec: TuneSpec) -> dict[str, Any]:
+    """The parameters of trial ``number``: the defaults first, then TPE's proposal.
+
+    The sampler is rebuilt for every trial from the finished ones and a seed
+    of its own, so the proposal depends only on them (resume-safe).
+    """
+    if number == 0:
+        return {t.key: t.default for t in params}
+    try:
+        import optuna
+    except ModuleNotFoundError:
+        raise DfcoaError("dfcoa tune needs Optuna: pip install -e '.[tune]'") from None
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    dists = _distributions(params)
+    sampler = optuna.samplers.TPESampler(seed=spec.sampler_seed * 100003 + number,
+                                         n_startup_trials=spec.startup_trials)
+    study = optuna.create_study(direction="maximize", sampler=sampler)
+    for t in done:
+        study.add_trial(optuna.trial.create_trial(params=dict(t.params), distributions=dists,
+                                                  value=t.value))
+    return dict(study.ask(dists).params)
+
+
+def trial_runs(base: Sequence[RunSpec], variant: str, number: int,
+               params: Mapping[str, Any]) -> list[RunSpec]:
+    """Trial ``number``'s runs: the variant's runs with ``params`` set, under their own name."""
+    name = f"{variant}@trial{number:03d}"
+    return [replace(r, overrides=canonical({**r.overrides_dict, **params}), variant=name)
+            for r in base]
+
+
+def _journal(root: Path) -> Path:
+    return root / "trials.json"
+
+
+def _identity(sweep: Sweep, variant: Variant, params: Sequence[Tunable],
+              spec: TuneSpec) -> dict[str, Any]:
+    """What a journal's trials depend on: another identity starts the trials over."""
+    return {"sweep_sha256": sweep.sha256, "variant": variant.name,
+            "controller": variant.controller, "overrides": dict(variant.overrides),
+            "tunables": [asdict(t) for t in params], "sampler_seed": spec.sampler_seed,
+            "startup_trials": spec.startup_trials, "runs": [r.key for r in
+                                                          _base_runs(sweep, variant.name)]}
+
+
+def _read_journal(root: Path, identity: Mapping[str, Any]) -> list[Trial]:
+    try:
+        data = json.loads(_journal(root).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return []
+    if data.get("identity") != json.loads(json.dumps(identity)):
+        return []
+    return [Trial(**t) for t in data.get("trials", [])]
+
+
+def _base_runs(sweep: Sweep, name: str) -> list[RunSpec]:
+    return [r for r in sweep.runs if r.variant_name == name and r.ladder_value is None]
+
+
+def tune_variant(sweep: Sweep, spec: TuneSpec, name: str, results: str | Path,
+                 config: ExecutorConfig | None = None, out: str | Path | None = None,
+                 progress: bool | None = None) -> TuneResult:
+    """Tune one variant of a tuning sweep (module docstring) and write its variants file.
+
+    Args:
+        sweep: The tuning sweep (:func:`tuning_sweep`).
+        spec: Its ``[tune]`` table.
+        name: The variant to tune.
+        results: Folder of the trials' runs and journals; the variant's go in
+            ``results/<variant>/``.
+        config: Executor of the runs.
+        out: Folder of the variants file; default ``spec.out`` beside the sweep file.
+        progress: Progress bars (default: when stdout is a terminal).
+
+    Raises:
+        DfcoaError: An unknown variant, or one with nothing to tune.
+    """
+    names = [v.name for v in sweep.variants]
+    if name not in names:
+        raise DfcoaError(f"{sweep.source}: --variant: '{name}' is not a variant of this sweep"
+                         f"{did_you_mean(name, names)}; variants: {', '.join(names)}")
+    variant = next(v for v in sweep.variants if v.name == name)
+    params = tunables_of(variant)
+    if not params:
+        raise DfcoaError(f"{sweep.source}: variant '{name}' ({variant.controller}) declares no "
+                         "tunable parameter (param(tune=...))")
+    base = _base_runs(sweep, name)
+    root = Path(results) / safe_name(name)
+    store = ResultsStore(root)
+    identity = _identity(sweep, variant, params, spec)
+    done = _read_journal(root, identity)[:spec.trials]
+    ran = 0
+    grown = replace(sweep, runs=())
+    config = config or ExecutorConfig()
+    with kept_workers(config):
+        ran = _trials(spec, name, params, base, done, grown, root, store, identity, config,
+                      progress)
+    best = max(done, key=lambda t: (t.value, -t.number))
+    folder = Path(out) if out is not None else Path(sweep.source).parent / spec.out
+    path = folder / f"{safe_name(name)}.toml"
+    folder.mkdir(parents=True, exist_ok=True)
+    atomic_write(path, variants_file_text(sweep, spec, variant, params, done, best))
+    return TuneResult(name, tuple(done), best, path, ran)
+
+
+def _trials(spec: TuneSpec, name: str, params: Sequence[Tunable], base: Sequence[RunSpec],
+            done: list[Trial], grown: Sweep, root: Path, store: ResultsStore,
+            identity: Mapping[str, Any], config: ExecutorConfig, progress: bool | None) -> int:
+    """Run the trials not in ``done`` yet (appended to it); the runs simulated."""
+    ran = 0
+    for k in range(len(done), spec.trials):
+        proposal = propose(k, done, params, spec)
+        runs = trial_runs(base, name, k, proposal)
+        grown = grown.extended(runs)
+        result = run_sweep(grown, root, config, progress=progress)
+        ran += result.ran
+        rows = [store.read_row(r.key) for r in runs]
+        if any(r is None for r in rows):
+            raise DfcoaError(f"{root}: trial {k} has runs without a row")
+        for row in rows:  # tuning reads rows only: its logs keep their trajectories alone
+            if row and row.get("log"):
+                compact_log(root / str(row["log"]))
+        value, wins, tail = objective(rows)  # type: ignore[arg-type]
+        done.append(Trial(k, proposal, value, wins, len(runs), tail))
+        atomic_write(_journal(root), json.dumps(
+            {"identity": identity, "trials": [asdict(t) for t in done]}, indent=1,
+            default=str) + "\n")
+        best = max(done, key=lambda t: (t.value, -t.number))
+        print(f"{name}: trial {k + 1}/{spec.trials}: {wins}/{len(runs)} succeeded; best "
+              f"{best.successes}/{best.runs} (trial {best.number})", file=sys.stderr)
+    return ran
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"no TOML form for {v!r}")
+
+
+def _seed_text(runs: Iterable[RunSpec]) -> str:
+    seeds = sorted({r.seed for r in runs})
+    return f"{seeds[0]}-{seeds[-1]}" if seeds == list(range(seeds[0], seeds[-1] + 1)) \
+        else ",".join(map(str, seeds))
+
+
+def variants_file_text(sweep: Sweep, spec: TuneSpec, variant: Variant,
+                       params: Sequence[Tunable], trials: Sequence[Trial], best: Trial) -> str:
+    """The variants file of a tuned variant: ``[variants."<name>@tuned"]`` and how it was made."""
+    base = _base_runs(sweep, variant.name)
+    default = trials[0]
+    scen = sorted({r.scenario for r in base})
+    lines = [
+        f"# The variant {variant.name} tuned by `dfcoa tune "
+        f"{display_path(sweep.source)} --variant {variant.name}` (docs/heldout.md).",
+        "# Budget: the same for every method, counted in simulated runs; training seeds only.",
+        "# Written by dfcoa tune; sweeps name the variant through variant_files.",
+        "",
+        "[tuned]",
+        f"variant = {_toml_value(variant.name)}",
+        f"controller = {_toml_value(variant.controller)}",
+        f"sweep = {_toml_value(display_path(sweep.source))}",
+        f"sweep_sha256 = {_toml_value(sweep.sha256)}",
+        f"split = {_toml_value(sweep.spec.split)}",
+        f"scenarios = {_toml_value(scen)}",
+        f"seeds = {_toml_value(_seed_text(base))}",
+        f"trials = {spec.trials}",
+        f"runs_per_trial = {len(base)}",
+        f"budget_runs = {spec.trials * len(base)}",
+        "sampler = \"TPE (optuna), trial 0 = the defaults\"",
+        f"sampler_seed = {spec.sampler_seed}",
+        f"startup_trials = {spec.startup_trials}",
+        "objective = \"collision-free success rate; tie breaker: CVaR(0.9) of fce_rms\"",
+        f"best_trial = {best.number}",
+        f"train_success = {best.successes}",
+        f"train_runs = {best.runs}",
+        f"default_train_success = {default.successes}",
+        f"tuned = {_toml_value([t.key for t in params])}",
+        "",
+        f"[variants.\"{variant.name}{TUNED}\"]",
+        f"controller = {_toml_value(variant.controller)}",
+    ]
+    values = {**dict(variant.overrides), **best.params}
+    lines += [f"\"{k}\" = {_toml_value(v)}" for k, v in values.items()]
+    return "\n".join(lines) + "\n"
