@@ -24,8 +24,9 @@ from dfcoa_opt.world.shapes import Rectangle
 HELDOUT = Path(__file__).resolve().parents[1] / "scenarios" / "heldout"
 FAMILIES = ("cellular", "rooms", "corridors", "crowd")
 LAYOUT = gen.Layout(extent=(0.0, 30.0, 0.0, 16.0), start=(3.0, 8.0), goal=(27.0, 8.0),
-                    start_clear=2.7, goal_clear=2.7, robot_radius=0.2, team_width=2.66,
-                    t_max=180.0)
+                    start_clear=2.7, goal_clear=2.7)
+#: The width of the heldout files' 5-robot V with the bodies, m.
+V_WIDTH = 2.66
 
 
 # ------------------------------------------------------------------ rectangles
@@ -111,7 +112,7 @@ def test_rooms_statistics_match_parameters() -> None:
         assert np.allclose(sorted(w for gaps in per_wall for w in gaps), sorted(f["door_widths"]))
         widths += f["door_widths"]
     assert min(widths) >= 1.0 and max(widths) <= 3.6
-    narrower = np.mean(np.array(widths) < LAYOUT.team_width)
+    narrower = np.mean(np.array(widths) < V_WIDTH)
     assert 0.4 < narrower < 0.8  # some narrower than the formation, some wider
 
 
@@ -232,3 +233,16 @@ def test_no_passage_stops_with_one_line_after_the_tries() -> None:
 def test_bad_generate_tables(generate: dict, match: str) -> None:
     with pytest.raises(ScenarioError, match=match):
         scenario_from_dict(_with("rooms", **generate), "f.toml", HELDOUT)
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_dfcoa_run_plots_a_generated_world(family: str, tmp_path: Path) -> None:
+    from dfcoa_opt.cli import main
+
+    data = _data(family)
+    text = (HELDOUT / f"{family}.toml").read_text()
+    short = tmp_path / f"{family}.toml"
+    short.write_text(text.replace(f"t_max = {data['t_max']}", "t_max = 2.0"))
+    assert main(["run", str(short), "--seed", "20001", "--controller", "reshape", "--plot",
+                 "--out", str(tmp_path)]) == 0
+    assert (tmp_path / f"{family}-reshape-s20001.png").stat().st_size > 10_000

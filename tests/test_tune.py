@@ -201,3 +201,22 @@ def test_the_committed_tuning_sweep_loads() -> None:
     assert sweep.spec.split == "train" and spec.trials >= 1
     assert len({r.scenario for r in sweep.runs}) == 5
     assert load_sweep(HELDOUT.parent / "sweeps" / "tune.toml").sha256 == sweep.sha256
+
+
+def test_kept_workers_serve_every_sweep_of_the_block(tmp_path: Path) -> None:
+    from dfcoa_opt.bench.executors import kept_workers
+    from dfcoa_opt.bench.harness import run_sweep
+
+    cfg = ExecutorConfig("process", 2)
+
+    def pids(name: str) -> set[int]:
+        sw = sweep_from_dict({"scenarios": [str(HELDOUT.parent / "example_empty.toml")],
+                              "controllers": ["goto_slot"], "seeds": 4},
+                             overrides={"t_max": 1.0})
+        res = run_sweep(sw, tmp_path / name, cfg, progress=False)
+        return {r["provenance"]["pid"] for r in res.store.rows()}
+
+    with kept_workers(cfg):
+        first, second = pids("a"), pids("b")
+    assert len(first | second) <= 2  # the same two worker processes
+    assert not pids("c") & (first | second)  # outside the block, a pool of its own

@@ -73,12 +73,6 @@ def barn_score(row: Row) -> float:
     return ref / min(max(t, ref), BARN_CLIP * ref)
 
 
-def censored_time(row: Row, t_max: float) -> float:
-    """Time to goal of a success; ``t_max`` for every other run (s)."""
-    t = as_number((row.get("metrics") or {}).get("time_to_goal"))
-    return t if is_success(row) and math.isfinite(t) else t_max
-
-
 @dataclass(frozen=True)
 class VariantStats:
     """One variant over a set of test worlds.
@@ -90,8 +84,8 @@ class VariantStats:
         success: Successes.
         interval: Wilson 95 % interval of the success rate.
         barn: Mean BARN score.
-        cvar_fce: CVaR(0.9) of the formation centroid error RMS, m.
-        cvar_time: CVaR(0.9) of the time to goal, failures at ``t_max``, s.
+        cvar_fce: CVaR(0.9) of the formation centroid error RMS over every run, m.
+        cvar_time: CVaR(0.9) of the time to goal over the successes, s (NaN without one).
     """
 
     variant: str
@@ -104,8 +98,8 @@ class VariantStats:
     cvar_time: float
 
 
-def variant_stats(name: str, rows: Sequence[Row], t_max: Mapping[str, float]) -> VariantStats:
-    """:class:`VariantStats` of ``rows`` (one variant's); ``t_max`` by scenario name."""
+def variant_stats(name: str, rows: Sequence[Row]) -> VariantStats:
+    """:class:`VariantStats` of ``rows`` (one variant's)."""
     from dfcoa_opt.bench.failures import run_outcome
 
     outcomes: dict[str, int] = {}
@@ -115,10 +109,11 @@ def variant_stats(name: str, rows: Sequence[Row], t_max: Mapping[str, float]) ->
     wins = sum(is_success(r) for r in rows)
     fce = [as_number((r.get("metrics") or {}).get("fce_rms")) if r.get("status") == "ok"
            else math.nan for r in rows]
-    times = [censored_time(r, t_max[str(r["scenario"])]) for r in rows]
+    times = [as_number((r.get("metrics") or {}).get("time_to_goal")) for r in rows
+             if is_success(r)]
     return VariantStats(name, len(rows), outcomes, wins, stats.wilson_interval(wins, len(rows)),
-                        float(np.mean([barn_score(r) for r in rows])),
-                        stats.cvar(fce, ALPHA), stats.cvar(times, ALPHA))
+                        float(np.mean([barn_score(r) for r in rows])), stats.cvar(fce, ALPHA),
+                        stats.cvar(times, ALPHA) if times else math.nan)
 
 
 @dataclass(frozen=True)

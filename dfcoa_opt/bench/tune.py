@@ -259,12 +259,10 @@ def tune_variant(sweep: Sweep, spec: TuneSpec, name: str, results: str | Path,
     store = ResultsStore(root)
     identity = _identity(sweep, variant, params, spec)
     done = _read_journal(root, identity)[:spec.trials]
-    ran = 0
-    grown = replace(sweep, runs=())
     config = config or ExecutorConfig()
     with kept_workers(config):
-        ran = _trials(spec, name, params, base, done, grown, root, store, identity, config,
-                      progress)
+        ran = _trials(spec, name, params, base, done, replace(sweep, runs=()), root, store,
+                      identity, config, progress)
     best = max(done, key=lambda t: (t.value, -t.number))
     folder = Path(out) if out is not None else Path(sweep.source).parent / spec.out
     path = folder / f"{safe_name(name)}.toml"

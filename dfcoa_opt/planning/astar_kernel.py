@@ -235,6 +235,16 @@ def astar_kernel(st, wp, s, t, kind, corner_cutting, h_gain, big_r, o_gain, obst
             nxt = -1
     if not found:
         return np.zeros((0, 2), np.int64), np.inf, expanded
+    return trace_path(parent, s, t, wp, 1), g[t], expanded
+
+
+@numba.njit(cache=True)
+def trace_path(parent, s, t, stride, pad):  # pragma: no cover - numba
+    """The cells from ``s`` to ``t``, following ``parent`` back from ``t``: ``(P, 2)``.
+
+    Node ``v`` is cell ``(v // stride - pad, v % stride - pad)`` (``pad``: the
+    width of a border the search added around the grid).
+    """
     count = 1
     v = t
     while v != s:
@@ -243,8 +253,8 @@ def astar_kernel(st, wp, s, t, kind, corner_cutting, h_gain, big_r, o_gain, obst
     out = np.empty((count, 2), np.int64)
     v = t
     for i in range(count - 1, -1, -1):
-        r = v // wp
-        out[i, 0] = r - 1
-        out[i, 1] = v - r * wp - 1
+        r = v // stride
+        out[i, 0] = r - pad
+        out[i, 1] = v - r * stride - pad
         v = parent[v]
-    return out, g[t], expanded
+    return out

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.params import param
+from dfcoa_opt.planning.astar_kernel import trace_path
 from dfcoa_opt.planning.postprocess import planning_grid
 from dfcoa_opt.planning.registry import register_planner
 from dfcoa_opt.world.grid import OccupancyGrid
@@ -101,17 +102,7 @@ def _search(blocked, penalty, weight, sr, sc, gr, gc):  # pragma: no cover - num
                 heapq.heappush(heap, (ng + hv, v))
     if not closed[t]:
         return np.zeros((0, 2), np.int64)
-    n = 1
-    v = t
-    while v != s:
-        v = parent[v]
-        n += 1
-    out = np.empty((n, 2), np.int64)
-    v = t
-    for i in range(n - 1, -1, -1):
-        out[i, 0], out[i, 1] = v // w, v % w
-        v = parent[v]
-    return out
+    return trace_path(parent, s, t, w, 0)
 
 
 @numba.njit(cache=True)

@@ -16,6 +16,8 @@ contact).
 Values that would be silently ignored are errors too: ``leader.waypoints``
 with a planner other than ``straight`` (and, in the schema, a formation key
 its shape ignores, a moving disc that cannot move, ``range_min >= range_max``).
+A ``[world.generate]`` world is drawn until a passage one robot wide joins the
+leader's start and goal and the planner finds its path (:func:`_generated`).
 Sizes are bounded so that no legal-looking number exhausts memory or overflows:
 a map of at most :data:`MAX_CELLS` cells, and every position and length within
 :data:`MAX_EXTENT` m of the origin (``team.n`` <= 100,000 is a schema bound).
@@ -33,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from dfcoa_opt.errors import DfcoaError, ScenarioError
-from dfcoa_opt.formation import formation_offsets, slot_positions, team_width
+from dfcoa_opt.formation import formation_offsets, slot_positions
 from dfcoa_opt.params import build
 from dfcoa_opt.sim.checks import (
     MAX_EXTENT,
@@ -246,11 +248,6 @@ def _plan_leader(world: World, spec: ScenarioSpec, source: str) -> np.ndarray | 
     return None if path is None or len(path) == 0 else np.asarray(path, dtype=float)
 
 
-def _unreachable(spec: ScenarioSpec, source: str) -> ScenarioError:
-    return ScenarioError(source, "leader.goal", f"unreachable from leader.start with planner "
-                                                f"'{spec.leader.planner}'")
-
-
 def _build_world(spec: ScenarioSpec, source: str, base_dir: Path, offsets: np.ndarray
                  ) -> tuple[World, np.ndarray]:
     """The world of the file (map, shapes, clutter, a generated world) and the leader's path."""
@@ -293,7 +290,8 @@ def _build_world(spec: ScenarioSpec, source: str, base_dir: Path, offsets: np.nd
                   raster=raster)
     path = _plan_leader(world, spec, source)
     if path is None:
-        raise _unreachable(spec, source)
+        raise ScenarioError(source, "leader.goal", f"unreachable from leader.start with planner "
+                                                   f"'{spec.leader.planner}'")
     return world, path
 
 
@@ -329,8 +327,7 @@ def _generated(spec: ScenarioSpec, source: str, offsets: np.ndarray, grid: Occup
         x0, x1, y0, y1 = x0 + t, x1 - t, y0 + t, y1 - t
     layout = gen.Layout(extent=(x0, x1, y0, y1), start=tuple(spec.leader.start),
                         goal=tuple(spec.leader.goal), start_clear=reach + g.keep_clear,
-                        goal_clear=reach + g.keep_clear, robot_radius=spec.robots.radius,
-                        team_width=team_width(offsets, spec.robots.radius), t_max=spec.t_max)
+                        goal_clear=reach + g.keep_clear)
     seed = spec.seed if g.seed is None else g.seed
     rng = gen.world_rng(seed)
     clearance = spec.robots.radius + g.margin

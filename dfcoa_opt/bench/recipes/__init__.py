@@ -47,8 +47,8 @@ from typing import Any
 
 #: Modules whose import registers recipes, in index order.
 RECIPE_MODULES = tuple(f"dfcoa_opt.bench.recipes.{m}" for m in (
-    "examples", "comparison", "beyond", "reshape", "ladders", "dfcoa", "astar", "paper001",
-    "paper002", "paper004"))
+    "examples", "comparison", "beyond", "reshape", "ladders", "heldout", "dfcoa", "astar",
+    "paper001", "paper002", "paper004"))
 
 
 @dataclass(frozen=True)

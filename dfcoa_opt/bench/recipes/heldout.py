@@ -24,13 +24,14 @@ from __future__ import annotations
 import csv
 import io
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench import heldout as ho
 from dfcoa_opt.bench import paired, stats
+from dfcoa_opt.bench.failures import run_outcome
 from dfcoa_opt.bench.plots import ladder_figure, variant_name
 from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.report import aggregate, environment_header
@@ -42,9 +43,6 @@ from dfcoa_opt.bench.trajectories import panels_figure
 from dfcoa_opt.figure_layout import save_png
 from dfcoa_opt.outcome import OUTCOMES
 
-#: The paired tests' baseline: the paper's method with its tuned parameters.
-BASELINE = "dfcoa@tuned"
-
 
 def _pct(k: int, n: int) -> str:
     lo, hi = stats.wilson_interval(k, n)
@@ -55,25 +53,12 @@ def _num(x: float, digits: int = 2) -> str:
     return f"{x:.{digits}f}" if math.isfinite(x) else "—"
 
 
-def _t_max(rows: Sequence[Mapping[str, Any]]) -> dict[str, float]:
-    """Each scenario's time limit, from its file (rows hold only the run's own)."""
-    from dfcoa_opt.sim.loader import read_toml
-
-    out = {}
-    for r in rows:
-        if str(r["scenario"]) not in out:
-            data = read_toml(r["scenario_file"])
-            out[str(r["scenario"])] = float(data.get("t_max", 60.0))
-    return out
-
-
-def _variant_table(names: Sequence[str], rows: Sequence[Mapping[str, Any]],
-                   t_max: Mapping[str, float]) -> tuple[list[str], list[ho.VariantStats]]:
-    out = [ho.variant_stats(n, [r for r in rows if variant_name(r) == n], t_max)
-           for n in names]
+def _variant_table(names: Sequence[str], rows: Sequence[Mapping[str, Any]]
+                   ) -> tuple[list[str], list[ho.VariantStats]]:
+    out = [ho.variant_stats(n, [r for r in rows if variant_name(r) == n]) for n in names]
     out = [s for s in out if s.runs]
     lines = ["| variant | worlds | success | collision | deadlock | timeout | failed | "
-             "BARN score | CVaR(0.9) FCE (m) | CVaR(0.9) time to goal (s) |",
+             "BARN score | CVaR(0.9) FCE RMS (m) | CVaR(0.9) time to goal of the successes (s) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for s in sorted(out, key=lambda s: (-s.success, s.variant)):
         cells = [_pct(s.outcomes.get(o, 0), s.runs) for o in OUTCOMES]
@@ -83,52 +68,49 @@ def _variant_table(names: Sequence[str], rows: Sequence[Mapping[str, Any]],
     return lines, out
 
 
-def _family_tables(names: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> list[str]:
-    scen = sorted({str(r["scenario"]) for r in rows})
-    head = "| variant | " + " | ".join(scen) + " |"
-    lines = [head, "|---|" + "---|" * len(scen)]
-    outc = [head.replace("| variant |", "| variant (S/C/D/T %) |"), lines[1]]
+def _group_tables(names: Sequence[str], rows: Sequence[Mapping[str, Any]],
+                  group_of: Callable[[Mapping[str, Any]], str | None],
+                  groups: Sequence[str]) -> list[str]:
+    """Success, and the outcome classes, of each variant in each group of runs (columns)."""
+    head = "| variant | " + " | ".join(md_escape(g) for g in groups) + " |"
+    rule = "|---|" + "---|" * len(groups)
+    lines, outc = [head, rule], [head.replace("| variant |", "| variant (S/C/D/T %) |"), rule]
     for n in names:
         mine = [r for r in rows if variant_name(r) == n]
         cells, classes = [], []
-        for s in scen:
-            runs = [r for r in mine if str(r["scenario"]) == s]
-            wins = sum(is_success(r) for r in runs)
-            cells.append(_pct(wins, len(runs)))
-            g = aggregate(runs, ())[0] if runs else None
-            classes.append("—" if g is None else "/".join(
-                f"{100 * g[f'{o}_rate']:.0f}" for o in OUTCOMES))
+        for g in groups:
+            runs = [r for r in mine if group_of(r) == g]
+            cells.append(_pct(sum(is_success(r) for r in runs), len(runs)))
+            seen = [run_outcome(r) for r in runs]
+            classes.append("/".join(f"{100 * seen.count(o) / len(runs):.0f}" for o in OUTCOMES)
+                           if runs else "—")
         lines.append(f"| {md_escape(n)} | " + " | ".join(cells) + " |")
         outc.append(f"| {md_escape(n)} | " + " | ".join(classes) + " |")
-    return ["Success by family:", "", *lines, "", "Outcome classes by family (success / "
-            "collision / deadlock / timeout, % of runs):", "", *outc]
+    return ["Success:", "", *lines, "", "Outcome classes (success / collision / deadlock / "
+            "timeout, % of runs):", "", *outc]
 
 
-def _bins_section(names: Sequence[str], rows: Sequence[Mapping[str, Any]],
-                  ws: Sequence[ho.World], dest: Path) -> tuple[list[str], Path]:
+def _difficulty(names: Sequence[str], rows: Sequence[Mapping[str, Any]],
+                ws: Sequence[ho.World], dest: Path) -> tuple[list[str], Path]:
+    """The tables by quartile of the difficulty index, and success against it (figure)."""
     bins = ho.difficulty_bins(ws)
-    bin_of = {(w.scenario, w.seed): ho.bin_of(w.metrics["world_difficulty"], bins)
-              for w in ws}
+    labels = [f"{a:.2f}–{b:.2f}" for a, b in bins]
+    label_of = {(w.scenario, w.seed): labels[ho.bin_of(w.metrics["world_difficulty"], bins)]
+                for w in ws}
     series: dict[str, list[tuple[float, float, float, float, int]]] = {}
-    centre = [(a + b) / 2 for a, b in bins]
-    head = "| variant | " + " | ".join(f"{a:.2f}–{b:.2f}" for a, b in bins) + " |"
-    lines = [head, "|---|" + "---|" * len(bins)]
     for n in names:
-        cells = []
-        for i in range(len(bins)):
+        for (a, b), label in zip(bins, labels, strict=True):
             runs = [r for r in rows if variant_name(r) == n
-                    and bin_of.get(ho.world_key(r)) == i]
-            wins = sum(is_success(r) for r in runs)
-            cells.append(_pct(wins, len(runs)))
+                    and label_of.get(ho.world_key(r)) == label]
             if runs:
+                wins = sum(is_success(r) for r in runs)
                 lo, hi = stats.wilson_interval(wins, len(runs))
                 series.setdefault(ho.method_of(n), []).append(
-                    (centre[i], wins / len(runs), lo, hi, len(runs)))
-        lines.append(f"| {md_escape(n)} | " + " | ".join(cells) + " |")
+                    ((a + b) / 2, wins / len(runs), lo, hi, len(runs)))
     path = ladder_figure(series, "difficulty index (bin centre)",
                          dest / "success_vs_difficulty.png",
                          "Tuned methods on the test worlds: success against difficulty")
-    return lines, path
+    return _group_tables(names, rows, lambda r: label_of.get(ho.world_key(r)), labels), path
 
 
 def _gap_and_defaults(methods: Sequence[str], rows: Sequence[Mapping[str, Any]],
@@ -196,11 +178,9 @@ def render_heldout(store: ResultsStore, dest: Path) -> list[Artefact]:
     tuned_names = [n for n in names if ho.is_tuned(n)]
     methods = [ho.method_of(n) for n in tuned_names if ho.method_of(n) in names]
     tuned_rows = [r for r in rows if variant_name(r) in tuned_names]
-    t_max = _t_max(rows)
     tuned_info = ho.read_tuned(_variant_files(store))
     ws = ho.worlds(rows, tuned_names)
     rho, p_rho, n_rho = ho.spearman(ws)
-    cpu = sum(float((r.get("provenance") or {}).get("wall_time") or 0.0) for r in rows)
     per_scen = {}
     for r in tuned_rows:
         per_scen.setdefault(str(r["scenario"]), set()).add(int(r["seed"]))
@@ -214,34 +194,36 @@ def render_heldout(store: ResultsStore, dest: Path) -> list[Artefact]:
           f"- Test worlds: {len(ws)} for the tuned variants ("
           + ", ".join(f"{s}: {len(v)}" for s, v in sorted(per_scen.items()))
           + f"); {len(defaults_worlds)} for the defaults (the first seeds of each family).",
-          f"- Runs: {len(rows)} in {cpu:.0f} CPU-s (the runs' own wall times).",
+          f"- Runs: {len(rows)}.",
           f"- Spearman's rho between the difficulty index and the failure rate averaged over "
           f"the {len(tuned_names)} tuned variants, over the {n_rho} test worlds: "
           f"**{_num(rho)}** (p = {p_rho:.2g}).", ""]
-    table, _ = _variant_table(tuned_names, tuned_rows, t_max)
+    table, _ = _variant_table(tuned_names, tuned_rows)
     md += ["## Tuned variants over every test world", "", *table, "",
            "BARN score: success × T_ref / clip(T, T_ref, 2 T_ref), T_ref the leader's time "
-           "along its reference path; CVaR(0.9): the mean of the worst 10 % of runs (time to "
-           "goal: failures count as the time limit; FCE: a run that raised counts as "
-           "infinite).", ""]
+           "along its reference path; CVaR(0.9): the mean of the worst 10 % (FCE RMS: of "
+           "every run, a run that raised counting as infinite; time to goal: of the runs "
+           "that succeeded).", ""]
     pool = ho.pooled(tuned_rows)
     groups = aggregate(pool, ("time_to_goal",))
-    comps = [c for c in paired.compare(pool, BASELINE, ()) if c.metric == "success"]
-    if any(ho.is_tuned(n) and n == BASELINE for n in tuned_names):
-        md += ["### Ranking", "", ranking_table(groups, comps, BASELINE),
-               f"Paired over the test worlds against `{BASELINE}` (McNemar exact, Holm).", ""]
-    md += ["## By family", "", *_family_tables(tuned_names, tuned_rows), ""]
-    bins, figure = _bins_section(tuned_names, tuned_rows, ws, dest)
-    md += ["## By difficulty", "", "Success of the tuned variants in four bins of the "
-           "difficulty index (quartiles of the test worlds):", "", *bins, "",
+    baseline = str(store.manifest().get("baseline") or "")
+    comps = [c for c in paired.compare(pool, baseline, ()) if c.metric == "success"]
+    if baseline in tuned_names:
+        md += ["### Ranking", "", ranking_table(groups, comps, baseline),
+               f"Paired over the test worlds against `{baseline}` (McNemar exact, Holm).", ""]
+    families = sorted({str(r["scenario"]) for r in tuned_rows})
+    md += ["## By family", "", *_group_tables(tuned_names, tuned_rows,
+                                              lambda r: str(r["scenario"]), families), ""]
+    bins, figure = _difficulty(tuned_names, tuned_rows, ws, dest)
+    md += ["## By difficulty", "", "The tuned variants in four bins of the difficulty index "
+           "(quartiles of the test worlds).", "", *bins, "",
            f"![success against difficulty]({figure.name})", ""]
     gap, dvt = _gap_and_defaults(methods, rows, tuned_info)
     md += ["## Generalisation gap", "", "Training success of the best trial (the tuning "
            "seeds it was chosen on) against test success:", "", *gap, "",
            "## Defaults against tuned", "", "On the test worlds both ran (paired by world); "
            "training columns from the variants files:", "", *dvt, ""]
-    default_table, _ = _variant_table(methods, [r for r in rows if variant_name(r) in methods],
-                                      t_max)
+    default_table, _ = _variant_table(methods, [r for r in rows if variant_name(r) in methods])
     md += ["### Defaults over their test worlds", "", *default_table, ""]
     arts = [Artefact("success_vs_difficulty.png", "-", "success against the difficulty "
                      "index, one line per tuned method (Wilson 95 %)")]
@@ -258,7 +240,7 @@ def render_heldout(store: ResultsStore, dest: Path) -> list[Artefact]:
         [["scenario", "seed", "failure_rate", *sorted(ws[0].metrics)] if ws else []]
         + [[w.scenario, w.seed, w.failure, *(w.metrics[k] for k in sorted(w.metrics))]
            for w in ws]))
-    _, every = _variant_table(names, rows, t_max)
+    _, every = _variant_table(names, rows)
     atomic_write(dest / "heldout.csv", _csv(
         [["variant", "runs", "success", "ci_low", "ci_high", *OUTCOMES, "failed", "barn_score",
           "cvar_fce", "cvar_time_to_goal"]]

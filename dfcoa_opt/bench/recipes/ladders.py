@@ -3,7 +3,7 @@
 Three ladders over the common scenarios, set by overrides (the scenario files
 are not changed): doorway width 4.0 -> 1.0 m (corridor), clutter density
 0.02 -> 0.12 (clutter), team size 4 -> 100 (large_100). Seeds are added to each
-(rung, variant) until its success rate's Wilson 95 % interval is within ±15
+(rung, variant) until its success rate's Wilson 95 % interval is within ±20
 points (:mod:`dfcoa_opt.bench.precision`). The report draws success rate
 against the rung's value, one line per variant.
 """

@@ -58,9 +58,6 @@ class Layout:
         start_clear: Radius kept free around the start (the formation's reach plus
             ``world.generate.keep_clear``), m.
         goal_clear: Radius kept free around the goal, m.
-        robot_radius: Robot body radius, m.
-        team_width: The formation's width across its heading, bodies included, m.
-        t_max: The run's time limit, s (moving discs are planned over it).
     """
 
     extent: tuple[float, float, float, float]
@@ -68,9 +65,6 @@ class Layout:
     goal: tuple[float, float]
     start_clear: float
     goal_clear: float
-    robot_radius: float
-    team_width: float
-    t_max: float
 
     @property
     def size(self) -> tuple[float, float]:
