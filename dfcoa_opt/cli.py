@@ -85,7 +85,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--only", action="append", help="only this recipe (repeatable)")
     f.add_argument("--seeds", type=int, help="override every recipe's seed count (quick runs)")
     f.add_argument("--keep-logs", action="store_true", help="keep every run's full log in the "
-                   "cache (default: compact the logs no figure reads)")
+                   "cache (default: prune the logs figures read to the fields read, compact "
+                   "the others)")
     _executor_args(f)
     return p
 

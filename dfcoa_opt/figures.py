@@ -51,11 +51,12 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
                  overrides: dict[str, Any] | None = None, compact: bool = True) -> Path:
     """Run every recipe's sweep (reusing cached runs) and render its artefacts.
 
-    After the last render, the logs that no renderer read are compacted
+    After the last render, the logs that a renderer read are pruned to the
+    fields it read, exact, and the others compacted
     (:func:`~dfcoa_opt.bench.logs.compact_store`: trajectories only, about 3 %
     of a full log); rows stay whole, so every table is the same. A renderer
-    that asks for a compacted log (its code changed since) gets those runs
-    simulated again and renders once more.
+    that asks for a compacted log or a pruned field (its code changed since)
+    gets those runs simulated again and renders once more.
 
     Args:
         scenarios: Scenario root; recipe sweeps are relative to it.
@@ -117,43 +118,50 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
     return write_index(out, names)
 
 
-def _compact(cache: Path, reads: dict[str, set[str]]) -> None:
-    """Compact the logs of each rendered recipe's store that its renderer did not read."""
+def _compact(cache: Path, reads: dict[str, dict[str, set[str]]]) -> None:
+    """Shrink each rendered recipe's logs: pruned to the fields read, or compacted if unread."""
     from dfcoa_opt.bench.logs import compact_store
 
-    count = saved = 0
+    compacted = pruned = saved = 0
     for name, keys in reads.items():
         if (cache / name / "logs").is_dir():
-            c, b = compact_store(cache / name, keys)
-            count, saved = count + c, saved + b
+            c, p, b = compact_store(cache / name, keys)
+            compacted, pruned, saved = compacted + c, pruned + p, saved + b
     total = sum(p.stat().st_size for p in cache.rglob("*") if p.is_file())
-    print(f"cache: {count} logs no figure reads compacted ({saved / 2**20:.0f} MB saved); "
-          f"{cache} holds {total / 2**20:.0f} MB", file=sys.stderr)
+    print(f"cache: {compacted} logs no figure reads compacted, {pruned} pruned to the fields "
+          f"figures read ({saved / 2**20:.0f} MB saved); {cache} holds {total / 2**20:.0f} MB",
+          file=sys.stderr)
 
 
 def restore_logs(root: Path) -> int:
-    """Drop the rows of the runs whose logs are compacted, so that the sweep runs them again.
+    """Drop the runs whose logs are compacted or pruned, so that the sweep runs them again.
 
     Returns:
         How many rows were dropped.
     """
-    from dfcoa_opt.sim.log import is_compact
+    from dfcoa_opt.sim.log import is_compact, is_pruned
 
     count = 0
     for path in sorted((root / "logs").glob("*.npz")):
-        if is_compact(path):
+        if is_compact(path) or is_pruned(path):
             (root / "rows" / f"{path.stem}.json").unlink(missing_ok=True)
             path.unlink()
             count += 1
     return count
 
 
+#: What a render returns: its artefacts, its wall time (s), and the logs it read (run key ->
+#: fields).
+_Rendered = tuple[list[Artefact], float, dict[str, set[str]]]
+
+
 def _render(render: Renderer, source: Path, is_store: bool,
-            dest: Path) -> tuple[list[Artefact], float, set[str]]:
+            dest: Path) -> _Rendered:
     """Run one renderer (in the render process or inline); ``source``: store root or scenarios.
 
     Returns:
-        The artefacts, the rendering's wall time (s) and the runs whose logs it read.
+        The artefacts, the rendering's wall time (s) and the runs whose logs it read, with
+        the fields read.
     """
     from dfcoa_opt.bench.logs import tracing
     from dfcoa_opt.bench.store import ResultsStore
@@ -181,9 +189,10 @@ class _Renderer:
             ctx = forkserver_context(WORKER_PRELOAD)
             self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
                                             initializer=init_worker, initargs=(None,))
-        self.pending: list[tuple[Recipe, Path, str, Future[tuple[Any, float, set[str]]]]] = []
-        #: Recipe -> the runs whose logs its render read (recipes with a sweep).
-        self.reads: dict[str, set[str]] = {}
+        self.pending: list[tuple[Recipe, Path, str, Future[_Rendered]]] = []
+        #: Recipe -> the runs whose logs its render read -> the fields read (recipes with a
+        #: sweep).
+        self.reads: dict[str, dict[str, set[str]]] = {}
         #: Recipes whose render wanted a compacted log, to render again.
         self.redo: list[tuple[Recipe, Path]] = []
 
@@ -196,7 +205,7 @@ class _Renderer:
         ``done`` (what the sweep did) starts the recipe's progress line.
         """
         args = (r.render, source, r.sweep is not None, dest)
-        fut: Future[tuple[Any, float, set[str]]] = Future()
+        fut: Future[_Rendered] = Future()
         if self.pool is not None and _picklable(r.render):
             with deferred():  # the first submit starts the render process
                 fut = self.pool.submit(_render, *args)
@@ -208,7 +217,7 @@ class _Renderer:
 
     def render_now(self, r: Recipe, source: Path, dest: Path, done: str) -> None:
         """Render ``r`` in this process and write its artefact list at once."""
-        fut: Future[tuple[Any, float, set[str]]] = Future()
+        fut: Future[_Rendered] = Future()
         fut.set_result(_render(r.render, source, True, dest))
         self.pending.append((r, dest, done, fut))
         self._collect(block=True)

@@ -7,7 +7,7 @@ from dfcoa_opt.bench import recipes as registry
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.cli import main
 from dfcoa_opt.figures import make_figures
-from dfcoa_opt.sim.log import is_compact
+from dfcoa_opt.sim.log import is_compact, is_pruned
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 QUICK = {"t_max": 3.0}
@@ -28,14 +28,17 @@ def test_figures_smoke_renders_every_recipe_and_reuses_the_cache(tmp_path):
     failed = [json.loads(p.read_text())["error"] for p in rows
               if json.loads(p.read_text())["status"] != "ok"]
     assert not failed
-    # every log a figure read is whole; the others are compacted (the ladders draw none)
-    compacted = 0
+    # every log a figure read keeps the fields read (pruned); the others are compacted (the
+    # ladders draw none)
+    compacted = pruned = 0
     for listing in cache.glob("*/logs_read.json"):
-        read = set(json.loads(listing.read_text()))
+        read = json.loads(listing.read_text())
         for log in (listing.parent / "logs").glob("*.npz"):
             assert is_compact(log) == (log.stem not in read), log
             compacted += log.stem not in read
+            pruned += is_pruned(log)
     assert compacted >= len(list((cache / "ladders" / "logs").glob("*.npz"))) > 0
+    assert pruned > 0
     report = (out / "comparison" / "report.md").read_bytes()
     stale = out / "comparison" / "traj_clutter_c4d9c17a7e_s0.png"  # an older file name
     stale.write_bytes(b"old")

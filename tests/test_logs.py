@@ -12,6 +12,7 @@ from dfcoa_opt.bench.logs import (
     compact_bytes,
     compact_store,
     load_compact,
+    prune_log,
     read_log,
     tracing,
 )
@@ -19,7 +20,8 @@ from dfcoa_opt.bench.runner import execute
 from dfcoa_opt.bench.store import ResultsStore
 from dfcoa_opt.bench.sweep import RunSpec
 from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.sim.log import RunLog, is_compact
+from dfcoa_opt.figures import restore_logs
+from dfcoa_opt.sim.log import RunLog, is_compact, is_pruned
 
 CROSSING = Path(__file__).resolve().parents[1] / "scenarios" / "bench" / "crossing.toml"
 
@@ -53,19 +55,44 @@ def test_compact_log_keeps_the_trajectories_to_a_millimetre(store: ResultsStore)
     assert "\n" not in str(e.value)
 
 
-def test_the_store_keeps_what_was_read_and_compacts_the_rest(store: ResultsStore) -> None:
+def test_a_log_read_whole_stays_whole(tmp_path: Path, store: ResultsStore) -> None:
+    row = dict(store.read_row("crossing__goto_slot+cbf__s0"))
+    src = store.root / row["log"]
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "logs" / src.name).write_bytes(src.read_bytes())
+    with tracing() as reads:
+        read_log(tmp_path, row).digest()  # reads every field
+    assert compact_store(tmp_path, reads) == (0, 0, 0)
+    assert (tmp_path / "logs" / src.name).read_bytes() == src.read_bytes()
+
+
+def test_the_store_prunes_what_was_read_and_compacts_the_rest(store: ResultsStore) -> None:
     rows = {k: store.read_row(k) for k in ("crossing__goto_slot+cbf__s0",
                                            "crossing__goto_slot+cbf__s1")}
     kept = store.root / rows["crossing__goto_slot+cbf__s0"]["log"]
-    before = kept.read_bytes()
-    with tracing() as keys:
-        read_log(store.root, rows["crossing__goto_slot+cbf__s0"])
-    assert keys == {"crossing__goto_slot+cbf__s0"}
-    count, saved = compact_store(store.root, keys)
-    assert count == 1 and saved > 0
-    assert kept.read_bytes() == before  # the drawn log is untouched
+    full = RunLog.load(kept)
+    size = kept.stat().st_size
+    with tracing() as reads:
+        log = read_log(store.root, rows["crossing__goto_slot+cbf__s0"])
+        assert log.n_robots == full.n_robots and log.t[-1] == full.t[-1]
+    assert reads == {"crossing__goto_slot+cbf__s0": {"pose", "t"}}
+    compacted, pruned, saved = compact_store(store.root, reads)
+    assert (compacted, pruned) == (1, 1) and saved > 0
+    assert is_pruned(kept) and not is_compact(kept) and kept.stat().st_size < 0.5 * size
+    again = read_log(store.root, rows["crossing__goto_slot+cbf__s0"])
+    for name in ("pose", "t"):  # the fields read, bit for bit
+        assert getattr(again, name).tobytes() == getattr(full, name).tobytes()
+    assert again.meta == full.meta
+    with pytest.raises(LogCompacted, match=r"the log of crossing__goto_slot\+cbf__s0 was pruned "
+                                           r"to the fields figures read \(not 'twist'\)"):
+        _ = again.twist
+    with pytest.raises(DfcoaError, match=r"a pruned log \(only the fields figures read: pose, t\)"):
+        RunLog.load(kept)
     with pytest.raises(LogCompacted, match=r"the log of crossing__goto_slot\+cbf__s1 was "
                                            r"compacted"):
         read_log(store.root, rows["crossing__goto_slot+cbf__s1"])
-    assert compact_store(store.root, keys) == (0, 0)  # nothing left to compact
+    assert compact_store(store.root, reads) == (0, 0, 0)  # nothing left to shrink
+    assert prune_log(kept, {"pose", "t", "twist"}) == 0  # a pruned log is never pruned again
     assert store.read_row("crossing__goto_slot+cbf__s1") == rows["crossing__goto_slot+cbf__s1"]
+    assert restore_logs(store.root) == 2  # both runs are simulated again for a redo
+    assert not list((store.root / "rows").glob("*.json"))

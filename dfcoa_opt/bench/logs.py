@@ -1,14 +1,16 @@
-"""Reading the runs' logs of a results folder, and compacting the logs no figure reads.
+"""Reading the runs' logs of a results folder, and shrinking the logs figures do not need.
 
 Every renderer reads a run's log through :func:`read_log`, which can record
-what it reads (:func:`tracing`). ``make figures`` keeps, after its last render,
-the full log of every run a figure drew and replaces each other log by a
+which fields of which runs it reads (:func:`tracing`). ``make figures`` then,
+after its last render, *prunes* the log of every run a figure drew to the fields
+it read, exact (:func:`pruned_bytes`), and replaces each other log by a
 *compact log* (:func:`compact_bytes`): the robots' and the leader's poses and
 the moving discs at 1 mm and 1 mrad, the contact counts and the run's facts,
 about 3 % of the full log. Rows (metrics, outcome, digest) are untouched, so
 every table is the same and a cached run stays cached; a figure that later
-wants a compacted log gets :class:`LogCompacted`, and ``make figures`` runs
-those runs again (the same bits: the digest in the row says so).
+wants a compacted log, or a field its pruned log lacks, gets
+:class:`LogCompacted`, and ``make figures`` runs those runs again (the same
+bits: the digest in the row says so).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import io
 import json
 import zipfile
 from collections.abc import Iterable, Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -27,50 +29,74 @@ from numpy.typing import NDArray
 
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.sim.log import COMPACT_FORMAT, RunLog, is_compact
+from dfcoa_opt.sim.log import COMPACT_FORMAT, PRUNED_MEMBER, RunLog, is_compact, is_pruned
 
 Row = Mapping[str, Any]
 #: Quantisation of the compact logs: positions in mm, headings in mrad.
 POSITION_STEP, ANGLE_STEP = 1e-3, 1e-3
 
-_TRACE: list[set[str]] = []
+#: Open :func:`tracing` blocks: run key -> the log fields read.
+_TRACE: list[dict[str, set[str]]] = []
+#: The fields of a log (``meta`` included).
+FIELDS = frozenset(f.name for f in fields(RunLog))
 
 
 class LogCompacted(DfcoaError):
-    """A renderer asked for the full log of a run whose log was compacted."""
+    """A renderer asked for a part of a run's log that the cache no longer keeps."""
 
-    def __init__(self, results_dir: Path, key: str) -> None:
-        super().__init__(f"{results_dir}: the log of {key} was compacted (only its trajectories "
-                         "are kept); run it again for the full log")
+    def __init__(self, results_dir: Path, key: str, field: str | None = None) -> None:
+        what = (f"was pruned to the fields figures read (not {field!r})" if field else
+                "was compacted (only its trajectories are kept)")
+        super().__init__(f"{results_dir}: the log of {key} {what}; run it again for the full "
+                         "log")
         self.results_dir, self.key = results_dir, key
 
 
+class _ReadLog(RunLog):
+    """A log read by :func:`read_log`: notes the fields read; a pruned one lacks some.
+
+    ``_reads``: the sets of the open :func:`tracing` blocks to add each field
+    read to; ``_missing``: the fields a pruned log does not keep, whose reading
+    raises :class:`LogCompacted` (``_where``: its results folder and run key).
+    """
+
+    def __getattribute__(self, name: str) -> Any:
+        if name in FIELDS:
+            state = object.__getattribute__(self, "__dict__")
+            for read in state.get("_reads", ()):
+                read.add(name)
+            if name in state.get("_missing", ()):
+                raise LogCompacted(*state["_where"], name)
+        return object.__getattribute__(self, name)
+
+
 @contextlib.contextmanager
-def tracing() -> Iterator[set[str]]:
-    """Record the keys of the runs whose logs :func:`read_log` reads inside the block."""
-    keys: set[str] = set()
-    _TRACE.append(keys)
+def tracing() -> Iterator[dict[str, set[str]]]:
+    """Record, inside the block, the runs whose logs :func:`read_log` reads and the fields read."""
+    reads: dict[str, set[str]] = {}
+    _TRACE.append(reads)
     try:
-        yield keys
+        yield reads
     finally:
-        _TRACE.remove(keys)
+        _TRACE.remove(reads)
 
 
 def read_log(results_dir: str | Path, row: Row) -> RunLog:
-    """A row's full log (the one way reports and figures read logs).
+    """A row's log (the one way reports and figures read logs); every field exact.
 
     Raises:
-        LogCompacted: Its log was compacted.
+        LogCompacted: Its log was compacted, or a field its pruned log lacks is read.
         DfcoaError: No such file, or a damaged one (one line).
     """
     results_dir = Path(results_dir)
     path = results_dir / str(row["log"])
-    for keys in _TRACE:
-        keys.add(str(row["key"]))
+    key = str(row["key"])
+    reads = [trace.setdefault(key, set()) for trace in _TRACE]
     try:
-        if is_compact(path):
-            raise LogCompacted(results_dir, str(row["key"]))
-        return RunLog.load(path)
+        with np.load(path, allow_pickle=False) as z:
+            if "format" in z.files:
+                raise LogCompacted(results_dir, key)
+            data = {k: z[k] for k in z.files}
     except FileNotFoundError:
         raise DfcoaError(f"{path}: log file not found") from None
     except DfcoaError:
@@ -78,6 +104,13 @@ def read_log(results_dir: str | Path, row: Row) -> RunLog:
     except Exception as exc:  # noqa: BLE001 - numpy/zip/json errors of a damaged file
         problem = " ".join(str(exc).split()) or type(exc).__name__
         raise DfcoaError(f"{path}: cannot read the log ({problem})") from None
+    missing: frozenset[str] = frozenset()
+    if PRUNED_MEMBER in data:
+        missing = FIELDS - {"meta"} - {str(f) for f in data.pop(PRUNED_MEMBER)}
+        data.update({name: np.empty(0) for name in missing})
+    log = _ReadLog.from_members(data)
+    log.__dict__.update(_reads=reads, _missing=missing, _where=(results_dir, key))
+    return log
 
 
 def _deltas(x: NDArray[np.float64], step: float) -> NDArray[np.int64]:
@@ -164,25 +197,69 @@ def compact_log(path: str | Path) -> int:
     if is_compact(path):
         return 0
     before = path.stat().st_size
-    data = compact_bytes(RunLog.load(path))
+    try:
+        data = compact_bytes(_load_any(path))
+    except LogCompacted:  # a pruned log without the trajectories: left as it is
+        return 0
     atomic_write(path, data)
     return before - len(data)
 
 
-def compact_store(root: str | Path, keep: Iterable[str]) -> tuple[int, int]:
-    """Compact every log of a results folder but those of the runs ``keep``.
+def pruned_bytes(log: RunLog, keep: Iterable[str]) -> bytes:
+    """A log file with the fields ``keep`` only (and ``meta``), exact; deflate level 6."""
+    keep = sorted(set(keep) - {"meta"})
+    members = {PRUNED_MEMBER: np.array(keep), "meta": np.array(json.dumps(log.meta, default=str)),
+               **{name: getattr(log, name) for name in keep}}
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=6) as z:
+        for name, arr in members.items():
+            with z.open(f"{name}.npy", "w", force_zip64=True) as f:
+                np.lib.format.write_array(f, np.asanyarray(arr), allow_pickle=False)
+    return buf.getvalue()
+
+
+def prune_log(path: str | Path, keep: Iterable[str]) -> int:
+    """Keep only the fields ``keep`` of a full log file (atomically); the bytes saved.
+
+    A log that is already pruned or compact, or of which every field is kept, is left as it is.
+    """
+    path = Path(path)
+    keep = set(keep)
+    if is_compact(path) or is_pruned(path) or FIELDS <= keep | {"meta"}:
+        return 0
+    before = path.stat().st_size
+    data = pruned_bytes(RunLog.load(path), keep)
+    if len(data) >= before:
+        return 0
+    atomic_write(path, data)
+    return before - len(data)
+
+
+def _load_any(path: Path) -> RunLog:
+    """A full or pruned log (a pruned one's missing fields are empty arrays)."""
+    return read_log(path.parent.parent, {"key": path.stem, "log": f"logs/{path.name}"})
+
+
+def compact_store(root: str | Path, keep: Mapping[str, Iterable[str]]) -> tuple[int, int, int]:
+    """Prune the logs of the runs ``keep`` to the fields read and compact every other log.
+
+    Args:
+        root: The results folder.
+        keep: Run key -> the log fields figures read (:func:`tracing`).
 
     Returns:
-        ``(logs compacted, bytes saved)``.
+        ``(logs compacted, logs pruned, bytes saved)``.
     """
     root = Path(root)
-    keep = set(keep)
-    count = saved = 0
+    compacted = pruned = saved = 0
     for path in sorted((root / "logs").glob("*.npz")):
         if path.stem in keep:
-            continue
-        gained = compact_log(path)
-        count += gained > 0
+            gained = prune_log(path, keep[path.stem])
+            pruned += gained > 0
+        else:
+            gained = compact_log(path)
+            compacted += gained > 0
         saved += gained
-    atomic_write(root / "logs_read.json", json.dumps(sorted(keep), indent=0) + "\n")
-    return count, saved
+    listing = {key: sorted(f) for key, f in sorted(keep.items())}
+    atomic_write(root / "logs_read.json", json.dumps(listing, indent=0) + "\n")
+    return compacted, pruned, saved

@@ -35,6 +35,8 @@ UNCHANGED_TOL = 1e-9
 TIMING_FIELDS = ("filter_time",)
 #: The ``format`` member of a compact log (:mod:`dfcoa_opt.bench.logs`): trajectories only.
 COMPACT_FORMAT = "dfcoa-compact-log/1"
+#: The member of a pruned log (:mod:`dfcoa_opt.bench.logs`) naming the fields it keeps.
+PRUNED_MEMBER = "pruned"
 
 
 def is_compact(path: str | Path) -> bool:
@@ -42,6 +44,15 @@ def is_compact(path: str | Path) -> bool:
     try:
         with zipfile.ZipFile(path) as z:
             return "format.npy" in z.namelist()
+    except zipfile.BadZipFile:
+        return False
+
+
+def is_pruned(path: str | Path) -> bool:
+    """Whether a log file keeps only some fields, exact (the ones figures read)."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            return f"{PRUNED_MEMBER}.npy" in z.namelist()
     except zipfile.BadZipFile:
         return False
 
@@ -224,7 +235,15 @@ class RunLog:
                 raise DfcoaError(f"{path}: a compact log (trajectories only, "
                                  f"{str(z['format'])}); read it with "
                                  "dfcoa_opt.bench.logs.load_compact")
-            data = {k: z[k] for k in z.files}
+            if PRUNED_MEMBER in z.files:
+                raise DfcoaError(f"{path}: a pruned log (only the fields figures read: "
+                                 f"{', '.join(map(str, z[PRUNED_MEMBER]))}); read it with "
+                                 "dfcoa_opt.bench.logs.read_log")
+            return cls.from_members({k: z[k] for k in z.files})
+
+    @classmethod
+    def from_members(cls, data: dict[str, np.ndarray]) -> RunLog:
+        """A log from the members of its ``.npz`` file (see :meth:`to_bytes`); consumes ``data``."""
         meta = json.loads(str(data.pop("meta")))
         if "pose_est" not in data:
             data["pose_est"] = data["pose"].copy()
