@@ -96,3 +96,18 @@ def test_the_store_prunes_what_was_read_and_compacts_the_rest(store: ResultsStor
     assert store.read_row("crossing__goto_slot+cbf__s1") == rows["crossing__goto_slot+cbf__s1"]
     assert restore_logs(store.root) == 2  # both runs are simulated again for a redo
     assert not list((store.root / "rows").glob("*.json"))
+
+
+def test_a_pruned_log_keeps_pose_est_that_the_full_log_left_out(tmp_path: Path) -> None:
+    s = ResultsStore(tmp_path)
+    s.write(execute(RunSpec(str(CROSSING), "crossing", "goto_slot", 0, '{"t_max":3.0}')))
+    row = s.read_row("crossing__goto_slot__s0")
+    full = RunLog.load(tmp_path / row["log"])
+    assert prune_log(tmp_path / row["log"], {"pose_est", "t"}) > 0
+    log = read_log(tmp_path, row)
+    assert log.pose_est.tobytes() == full.pose_est.tobytes() == full.pose.tobytes()
+    with pytest.raises(LogCompacted, match=r"not 'pose'"):
+        _ = log.pose
+    before = (tmp_path / row["log"]).read_bytes()
+    assert compact_store(tmp_path, {}) == (0, 0, 0)  # no trajectories to compact: left as is
+    assert (tmp_path / row["log"]).read_bytes() == before

@@ -104,13 +104,30 @@ def read_log(results_dir: str | Path, row: Row) -> RunLog:
     except Exception as exc:  # noqa: BLE001 - numpy/zip/json errors of a damaged file
         problem = " ".join(str(exc).split()) or type(exc).__name__
         raise DfcoaError(f"{path}: cannot read the log ({problem})") from None
-    missing: frozenset[str] = frozenset()
+    missing: set[str] = set()
     if PRUNED_MEMBER in data:
         missing = FIELDS - {"meta"} - {str(f) for f in data.pop(PRUNED_MEMBER)}
-        data.update({name: np.empty(0) for name in missing})
+    return _log(data, missing, (results_dir, key), reads)
+
+
+def _log(data: dict[str, np.ndarray], missing: Iterable[str], where: tuple[Path, str],
+         reads: list[set[str]]) -> RunLog:
+    """A :class:`_ReadLog` of a file's members; the fields ``missing`` raise when read."""
+    missing = frozenset(missing)
+    data.update({name: np.empty(0) for name in missing})
     log = _ReadLog.from_members(data)
-    log.__dict__.update(_reads=reads, _missing=missing, _where=(results_dir, key))
+    log.__dict__.update(_reads=reads, _missing=missing, _where=where)
     return log
+
+
+def _fields_of(path: Path, names: Iterable[str]) -> RunLog:
+    """Only the fields ``names`` (and ``meta``) of a full or pruned log file, read fast."""
+    names = {*names, "meta"}
+    with np.load(path, allow_pickle=False) as z:
+        data = {k: z[k] for k in names if k in z.files}
+        if "pose_est" in names and "pose_est" not in z.files and "pose" in z.files:
+            data["pose_est"] = z["pose"]  # a full log leaves out pose_est when it is pose
+    return _log(data, FIELDS - {"meta"} - set(data), (path.parent.parent, path.stem), [])
 
 
 def _deltas(x: NDArray[np.float64], step: float) -> NDArray[np.int64]:
@@ -119,12 +136,18 @@ def _deltas(x: NDArray[np.float64], step: float) -> NDArray[np.int64]:
     return np.diff(q, axis=0, prepend=np.zeros_like(q[:1]))
 
 
+#: The fields a compact log is made of.
+COMPACT_SOURCES = ("t", "pose", "leader", "dyn_pos", "offsets", "dyn_radius", "robot_contacts",
+                   "obstacle_contacts", "dynamic_contacts", "collision_events")
+
+
 def compact_bytes(log: RunLog) -> bytes:
     """The compact form of a log: poses, leader, moving discs, contacts and facts.
 
     Poses and the leader's pose at :data:`POSITION_STEP` m and
     :data:`ANGLE_STEP` rad, stored as differences between steps; contact
-    counts, offsets, disc radii and ``meta`` as they are. Deflate level 9.
+    counts, offsets, disc radii and ``meta`` as they are. Deflate level 6
+    (level 9: 5x the time for 4 % less).
     """
     members = {
         "format": np.array(COMPACT_FORMAT),
@@ -140,7 +163,7 @@ def compact_bytes(log: RunLog) -> bytes:
         "dynamic_contacts": log.dynamic_contacts, "collision_events": log.collision_events,
     }
     buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as z:
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=6) as z:
         for name, arr in members.items():
             with z.open(f"{name}.npy", "w", force_zip64=True) as f:
                 np.lib.format.write_array(f, np.asanyarray(arr), allow_pickle=False)
@@ -198,7 +221,7 @@ def compact_log(path: str | Path) -> int:
         return 0
     before = path.stat().st_size
     try:
-        data = compact_bytes(_load_any(path))
+        data = compact_bytes(_fields_of(path, COMPACT_SOURCES))
     except LogCompacted:  # a pruned log without the trajectories: left as it is
         return 0
     atomic_write(path, data)
@@ -228,16 +251,11 @@ def prune_log(path: str | Path, keep: Iterable[str]) -> int:
     if is_compact(path) or is_pruned(path) or FIELDS <= keep | {"meta"}:
         return 0
     before = path.stat().st_size
-    data = pruned_bytes(RunLog.load(path), keep)
+    data = pruned_bytes(_fields_of(path, keep), keep)
     if len(data) >= before:
         return 0
     atomic_write(path, data)
     return before - len(data)
-
-
-def _load_any(path: Path) -> RunLog:
-    """A full or pruned log (a pruned one's missing fields are empty arrays)."""
-    return read_log(path.parent.parent, {"key": path.stem, "log": f"logs/{path.name}"})
 
 
 def compact_store(root: str | Path, keep: Mapping[str, Iterable[str]]) -> tuple[int, int, int]:
