@@ -16,9 +16,7 @@ bits: the digest in the row says so).
 from __future__ import annotations
 
 import contextlib
-import io
 import json
-import zipfile
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -29,7 +27,14 @@ from numpy.typing import NDArray
 
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.sim.log import COMPACT_FORMAT, PRUNED_MEMBER, RunLog, is_compact, is_pruned
+from dfcoa_opt.sim.log import (
+    COMPACT_FORMAT,
+    PRUNED_MEMBER,
+    RunLog,
+    is_compact,
+    is_pruned,
+    npz_bytes,
+)
 
 Row = Mapping[str, Any]
 #: Quantisation of the compact logs: positions in mm, headings in mrad.
@@ -162,12 +167,7 @@ def compact_bytes(log: RunLog) -> bytes:
         "robot_contacts": log.robot_contacts, "obstacle_contacts": log.obstacle_contacts,
         "dynamic_contacts": log.dynamic_contacts, "collision_events": log.collision_events,
     }
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=6) as z:
-        for name, arr in members.items():
-            with z.open(f"{name}.npy", "w", force_zip64=True) as f:
-                np.lib.format.write_array(f, np.asanyarray(arr), allow_pickle=False)
-    return buf.getvalue()
+    return npz_bytes(members, 6)
 
 
 @dataclass(frozen=True)
@@ -233,12 +233,7 @@ def pruned_bytes(log: RunLog, keep: Iterable[str]) -> bytes:
     keep = sorted(set(keep) - {"meta"})
     members = {PRUNED_MEMBER: np.array(keep), "meta": np.array(json.dumps(log.meta, default=str)),
                **{name: getattr(log, name) for name in keep}}
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=6) as z:
-        for name, arr in members.items():
-            with z.open(f"{name}.npy", "w", force_zip64=True) as f:
-                np.lib.format.write_array(f, np.asanyarray(arr), allow_pickle=False)
-    return buf.getvalue()
+    return npz_bytes(members, 6)
 
 
 def prune_log(path: str | Path, keep: Iterable[str]) -> int:

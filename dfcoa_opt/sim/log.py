@@ -39,6 +39,16 @@ COMPACT_FORMAT = "dfcoa-compact-log/1"
 PRUNED_MEMBER = "pruned"
 
 
+def npz_bytes(members: dict[str, Any], level: int) -> bytes:
+    """An ``.npz`` file's contents (``np.load`` reads it), each member deflated at ``level``."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=level) as z:
+        for name, arr in members.items():
+            with z.open(f"{name}.npy", "w", force_zip64=True) as f:
+                np.lib.format.write_array(f, np.asanyarray(arr), allow_pickle=False)
+    return buf.getvalue()
+
+
 def is_compact(path: str | Path) -> bool:
     """Whether a log file is a compact log (trajectories only), not a :class:`RunLog`."""
     try:
@@ -208,15 +218,10 @@ class RunLog:
         is ``pose`` bit for bit (``truth`` localisation), and :meth:`load` puts
         it back: on a 100-robot run that spares 39 of 159 ms and 1.5 of 6.5 MB.
         """
-        buf = io.BytesIO()
         members = {"meta": np.array(json.dumps(self.meta, default=str)), **self.arrays()}
         if _same_bits(self.pose_est, self.pose):
             del members["pose_est"]
-        with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as z:
-            for name, arr in members.items():
-                with z.open(f"{name}.npy", "w", force_zip64=True) as f:
-                    np.lib.format.write_array(f, np.asanyarray(arr), allow_pickle=False)
-        return buf.getvalue()
+        return npz_bytes(members, 1)
 
     def save(self, path: str | Path) -> Path:
         """Write :meth:`to_bytes` to ``path`` atomically; returns the path."""
