@@ -93,6 +93,18 @@ def test_ladder_sweep_adds_seeds_to_undecided_cells_and_reports_curves(ladder_re
     assert "| goto_slot | 0% [0, 49] (0/4) | 0% [0, 49] (0/4) |" in md
 
 
+def test_ladder_sweep_with_decide_at_stops_a_cell_once_it_is_wholly_below_the_line(tmp_path):
+    scen = (ROOT / "scenarios" / "example_obstacles.toml").as_posix()
+    sweep = tmp_path / "ladder.toml"
+    sweep.write_text(f'scenarios = ["{scen}"]\ncontrollers = ["goto_slot", "orca_nav"]\n'
+                     f'seeds = 2\nmax_seeds = 6\nmax_half_width = 0.25\ndecide_at = 0.6\n'
+                     f'[grid]\nt_max = [4.0]\n[ladder]\nkey = "team.n"\nvalues = [2, 3]\n')
+    res = run_sweep(sweep, tmp_path / "res", ExecutorConfig("serial"), progress=False)
+    # 0 of 2 is [0, 65.8 %], across 60 %; 0 of 3 is [0, 56.2 %], wholly below: 3 seeds a cell,
+    # one fewer than without decide_at (above)
+    assert len(res.sweep.runs) == 2 * 2 * 3 and res.ran == 12
+
+
 def test_panels_have_one_titled_panel_per_variant_with_the_same_axes(ladder_results):
     _, res = ladder_results
     rows = [r for r in res.store.rows() if r["seed"] == 0 and r["ladder_value"] == 2.0]

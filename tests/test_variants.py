@@ -158,6 +158,21 @@ def test_seeds_needed_settles_extreme_cells_early_and_caps_at_the_limit():
     assert precision.seeds_needed(5, 40, 0.05, 40) == 40  # at the cap already
 
 
+def test_decide_at_settles_a_cell_whose_interval_lies_on_one_side_of_the_line():
+    # 0 of 4: Wilson [0, 49.0 %] is +-24.5 points wide, yet wholly below 50 %
+    assert not precision.settled(0, 4, 0.2)
+    assert precision.settled(0, 4, 0.2, decide_at=0.5)
+    assert precision.settled(4, 4, 0.2, decide_at=0.5)  # [51.0 %, 100 %]
+    assert not precision.settled(4, 4, 0.2, decide_at=0.6)  # straddles 60 %
+    assert not precision.settled(0, 3, 0.2, decide_at=0.5)  # [0, 56.2 %] straddles it
+    assert not precision.settled(2, 4, 0.2, decide_at=0.5)
+    assert precision.seeds_needed(0, 4, 0.2, 40, decide_at=0.5) == 4
+    assert precision.seeds_needed(0, 4, 0.2, 40) == 6  # [0, 39.0 %] at 6
+    # 7 of 8: [52.9 %, 97.8 %], +-22 points, wholly above 50 %
+    assert precision.seeds_needed(7, 8, 0.2, 40, decide_at=0.5) == 8
+    assert precision.seeds_needed(7, 8, 0.2, 40) > 8
+
+
 def test_extra_runs_continue_the_seeds_of_undecided_cells_only(tmp_path):
     sw = load_sweep(_sweep(tmp_path, 'controllers = ["goto_slot", "dfcoa"]\nseeds = 10\n'
                                      'max_seeds = 40\n'))
@@ -170,6 +185,17 @@ def test_extra_runs_continue_the_seeds_of_undecided_cells_only(tmp_path):
     del won[sw.runs[-1].key]
     assert precision.extra_runs(sw.runs, won, 0.15, 40) == []
     assert sw.max_seeds == 40 and load_sweep(sw.source, seeds=2).max_seeds == 0
+
+
+def test_extra_runs_with_decide_at_add_nothing_to_cells_wholly_on_one_side(tmp_path):
+    sw = load_sweep(_sweep(tmp_path, 'controllers = ["goto_slot", "dfcoa"]\nseeds = 4\n'
+                                     'max_seeds = 40\nmax_half_width = 0.2\ndecide_at = 0.5\n'))
+    assert sw.spec.decide_at == 0.5
+    won = {r.key: r.controller == "goto_slot" for r in sw.runs}  # 4 of 4 and 0 of 4
+    assert len(precision.extra_runs(sw.runs, won, 0.2, 40)) == 2 * (6 - 4)
+    assert precision.extra_runs(sw.runs, won, 0.2, 40, sw.spec.decide_at) == []
+    with pytest.raises(ScenarioError, match="decide_at"):
+        load_sweep(_sweep(tmp_path, 'controllers = ["goto_slot"]\ndecide_at = 1.0\n'))
 
 
 @pytest.mark.parametrize("path", sorted((ROOT / "scenarios" / "sweeps").glob("*.toml")),

@@ -144,7 +144,8 @@ def _grow(sw: Sweep, store: ResultsStore,
     while sw.max_seeds:
         rows = [row for r in sw.runs if (row := store.read_row(r.key)) is not None]
         extra = precision.extra_runs(sw.runs, precision.success_by_key(rows),
-                                     sw.spec.max_half_width, sw.max_seeds)
+                                     sw.spec.max_half_width, sw.max_seeds,
+                                     sw.spec.decide_at)
         if not extra:
             break
         sw = sw.extended(extra)

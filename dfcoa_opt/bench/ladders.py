@@ -45,7 +45,9 @@ def sections(groups: Sequence[Mapping[str, Any]], manifest: Mapping[str, Any],
                          default=math.nan)
             md += [f"## Ladder `{label}` on `{scen}`", "", tables.ladder_table(mine, label),
                    f"Success rate with its Wilson 95 % interval; the widest interval is "
-                   f"±{100 * widest:.0f} points.", "", f"![ladder {label}]({name})", ""]
+                   f"±{100 * widest:.0f} points (one that lies wholly above or below 50 % "
+                   f"settles where the variant breaks however wide it is).", "",
+                   f"![ladder {label}]({name})", ""]
             md += ["Where each variant breaks, going up the ladder (the rungs in the sweep "
                    "file's order, easy to hard): the first rung below 50 % success and its "
                    "most frequent failure.", "",

@@ -83,6 +83,9 @@ class SweepSpec:
                                   "(dfcoa_opt.bench.precision).", ge=0)
     max_half_width: float = param(0.15, doc="Target half-width of the success rate's interval "
                                             "with max_seeds (fraction).", gt=0.0, le=0.5)
+    decide_at: float = param(0.0, doc="With max_seeds and > 0: a cell whose interval lies wholly "
+                                      "above or below this success rate (fraction) is settled "
+                                      "too, however wide; 0 = off.", ge=0.0, lt=1.0)
     first_seed: int = param(0, doc="The first seed.", ge=0)
     grid: dict[str, Any] = param(default_factory=dict, doc="Dotted scenario key -> list of "
                                                            "values; runs take every combination.")
