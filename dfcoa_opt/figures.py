@@ -112,20 +112,24 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
                                progress=progress, overrides=overrides)
             renderer.render_now(r, result.store.root, dest, f"{restored} compacted runs "
                                                             "simulated again for their logs")
-    if compact:
-        _compact(cache, renderer.reads)
+        if compact:
+            _compact(cache, renderer.reads, renderer.pool)
     print(f"figures: {time.perf_counter() - start:.1f} s in all", file=sys.stderr)
     return write_index(out, names)
 
 
-def _compact(cache: Path, reads: dict[str, dict[str, set[str]]]) -> None:
-    """Shrink each rendered recipe's logs: pruned to the fields read, or compacted if unread."""
+def _compact(cache: Path, reads: dict[str, dict[str, set[str]]],
+             pool: ProcessPoolExecutor | None) -> None:
+    """Shrink each rendered recipe's logs: pruned to the fields read, or compacted if unread.
+
+    The render processes (``pool``, when there are) share the files.
+    """
     from dfcoa_opt.bench.logs import compact_store
 
     compacted = pruned = saved = 0
     for name, keys in reads.items():
         if (cache / name / "logs").is_dir():
-            c, p, b = compact_store(cache / name, keys)
+            c, p, b = compact_store(cache / name, keys, pool)
             compacted, pruned, saved = compacted + c, pruned + p, saved + b
     total = sum(p.stat().st_size for p in cache.rglob("*") if p.is_file())
     print(f"cache: {compacted} logs no figure reads compacted, {pruned} pruned to the fields "

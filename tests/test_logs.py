@@ -111,3 +111,23 @@ def test_a_pruned_log_keeps_pose_est_that_the_full_log_left_out(tmp_path: Path) 
     before = (tmp_path / row["log"]).read_bytes()
     assert compact_store(tmp_path, {}) == (0, 0, 0)  # no trajectories to compact: left as is
     assert (tmp_path / row["log"]).read_bytes() == before
+
+
+def test_worker_processes_shrink_a_store_to_the_same_bytes(tmp_path: Path) -> None:
+    from concurrent.futures import ProcessPoolExecutor
+
+    s = ResultsStore(tmp_path / "a")
+    for seed in range(4):
+        s.write(execute(RunSpec(str(CROSSING), "crossing", "goto_slot", seed, '{"t_max":3.0}')))
+    b = tmp_path / "b"
+    (b / "logs").mkdir(parents=True)
+    for p in (s.root / "logs").glob("*.npz"):
+        (b / "logs" / p.name).write_bytes(p.read_bytes())
+    reads = {"crossing__goto_slot__s1": {"pose", "t"}, "crossing__goto_slot__s2": {"twist"}}
+    with ProcessPoolExecutor(2) as pool:
+        assert compact_store(b, reads, pool) == compact_store(s.root, reads)
+    names = sorted(p.name for p in (s.root / "logs").glob("*.npz"))
+    assert len(names) == 4
+    assert [(b / "logs" / n).read_bytes() for n in names] == [
+        (s.root / "logs" / n).read_bytes() for n in names]
+    assert (b / "logs_read.json").read_bytes() == (s.root / "logs_read.json").read_bytes()

@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import json
 from collections.abc import Iterable, Iterator, Mapping
+from concurrent.futures import Executor
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -253,25 +254,35 @@ def prune_log(path: str | Path, keep: Iterable[str]) -> int:
     return before - len(data)
 
 
-def compact_store(root: str | Path, keep: Mapping[str, Iterable[str]]) -> tuple[int, int, int]:
+def _shrink(path: Path, keep: frozenset[str] | None) -> tuple[bool, int]:
+    """Prune ``path`` to ``keep`` or, with None, compact it: (pruned, bytes saved)."""
+    if keep is None:
+        return False, compact_log(path)
+    return True, prune_log(path, keep)
+
+
+def compact_store(root: str | Path, keep: Mapping[str, Iterable[str]],
+                  pool: Executor | None = None) -> tuple[int, int, int]:
     """Prune the logs of the runs ``keep`` to the fields read and compact every other log.
 
     Args:
         root: The results folder.
         keep: Run key -> the log fields figures read (:func:`tracing`).
+        pool: Worker processes that shrink the logs (each file is written by one
+            of them, the same bytes as here); None shrinks them in this process.
 
     Returns:
         ``(logs compacted, logs pruned, bytes saved)``.
     """
     root = Path(root)
+    paths = sorted((root / "logs").glob("*.npz"))
+    wanted = [frozenset(keep[p.stem]) if p.stem in keep else None for p in paths]
+    done = (pool.map(_shrink, paths, wanted, chunksize=max(1, len(paths) // 64)) if pool
+            else map(_shrink, paths, wanted))
     compacted = pruned = saved = 0
-    for path in sorted((root / "logs").glob("*.npz")):
-        if path.stem in keep:
-            gained = prune_log(path, keep[path.stem])
-            pruned += gained > 0
-        else:
-            gained = compact_log(path)
-            compacted += gained > 0
+    for was_pruned, gained in done:
+        pruned += was_pruned and gained > 0
+        compacted += not was_pruned and gained > 0
         saved += gained
     listing = {key: sorted(f) for key, f in sorted(keep.items())}
     atomic_write(root / "logs_read.json", json.dumps(listing, indent=0) + "\n")
