@@ -88,6 +88,11 @@ def _parser() -> argparse.ArgumentParser:
                    "cache (default: prune the logs figures read to the fields read, compact "
                    "the others)")
     _executor_args(f)
+    for name in ("run", "list", "bench", "tune", "report", "figures"):
+        sub.choices[name].add_argument(
+            "--plugin", action="append", default=[], metavar="FILE.py|MODULE",
+            help="import a controller file or module first (repeatable; also "
+                 "$DFCOA_PLUGINS, ':'-separated)")
     return p
 
 
@@ -315,6 +320,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                  else contextlib.nullcontext())
     try:
         with stoppable:
+            if getattr(args, "plugin", None):
+                from dfcoa_opt.control.plugins import load_plugins
+
+                load_plugins(args.plugin)
             return handlers[args.cmd](args)
     except DfcoaError as exc:
         print(f"dfcoa: error: {exc}", file=sys.stderr)

@@ -35,6 +35,8 @@ from typing import Any
 from dfcoa_opt.bench.lifecycle import deferred, forkserver_context, init_worker, terminate
 from dfcoa_opt.bench.runner import Outcome, execute_batch
 from dfcoa_opt.bench.sweep import RunSpec
+from dfcoa_opt.control.plugins import load_plugins
+from dfcoa_opt.control.plugins import loaded as loaded_plugins
 from dfcoa_opt.control.registry import BUILTIN_MODULES
 from dfcoa_opt.errors import DfcoaError
 
@@ -257,8 +259,13 @@ def _init_batch_worker(results: Any) -> None:
     _RESULTS = results
 
 
-def _execute_streaming(batch: int, runs: Sequence[RunSpec]) -> int:
-    """In a worker: execute one batch, sending ``(batch, outcome)`` as each run ends."""
+def _execute_streaming(batch: int, runs: Sequence[RunSpec], plugins: Sequence[str]) -> int:
+    """In a worker: execute one batch, sending ``(batch, outcome)`` as each run ends.
+
+    ``plugins``: the caller's loaded plugins (:mod:`dfcoa_opt.control.plugins`),
+    imported first (once per worker).
+    """
+    load_plugins(plugins)
     n = 0
     for outcome in execute_batch(runs):
         _RESULTS.put((batch, outcome))
@@ -288,7 +295,7 @@ def _submit(pool: ProcessPoolExecutor, work: Iterable[tuple[int, Sequence[RunSpe
     """
     n = 0
     for b, runs in work:
-        fut = pool.submit(_execute_streaming, b, runs)
+        fut = pool.submit(_execute_streaming, b, runs, loaded_plugins())
         fut.batch = b  # type: ignore[attr-defined]
         fut.add_done_callback(finished.put)
         n += 1
@@ -340,8 +347,8 @@ def _dask_stream(client: Any, runs: Sequence[RunSpec]) -> Iterator[Outcome]:
 
     queue = Queue(f"dfcoa-{uuid.uuid4().hex}", client=client)
     workers = sum(client.nthreads().values()) or 1
-    tasks = [client.submit(_execute_to_queue, b, queue.name, key=f"batch-{b[0].key}",
-                           pure=False) for b in batches(runs, workers)]
+    tasks = [client.submit(_execute_to_queue, b, queue.name, loaded_plugins(),
+                           key=f"batch-{b[0].key}", pure=False) for b in batches(runs, workers)]
     seen: set[str] = set()
     while len(seen) < len(runs):
         try:
@@ -360,10 +367,14 @@ def _dask_stream(client: Any, runs: Sequence[RunSpec]) -> Iterator[Outcome]:
         task.release()
 
 
-def _execute_to_queue(runs: Sequence[RunSpec], queue: str) -> int:
-    """On a Dask worker: execute one batch, putting each outcome (scattered) in ``queue``."""
+def _execute_to_queue(runs: Sequence[RunSpec], queue: str, plugins: Sequence[str]) -> int:
+    """On a Dask worker: execute one batch, putting each outcome (scattered) in ``queue``.
+
+    ``plugins`` are imported first (:func:`_execute_streaming`).
+    """
     from distributed import Queue, get_client
 
+    load_plugins(plugins)
     client, out, n = get_client(), Queue(queue), 0
     for outcome in execute_batch(runs):
         out.put(client.scatter(outcome, direct=True))

@@ -40,10 +40,12 @@ import sys
 import threading
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import spawn
 from multiprocessing.connection import wait
-from multiprocessing.context import ForkServerContext
+from multiprocessing.context import ForkServerContext, ForkServerProcess
 from pathlib import Path
 from types import FrameType
+from typing import Any
 
 
 class Interrupted(BaseException):
@@ -159,8 +161,48 @@ def init_worker(numba_threads: int | None = 1) -> None:
         numba.set_num_threads(numba_threads)
 
 
+_MAIN_KEYS = ("init_main_from_path", "init_main_from_name")
+_LAUNCH = threading.Lock()
+
+
+class _WorkerProcess(ForkServerProcess):
+    """A forkserver process that does not import the caller's ``__main__``.
+
+    multiprocessing runs the main script (or ``-m`` module) again in every new
+    process, so that functions defined there can be unpickled; a script that
+    calls :func:`dfcoa_opt.sweep` at its top level, with no
+    ``if __name__ == "__main__":`` guard, then ran its sweep again in every
+    worker, which failed with ``BrokenProcessPool``. Workers need nothing of
+    ``__main__``: they build controllers from the registry's modules, entry
+    points and plugin files, and a sweep whose controller was registered in the
+    caller only runs in the caller (:func:`dfcoa_opt.api.sweep`).
+    """
+
+    @staticmethod
+    def _Popen(process_obj: ForkServerProcess) -> Any:  # noqa: N802 - multiprocessing's name
+        prepare = spawn.get_preparation_data
+        with _LAUNCH:  # the start reads the function by name: swap it for this start only
+            spawn.get_preparation_data = lambda name: {  # type: ignore[assignment]
+                k: v for k, v in prepare(name).items() if k not in _MAIN_KEYS}
+            try:
+                return ForkServerProcess._Popen(process_obj)
+            finally:
+                spawn.get_preparation_data = prepare  # type: ignore[assignment]
+
+
+class _WorkerContext(ForkServerContext):
+    """The forkserver context whose processes skip ``__main__`` (:class:`_WorkerProcess`)."""
+
+    Process = _WorkerProcess  # type: ignore[assignment]
+
+
+_CONTEXT = _WorkerContext()
+
+
 def forkserver_context(preload: Sequence[str]) -> ForkServerContext:
     """The ``forkserver`` context, with its server running (started once per process).
+
+    Its processes do not run the caller's main script again (:class:`_WorkerProcess`).
 
     The server is spawned with SIGINT blocked in the calling thread: a blocked
     signal stays blocked across ``fork`` and ``exec``, so a Ctrl-C can no
@@ -178,7 +220,7 @@ def forkserver_context(preload: Sequence[str]) -> ForkServerContext:
         The context for ``ProcessPoolExecutor(mp_context=...)``.
     """
     _quiet_resource_tracker()
-    ctx = multiprocessing.get_context("forkserver")
+    ctx = _CONTEXT
     ctx.set_forkserver_preload(list(preload))
     with deferred():
         # The tracker first: starting it unblocks SIGINT (it blocks SIGINT and SIGTERM

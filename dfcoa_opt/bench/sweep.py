@@ -75,6 +75,9 @@ class SweepSpec:
     controllers: tuple[str, ...] | None = param(
         None, doc="Controller ids, each a variant named by its id; '*' = every registered "
                   "controller. Default: '*', or none when [variants] names variants.")
+    plugins: tuple[str, ...] = param((), doc="Controller files (.py, relative to the sweep "
+                                             "file) or module names imported before the "
+                                             "controllers are resolved (docs/controllers.md).")
     seeds: int = param(20, doc="Seeds per (scenario, variant, ladder rung); with max_seeds, "
                                "the first seeds of each.", ge=1)
     max_seeds: int = param(0, doc="With > 0: add seeds to each (scenario, variant, rung) until "
@@ -364,6 +367,10 @@ def expand_sweep(data: dict[str, Any], src: str, base: Path, text: str,
     if spec.max_seeds and spec.max_seeds < spec.seeds:
         raise ScenarioError(src, "max_seeds", f"must be 0 or >= seeds ({spec.seeds}), got "
                                               f"{spec.max_seeds}")
+    from dfcoa_opt.control.plugins import is_file_spec, load_plugins
+
+    load_plugins([str(base / p) if is_file_spec(p) else p for p in spec.plugins],
+                 f"{src}: plugins")
     variants = _variants(spec, src, base)
     seeds_of = _variant_seeds(spec, variants, src)
     ladders = parse_ladders(spec.ladder, _flatten, src)

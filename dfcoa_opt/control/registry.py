@@ -34,7 +34,8 @@ from dataclasses import replace
 from importlib.metadata import entry_points
 from typing import Any, TypeVar
 
-from dfcoa_opt.errors import ScenarioError, UnknownNameError, did_you_mean
+from dfcoa_opt.control import plugins
+from dfcoa_opt.errors import DfcoaError, ScenarioError, UnknownNameError, did_you_mean
 from dfcoa_opt.params import Tunable, build, tunables
 
 ENTRY_POINT_GROUP = "dfcoa_opt.controllers"
@@ -160,16 +161,29 @@ def is_policy(controller_id: str) -> bool:
 def data_digest(controller_id: str) -> str:
     """SHA-256 of the data a run of ``controller_id`` reads: a policy's spec and weights.
 
-    Empty for every other id. The results store adds it to the run's identity,
-    so a changed policy file re-simulates its runs
+    For a controller or filter from a plugin file, that file's bytes
+    (:func:`dfcoa_opt.control.plugins.plugin_digest`); empty for every other id.
+    The results store adds it to the run's identity, so a changed policy or
+    plugin file re-simulates its runs
     (:func:`dfcoa_opt.control.policy.policy_digest`).
     """
     if not is_policy(controller_id):
-        return ""
+        _load_all()
+        digests = [plugins.plugin_digest(getattr(table.get(part), "__module__", ""))
+                   for part, table in zip(_parts(controller_id), (_REGISTRY, _FILTERS),
+                                          strict=True) if part is not None]
+        return " ".join(d for d in digests if d)
     return str(_policy().policy_digest(_parts(controller_id)[0][len(POLICY_PREFIX):]))
 
 
 def _load_all() -> None:
+    """Import the built-in controllers, the entry points and ``DFCOA_PLUGINS`` (once).
+
+    Raises:
+        DfcoaError: An entry point whose class is registered under another id
+            (``@register("a")`` with the entry point named ``b`` would list it
+            twice), or a plugin of ``DFCOA_PLUGINS`` that cannot be imported.
+    """
     global _loaded
     if _loaded:
         return
@@ -177,17 +191,25 @@ def _load_all() -> None:
     for mod in BUILTIN_MODULES:
         importlib.import_module(mod)
     for ep in entry_points(group=ENTRY_POINT_GROUP):
+        cls = ep.load()
+        ids = [key for key, c in _REGISTRY.items() if c is cls]
+        if ids and ep.name not in ids:
+            raise DfcoaError(f"entry point '{ep.name}' of group {ENTRY_POINT_GROUP} loads "
+                             f"{getattr(cls, '__name__', cls)}, which @register names "
+                             f"'{ids[0]}': name the entry point '{ids[0]}'")
         if ep.name not in _REGISTRY:
-            _REGISTRY[ep.name] = ep.load()
-            _REGISTRY[ep.name].name = ep.name
+            _REGISTRY[ep.name] = cls
+            cls.name = ep.name
+    plugins.load_plugins(plugins.from_env(), plugins.ENV_VAR)
 
 
 def known_to_workers(controller_id: str) -> bool:
     """Whether a fresh process finds ``controller_id`` (and its filter) in the registry.
 
-    True for classes of :data:`BUILTIN_MODULES` and of the entry-point group,
-    and for policy files (``policy:PATH``; workers share the working folder);
-    a class registered with :func:`register` in a notebook or a script (a
+    True for classes of :data:`BUILTIN_MODULES`, of the entry-point group and
+    of plugins (:mod:`dfcoa_opt.control.plugins`, which workers load too), and
+    for policy files (``policy:PATH``; workers share the working folder); a
+    class registered with :func:`register` in a notebook or a script (a
     callable policy too) is known only to the process that ran it, so a sweep's
     worker processes cannot build it.
     """
@@ -198,7 +220,8 @@ def known_to_workers(controller_id: str) -> bool:
                                               and part.startswith(POLICY_PREFIX)):
             continue
         module = getattr(table.get(part), "__module__", "")
-        if not any(module == m or module.startswith(m + ".") for m in BUILTIN_MODULES):
+        if not (any(module == m or module.startswith(m + ".") for m in BUILTIN_MODULES)
+                or plugins.is_plugin_module(module)):
             return False
     return True
 
@@ -235,7 +258,8 @@ def controller_class(controller_id: str) -> type:
     except KeyError:
         raise UnknownNameError(
             f"unknown controller '{base}'{did_you_mean(base, _REGISTRY)}; "
-            f"available: {', '.join(sorted(_REGISTRY))}") from None
+            f"available: {', '.join(sorted(_REGISTRY))} (dfcoa list controllers; a "
+            f"controller in a file: --plugin FILE.py)") from None
 
 
 def component_classes(controller_id: str) -> list[type]:
