@@ -20,13 +20,21 @@ from PIL import Image
 
 from dfcoa_opt.figure_layout import freeze_layout, legend_and_fit, map_figure, save_atomic
 from dfcoa_opt.plotting import (
+    LEADER_STYLE,
     OBSTACLE_COLOR,
+    TITLE_PT,
+    Z_LEADER,
+    Z_OBSTACLE_TRACK,
+    Z_ROBOT,
     _default_title,
     _Frame,
     _robot_label,
     _robot_radius,
     _set_view,
+    _title,
+    draw_contacts,
     draw_world,
+    outcome_title,
     robot_colors,
 )
 
@@ -34,6 +42,7 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
     from dfcoa_opt.sim.log import RunLog
+    from dfcoa_opt.sim.schema import MetricSpec
     from dfcoa_opt.world.grid import OccupancyGrid
     from dfcoa_opt.world.shapes import Shape
 
@@ -42,13 +51,15 @@ def animate_run(log: RunLog, grid: OccupancyGrid, path: str | Path,
                 goal: ArrayLike | None = None, fps: float = 10.0, max_frames: int = 200,
                 start: ArrayLike | None = None, *, shapes: Iterable[Shape] = (),
                 figsize: tuple[float, float] | None = None, dpi: float = 80.0,
-                figure: list[Figure] | None = None) -> Path:
+                figure: list[Figure] | None = None, metrics: MetricSpec | None = None) -> Path:
     """Save a GIF animation of a run.
 
     The ``T`` logged steps are subsampled uniformly (first and last included) to
     ``min(T, max_frames)`` frames. Each frame shows the map, the trails so far,
     the robots as discs with heading lines, the leader, the formation slots
-    (hollow circles), the moving obstacles and the time in the title. (Pillow
+    (hollow circles), the moving obstacles, from the first contact on its marks
+    (:func:`~dfcoa_opt.plotting.draw_contacts`), and in the title the run's
+    outcome (:func:`~dfcoa_opt.plotting.outcome_title`) and the time. (Pillow
     merges consecutive identical frames; frames always differ in their time.)
 
     The figure is drawn once; each frame restores that picture without the
@@ -68,6 +79,8 @@ def animate_run(log: RunLog, grid: OccupancyGrid, path: str | Path,
             :data:`~dfcoa_opt.figure_layout.MAP_FIGURE_WIDTH` wide and as tall as the map needs.
         dpi: Pixels per inch (frames are ``figsize * dpi`` pixels).
         figure: When given, the animation's figure (at its last frame) is appended.
+        metrics: The scenario's metric settings (the deadlock test of the outcome);
+            default ``MetricSpec()``.
 
     Returns:
         The written path.
@@ -78,7 +91,7 @@ def animate_run(log: RunLog, grid: OccupancyGrid, path: str | Path,
     if max_frames < 1 or not fps > 0:
         raise ValueError("need max_frames >= 1 and fps > 0")
     steps = [int(k) for k in frame_indices(log.n_steps, max_frames)]
-    anim = _RunAnimation(log, grid, goal, start, shapes, figsize, dpi)
+    anim = _RunAnimation(log, grid, goal, start, shapes, figsize, dpi, metrics)
 
     def write(tmp: str) -> None:
         palette = _GifPalette([anim.render(steps[0]), anim.render(steps[-1])])
@@ -124,7 +137,8 @@ class _RunAnimation:
 
     def __init__(self, log: RunLog, grid: OccupancyGrid, goal: ArrayLike | None,
                  start: ArrayLike | None, shapes: Iterable[Shape],
-                 figsize: tuple[float, float] | None, dpi: float) -> None:
+                 figsize: tuple[float, float] | None, dpi: float,
+                 metrics: MetricSpec | None = None) -> None:
         if log.n_steps == 0:
             raise ValueError("the log has no steps")
         self.pose = np.asarray(log.pose, dtype=float)
@@ -137,24 +151,29 @@ class _RunAnimation:
         self.fig = fig = map_figure(grid, figsize, dpi)
         self.ax = ax = fig.add_subplot()
         draw_world(ax, grid, goal, start, shapes=shapes)
-        self.trails = [ax.plot([], [], "-", color=c, linewidth=1.5, zorder=3,
+        self.trails = [ax.plot([], [], "-", color=c, linewidth=1.5, zorder=Z_ROBOT,
                                label=_robot_label(i, len(colors)))[0]
                        for i, c in enumerate(colors)]
-        self.lead_trail = ax.plot([], [], "--", color="black", linewidth=1.2, label="leader",
-                                  zorder=4)[0]
+        self.lead_trail = ax.plot([], [], label="leader", zorder=Z_LEADER, **LEADER_STYLE)[0]
         self.lead_dot = ax.plot([], [], "o", color="black", markersize=5, zorder=6)[0]
-        self.dyn_trails = [ax.plot([], [], "-", color=OBSTACLE_COLOR, linewidth=0.8, zorder=2,
+        self.dyn_trails = [ax.plot([], [], "-", color=OBSTACLE_COLOR, linewidth=0.8,
+                                   zorder=Z_OBSTACLE_TRACK,
                                    label="moving obstacle" if j == 0 else None)[0]
                            for j in range(self.dyn.shape[1])]
         self.frame = _Frame(ax, colors, radius, np.asarray(log.dyn_radius, dtype=float))
+        outcome, k0, contacts = outcome_title(log, grid, metrics)
+        # the first contact's marks, shown from its frame on (in the legend from the start)
+        self.contact_step = k0 if k0 is not None else self.t.size
+        self.contact_marks = draw_contacts(ax, log, k0, contacts, radius) if k0 is not None else []
         _set_view(ax, grid, log, radius, goal, start)
-        self.head = _default_title(log)
-        self.show(0)
+        self.head = _title(fig, _default_title(log), outcome)
+        self.show(self.t.size - 1)  # the contact marks visible: legend entries copy that
         legend_and_fit(fig, ax, colors, fit=figsize is None)
+        self.show(0)
         # Lay the figure out once and freeze it, so frames do not jitter.
         freeze_layout(fig)
         moving = {*self.trails, self.lead_trail, self.lead_dot, *self.dyn_trails,
-                  *self.frame.artists(), ax.title}
+                  *self.frame.artists(), *self.contact_marks, ax.title}
         order = sorted((a for a in ax.get_children() if a is not ax.patch),
                        key=attrgetter("zorder"))  # as Axes.draw orders them
         first = min(i for i, a in enumerate(order) if a in moving)
@@ -171,7 +190,9 @@ class _RunAnimation:
         for j, line in enumerate(self.dyn_trails):
             line.set_data(dyn[: k + 1, j, 0], dyn[: k + 1, j, 1])
         self.frame.update(pose[k], self.slots[k], dyn[k])
-        self.ax.set_title(f"{self.head}\nt = {self.t[k]:.2f} s (step {k})")
+        for mark in self.contact_marks:
+            mark.set_visible(k >= self.contact_step)
+        self.ax.set_title(f"{self.head}\nt = {self.t[k]:.2f} s (step {k})", fontsize=TITLE_PT)
 
     def set_blitting(self, on: bool) -> None:
         """Exclude the overlay from full draws (``on``), or make it a plain figure again."""

@@ -224,7 +224,8 @@ class Run:
 
         sc = self.scenario
         fig = plotting.run_figure(self.log, sc.world.grid, sc.spec.leader.goal,
-                                  sc.spec.leader.start, shapes=sc.world.shapes)
+                                  sc.spec.leader.start, shapes=sc.world.shapes,
+                                  metrics=sc.spec.metrics)
         if path is not None:
             save_png(fig, path)
         return fig
@@ -251,7 +252,7 @@ class Run:
         out: list[Figure] = []
         animation.animate_run(self.log, sc.world.grid, path, sc.spec.leader.goal, fps,
                               max_frames, sc.spec.leader.start, shapes=sc.world.shapes,
-                              figure=out)
+                              figure=out, metrics=sc.spec.metrics)
         return out[0]
 
 
@@ -269,7 +270,13 @@ def sweep(spec: str | Path | Mapping[str, Any], out: str | Path | None = None, *
             relative to the working folder), ``controllers``, ``seeds``,
             ``grid``, ``variants``, ``baseline``, ``ladder``;
             ``docs/benchmarking.md``).
-        out: Results folder (default ``results/<sweep name>``).
+        out: Results folder. Default: for a sweep file ``results/<sweep name>``
+            (as ``dfcoa bench``); for a dict ``results/<name>-<8 hex digits>``
+            (the name, ``"sweep"`` unless the dict gives one, and a hash of the
+            dict, ``seeds`` and ``overrides``:
+            :func:`~dfcoa_opt.bench.harness.default_folder`), so the same dict
+            resumes in its folder and a different one never shares a folder
+            with it.
         jobs: Worker processes (default: one per core). 1 runs every run in
             this process, which is also what happens, with a warning, when a
             controller of the sweep was registered in this process only (a
@@ -293,7 +300,7 @@ def sweep(spec: str | Path | Mapping[str, Any], out: str | Path | None = None, *
         ['success', 'success']
     """
     from dfcoa_opt.bench.executors import ExecutorConfig
-    from dfcoa_opt.bench.harness import run_sweep
+    from dfcoa_opt.bench.harness import default_folder, run_sweep
     from dfcoa_opt.bench.sweep import load_sweep, sweep_from_dict
     from dfcoa_opt.control.registry import known_to_workers
 
@@ -307,7 +314,7 @@ def sweep(spec: str | Path | Mapping[str, Any], out: str | Path | None = None, *
                       "built-in or an entry point), so the sweep runs here, one run at a "
                       "time (jobs=1)", stacklevel=2)
         jobs = 1
-    folder = Path(out) if out is not None else Path("results") / sw.name
+    folder = Path(out) if out is not None else default_folder(sw, seeds, overrides)
     run_sweep(sw, folder, ExecutorConfig("process", jobs), rerun=rerun, progress=progress)
     return Results(folder)
 

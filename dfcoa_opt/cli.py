@@ -136,14 +136,14 @@ def _executor(a: argparse.Namespace):
 
 
 def _cmd_bench(a: argparse.Namespace) -> int:
-    from dfcoa_opt.bench.harness import run_sweep
+    from dfcoa_opt.bench.harness import default_folder, run_sweep
     from dfcoa_opt.bench.sweep import load_sweep
 
     if a.seeds is not None and a.seeds < 1:
         raise DfcoaError(f"--seeds: must be >= 1, got {a.seeds}")
     config = _executor(a)
     sweep = load_sweep(a.sweep, a.seeds, _overrides(a.set))
-    out = Path(a.out) if a.out else Path("results") / sweep.name
+    out = Path(a.out) if a.out else default_folder(sweep)
     result = run_sweep(sweep, out, config, rerun=a.rerun, progress=a.progress)
     print(result.summary())
     print(f"report: dfcoa report {out}")
@@ -219,6 +219,8 @@ def _cmd_run(a: argparse.Namespace) -> int:
     from dfcoa_opt import metrics
     from dfcoa_opt.bench.runner import jsonable
     from dfcoa_opt.bench.sweep import safe_name
+    from dfcoa_opt.cli_text import run_summary
+    from dfcoa_opt.metrics_units import units
     from dfcoa_opt.sim.batch import BatchSimulator
     from dfcoa_opt.sim.loader import load_scenario
     from dfcoa_opt.sim.simulator import ControllerError, batch_controllers
@@ -241,7 +243,7 @@ def _cmd_run(a: argparse.Namespace) -> int:
         stem = Path(a.out) / safe_name(f"{sc.name}-{a.controller}-s{seed}")
         log.save(f"{stem}.npz")
         result = {"scenario": sc.name, "controller": a.controller, "seed": seed,
-                  "metrics": jsonable(summary)}
+                  "metrics": jsonable(summary), "units": units(summary)}
         Path(f"{stem}.json").write_text(json.dumps(result, indent=2) + "\n")
         if a.plot or a.animate:
             from dfcoa_opt import animation, plotting
@@ -249,30 +251,27 @@ def _cmd_run(a: argparse.Namespace) -> int:
             goal, start = sc.spec.leader.goal, sc.spec.leader.start
             if a.plot:
                 plotting.plot_run(log, sc.world.grid, Path(f"{stem}.png"), goal=goal,
-                                  start=start, shapes=sc.world.shapes)
+                                  start=start, shapes=sc.world.shapes, metrics=sc.spec.metrics)
             if a.animate:
                 animation.animate_run(log, sc.world.grid, a.animate, goal=goal, start=start,
-                                      shapes=sc.world.shapes)
+                                      shapes=sc.world.shapes, metrics=sc.spec.metrics)
         if a.json:
             print(json.dumps(result))  # one object per line (JSON Lines) with --seeds
             continue
-        print(f"{sc.name} / {a.controller} / seed {seed}: {summary['outcome']} "
-              f"({'reached goal' if summary['reached'] else 'did not reach goal'}) "
-              f"in {log.t[-1]:.1f} s simulated ({log.meta['wall_time']:.2f} s wall)")
-        if len(seeds) == 1:
-            for k, v in summary.items():
-                print(f"  {k:28s} {v}")
-        print(f"  log: {stem}.npz")
+        files = {"log": f"{stem}.npz", "metrics": f"{stem}.json"}
+        files.update({"plot": f"{stem}.png"} if a.plot else {})
+        files.update({"animation": a.animate} if a.animate else {})
+        print(run_summary(f"{sc.name} / {a.controller} / seed {seed}", summary,
+                          float(log.t[-1]), float(log.meta["wall_time"]), files,
+                          detail=len(seeds) == 1))
     return 0
 
 
 def _cmd_list(a: argparse.Namespace) -> int:
     if a.what == "controllers":
-        from dfcoa_opt.control.registry import available, controller_class
+        from dfcoa_opt.cli_text import controller_list
 
-        for cid in available():
-            doc = (controller_class(cid).__doc__ or "").strip().splitlines()
-            print(f"{cid:20s} {doc[0] if doc else ''}")
+        print(controller_list())
         return 0
     if a.what == "recipes":
         from dfcoa_opt.bench.recipes import registered

@@ -51,9 +51,16 @@ class UnknownNameError(DfcoaError):
 def did_you_mean(name: str, choices: Iterable[str]) -> str:
     """Return a ``" (did you mean 'x'?)"`` hint, or ``""`` when nothing is close.
 
+    Case does not count: a choice equal to ``name`` but for case comes first
+    (``kP`` -> ``kp``), then the closest choice by :func:`difflib.get_close_matches`
+    on the lowercased names.
+
     Args:
         name: The unknown name.
         choices: The valid names.
     """
-    close = difflib.get_close_matches(name, list(choices), n=1, cutoff=0.6)
-    return f" (did you mean '{close[0]}'?)" if close else ""
+    folded: dict[str, str] = {}
+    for choice in choices:
+        folded.setdefault(choice.lower(), choice)  # the first of names equal but for case
+    close = difflib.get_close_matches(name.lower(), list(folded), n=1, cutoff=0.6)
+    return f" (did you mean '{folded[close[0]]}'?)" if close else ""

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import io
 import os
+import textwrap
 import uuid
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -167,6 +168,26 @@ def fit_to_map(fig: Figure, ax: Axes, legend: Legend) -> None:
             break
         fig.set_size_inches(new_w, new_h)
     ax.set_aspect("equal")
+
+
+#: Mean width of a character of the default font (DejaVu Sans), in ems (a generous guess).
+CHAR_EM = 0.6
+
+
+def wrap_text(text: str, width_in: float, fontsize_pt: float) -> str:
+    """``text`` with each of its lines wrapped at spaces to fit ``width_in`` inches.
+
+    A line holds about ``width_in * 72 / (CHAR_EM * fontsize_pt)`` characters (at
+    least 12); a word longer than that stays whole.
+
+    Args:
+        text: The text; its own line breaks are kept.
+        width_in: The width available, inches.
+        fontsize_pt: The font size, points.
+    """
+    chars = max(12, int(width_in * 72.0 / (CHAR_EM * fontsize_pt)))
+    return "\n".join(textwrap.fill(line, chars, break_long_words=False, break_on_hyphens=False)
+                     or line for line in text.split("\n"))
 
 
 def save_atomic(path: str | Path, write: Callable[[str], object], suffix: str) -> Path:

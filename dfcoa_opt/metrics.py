@@ -5,38 +5,48 @@ Every metric is a pure, vectorised function of a :class:`~dfcoa_opt.sim.log.RunL
 ``ScenarioSpec`` / ``Scenario`` whose ``metrics`` section is used). Time series
 have one value per logged step ``t[k]``; summaries average over all logged steps.
 :func:`summary` collects the JSON keys; every definition and choice is written
-down in ``docs/metrics.md``. The per-robot metrics of the companion papers'
-tables are in :mod:`dfcoa_opt.metrics_robots`.
+down in ``docs/metrics.md``. The collision risk of eq 11 is in
+:mod:`dfcoa_opt.metrics_risk` (re-exported here), the per-robot metrics of the
+companion papers' tables in :mod:`dfcoa_opt.metrics_robots`, and the unit of
+every key in :mod:`dfcoa_opt.metrics_units` (:data:`UNITS`, re-exported).
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, Union
+from typing import Any
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from dfcoa_opt.metrics_risk import (
+    CHUNK_ELEMS,
+    RISK_DISTANCE_FLOOR,
+    Settings,
+    collision_risk,
+    collision_risk_normalised,
+    normalise_risk,
+    run_risk,
+)
+from dfcoa_opt.metrics_risk import metric_settings as _cfg
 from dfcoa_opt.metrics_robots import (
     leader_follower_position_error,
     mse_per_robot,
     path_length_per_robot,
 )
+from dfcoa_opt.metrics_units import UNITS, unit
 from dfcoa_opt.outcome import classify
 from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_MODIFIED, STATUS_SOLVER_FAIL, RunLog
 from dfcoa_opt.sim.schema import MetricSpec
 
-if TYPE_CHECKING:
-    from dfcoa_opt.sim.scenario import Scenario
-    from dfcoa_opt.sim.schema import ScenarioSpec
+__all__ = ["PAPER_000_TABLE5", "RISK_DISTANCE_FLOOR", "UNITS", "centroid_offset", "centroids",
+           "collision_risk", "collision_risk_normalised", "filter_counts",
+           "formation_centroid_error", "formation_shape_error", "formation_stability_error",
+           "formation_stability_pct", "localization_error", "min_inter_robot_distance",
+           "min_obstacle_clearance", "normalise_risk", "open_steps", "rms", "rms_velocities",
+           "summary", "unit", "velocity_centroid_error"]
 
 FloatArray = NDArray[np.float64]
-Settings = Union[MetricSpec, "ScenarioSpec", "Scenario", None]
-
-#: Distances below this (m) are floored in the inverse-square risk terms of eq 11.
-RISK_DISTANCE_FLOOR = 1e-6
-_CHUNK_ELEMS = 2_000_000  # (step, robot, moving obstacle) triples per chunk
 
 #: Paper 000 Table 5, (Scenario 1, Scenario 2), under this module's summary keys.
 PAPER_000_TABLE5: dict[str, tuple[float, float]] = {
@@ -48,15 +58,6 @@ PAPER_000_TABLE5: dict[str, tuple[float, float]] = {
     "risk_mean": (0.7773, 0.5143), "risk_max": (1.0000, 0.6237),
     "min_inter_robot_distance": (0.4702, 0.8763),
 }
-
-
-def _cfg(spec: Settings) -> MetricSpec:
-    """Get the metric settings of a MetricSpec, ScenarioSpec or Scenario (None: defaults)."""
-    if spec is None:
-        return MetricSpec()
-    if isinstance(spec, MetricSpec):
-        return spec
-    return getattr(spec, "spec", spec).metrics
 
 
 def _dt(log: RunLog) -> float:
@@ -187,119 +188,6 @@ def rms_velocities(log: RunLog) -> tuple[FloatArray, FloatArray]:
     return per[:, 0], per[:, 1]
 
 
-def _robot_pair_term(pos: FloatArray, cutoff: float) -> FloatArray:
-    """``sum_{i != j, d_ij <= cutoff} 1 / d_ij^2`` per step (ordered pairs), 1/m^2.
-
-    Per step, the robots are sorted by x and each is paired with the next ones
-    while their x stays within ``cutoff`` (a sweep line, numba): O(N log N +
-    candidate pairs) per step, 30x faster than the stacked k-d tree it
-    replaced on a 100-robot run; the sums agree to rounding (tested).
-    """
-    n_t, n = pos.shape[:2]
-    if n < 2 or n_t == 0:
-        return np.zeros(n_t)
-    order = np.argsort(pos[..., 0], axis=1, kind="stable")
-    return _pair_term_kernel(np.ascontiguousarray(pos, dtype=float), order, float(cutoff),
-                             RISK_DISTANCE_FLOOR**2)
-
-
-@numba.njit(cache=True)
-def _pair_term_kernel(pos, order, cutoff, floor_sq):  # pragma: no cover - numba
-    """:func:`_robot_pair_term` with each step's robots visited in x order ``order``."""
-    n_t, n = order.shape
-    out = np.zeros(n_t)
-    cut_sq = cutoff * cutoff
-    for k in range(n_t):
-        acc = 0.0
-        for a in range(n):
-            i = order[k, a]
-            xi, yi = pos[k, i, 0], pos[k, i, 1]
-            for b in range(a + 1, n):
-                j = order[k, b]
-                dx = pos[k, j, 0] - xi
-                if dx > cutoff:
-                    break
-                dy = pos[k, j, 1] - yi
-                d2 = dx * dx + dy * dy
-                if d2 <= cut_sq:
-                    acc += 1.0 / max(d2, floor_sq)
-        out[k] = 2.0 * acc
-    return out
-
-
-def _obstacle_term(log: RunLog, cfg: MetricSpec) -> FloatArray:
-    """``sum_i sum_k 1 / d_ik^2`` per step over detected obstacles, 1/m^2."""
-    rng = cfg.risk_detection_range
-    c = np.maximum(log.clearance, RISK_DISTANCE_FLOOR)
-    near = (log.clearance <= rng) & (log.clearance < cfg.clearance_cap)
-    out = np.where(near, 1.0 / np.square(c), 0.0).sum(axis=1)
-    n_t, n = log.pose.shape[:2]
-    m = len(log.dyn_radius)
-    if m == 0 or n == 0:
-        return out
-    step = max(1, _CHUNK_ELEMS // (n * m))
-    for s in range(0, n_t, step):  # loop over chunks of steps, not over steps
-        diff = log.pose[s:s + step, :, None, :2] - log.dyn_pos[s:s + step, None, :, :]
-        d = np.linalg.norm(diff, axis=-1) - log.dyn_radius
-        d = np.maximum(d, RISK_DISTANCE_FLOOR)
-        out[s:s + step] += np.where(d <= rng, 1.0 / np.square(d), 0.0).sum(axis=(1, 2))
-    return out
-
-
-def collision_risk(log: RunLog, spec: Settings = None) -> FloatArray:
-    """Raw Collision Risk Metric R(t), paper 000 eq 11.
-
-    ``R = lambda1 sum_{i != j} 1/d_ij^2 + lambda2 sum_i sum_k 1/d_ik^2``. The robot
-    sum runs over ordered pairs (each unordered pair counts twice) of robot
-    centres. Obstacles k of robot i: its nearest static obstacle point
-    (distance ``clearance[t, i]``, skipped when capped) and every moving disc
-    (centre distance minus the disc radius). Only distances within
-    ``risk_detection_range`` contribute, for robots and obstacles alike; every
-    distance is floored at :data:`RISK_DISTANCE_FLOOR`.
-
-    Args:
-        log: The run.
-        spec: Metric settings (lambda1, lambda2, detection range, clearance cap).
-
-    Returns:
-        ``(T,)`` risk, 1/m^2.
-    """
-    cfg = _cfg(spec)
-    r = np.zeros(log.n_steps)
-    if cfg.risk_lambda1 > 0.0:
-        r += cfg.risk_lambda1 * _robot_pair_term(log.pose[..., :2], cfg.risk_detection_range)
-    if cfg.risk_lambda2 > 0.0:
-        r += cfg.risk_lambda2 * _obstacle_term(log, cfg)
-    return r
-
-
-def collision_risk_normalised(log: RunLog, spec: Settings = None) -> FloatArray:
-    """Collision risk of eq 11 normalised to [0, 1] (paper 000 Table 5 "Normalized").
-
-    ``clip(R / R_ref, 0, 1)`` with ``R_ref = 2 lambda1 / d_ref^2``: one robot pair
-    at ``risk_reference_distance`` gives exactly 1. With ``lambda1 = 0``,
-    ``R_ref = lambda2 / d_ref^2`` (one obstacle at d_ref gives 1).
-
-    Args:
-        log: The run.
-        spec: Metric settings.
-
-    Returns:
-        ``(T,)`` normalised risk, dimensionless.
-    """
-    cfg = _cfg(spec)
-    return normalise_risk(collision_risk(log, cfg), cfg)
-
-
-def normalise_risk(risk: FloatArray, spec: Settings = None) -> FloatArray:
-    """:func:`collision_risk_normalised` of an already computed raw risk ``(T,)`` (1/m^2)."""
-    cfg = _cfg(spec)
-    weight = 2.0 * cfg.risk_lambda1 if cfg.risk_lambda1 > 0.0 else cfg.risk_lambda2
-    if weight == 0.0:
-        return np.zeros_like(risk)
-    return np.clip(risk * cfg.risk_reference_distance**2 / weight, 0.0, 1.0)
-
-
 def open_steps(log: RunLog, spec: Settings = None) -> NDArray[np.bool_]:
     """``(T,)`` steps on an open stretch, where nothing is near any robot.
 
@@ -315,7 +203,7 @@ def open_steps(log: RunLog, spec: Settings = None) -> NDArray[np.bool_]:
     m = len(log.dyn_radius)
     if m == 0 or n == 0:
         return ok
-    step = max(1, _CHUNK_ELEMS // (n * m))
+    step = max(1, CHUNK_ELEMS // (n * m))
     for s in range(0, n_t, step):
         diff = log.pose[s:s + step, :, None, :2] - log.dyn_pos[s:s + step, None, :, :]
         gap = np.linalg.norm(diff, axis=-1) - log.dyn_radius - r
@@ -387,7 +275,9 @@ def summary(log: RunLog, spec: Settings = None) -> dict[str, Any]:
         spec: Metric settings; default ``MetricSpec()``.
 
     Returns:
-        Python floats, ints and bools (NaN where undefined).
+        Python floats, ints and bools (NaN where undefined; ``risk_raw_mean`` and
+        ``risk_raw_max`` are ``inf`` for a run with a contact); each key's unit
+        is :func:`unit` of it.
     """
     cfg = _cfg(spec)
     off = centroid_offset(log)
@@ -399,6 +289,7 @@ def summary(log: RunLog, spec: Settings = None) -> dict[str, Any]:
     risk = normalise_risk(raw, cfg)
     ttg = log.meta.get("time_to_goal")
     end = classify(log, cfg)
+    raw_mean, raw_max = run_risk(raw, end["outcome"] == "collision")
     is_open = open_steps(log, cfg)
     return {
         "fce_rms": rms(fce),
@@ -420,8 +311,8 @@ def summary(log: RunLog, spec: Settings = None) -> dict[str, Any]:
         "risk_mean": _mean(risk),
         "risk_max": _max(risk),
         "risk_clip_pct": 100.0 * _mean(risk >= 1.0),
-        "risk_raw_mean": _mean(raw),
-        "risk_raw_max": _max(raw),
+        "risk_raw_mean": raw_mean,
+        "risk_raw_max": raw_max,
         "min_inter_robot_distance": min_inter_robot_distance(log),
         "min_obstacle_clearance": min_obstacle_clearance(log),
         "collisions": int(np.sum(log.collision_events)),

@@ -205,3 +205,26 @@ def classify(log: RunLog, cfg: MetricSpec | None = None) -> dict[str, Any]:
         outcome = "deadlock" if math.isfinite(onset) else "timeout"
     return {"outcome": outcome, "reached": reached, "first_contact_time": contact,
             "deadlock_time": onset}
+
+
+def outcome_text(outcome: str, first_contact_time: Any = None, deadlock_time: Any = None,
+                 what: str = "") -> str:
+    """An outcome in words, for figure titles (the one wording of every figure).
+
+    ``"collision at t = 12.30 s (robot 0 and robot 2)"``,
+    ``"deadlock from t = 40.00 s"``, ``"success"``, ``"timeout"``. A collision or
+    deadlock without a finite time is its bare name; other strings are returned
+    as they are.
+
+    Args:
+        outcome: One of :data:`OUTCOMES` (as :func:`classify` gives it).
+        first_contact_time: The first contact, s (a collision's time).
+        deadlock_time: The deadlock's onset, s.
+        what: What touched (e.g. :func:`dfcoa_opt.contacts.describe`), in brackets
+            after a collision's time.
+    """
+    t = {"collision": first_contact_time, "deadlock": deadlock_time}.get(outcome)
+    if not isinstance(t, (int, float)) or not math.isfinite(t):
+        return outcome
+    word = "at" if outcome == "collision" else "from"
+    return f"{outcome} {word} t = {t:.2f} s" + (f" ({what})" if what else "")

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import matplotlib as mpl
 import numpy as np
@@ -28,6 +28,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle as CirclePatch
 from matplotlib.patches import Polygon as PolygonPatch
 
+from dfcoa_opt.contacts import contacts_at, describe, first_contact_step
 from dfcoa_opt.figure_layout import (
     MAX_LEGEND_ROBOTS,
     index_colorbar,
@@ -35,7 +36,9 @@ from dfcoa_opt.figure_layout import (
     map_figure,
     new_figure,
     save_png,
+    wrap_text,
 )
+from dfcoa_opt.outcome import classify, outcome_text
 from dfcoa_opt.world.shapes import Circle
 
 if TYPE_CHECKING:
@@ -43,7 +46,9 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from numpy.typing import ArrayLike, NDArray
 
+    from dfcoa_opt.contacts import Contact
     from dfcoa_opt.sim.log import RunLog
+    from dfcoa_opt.sim.schema import MetricSpec
     from dfcoa_opt.world.grid import OccupancyGrid
     from dfcoa_opt.world.shapes import Shape
 
@@ -52,6 +57,16 @@ FREE_COLOR = "#ffffff"
 OCCUPIED_COLOR = "#404040"
 #: Colour of moving obstacles.
 OBSTACLE_COLOR = "#8c8c8c"
+#: Colour of the contact marks (:func:`draw_contacts`).
+CONTACT_COLOR = "#e41a1c"
+#: Drawing order: moving-obstacle tracks, the leader's path (below every robot's line, so
+#: that a robot driving on it stays visible), the robots' lines, the contact marks on top.
+Z_OBSTACLE_TRACK, Z_LEADER, Z_ROBOT, Z_CONTACT = 2.0, 2.5, 3.0, 10.0
+#: The leader's path: dashed, wider than a robot's line and faint, so that where a robot
+#: drives on it (robot 0 often does) the dashes show on both sides of the robot's line.
+LEADER_STYLE: dict[str, Any] = {"linestyle": "--", "color": "black", "alpha": 0.4, "linewidth": 3.5}
+#: Font size of the run figures' titles, pt.
+TITLE_PT = 10.0
 
 _MAP_CMAP = ListedColormap([FREE_COLOR, OCCUPIED_COLOR])
 
@@ -119,25 +134,29 @@ def draw_world(ax: Axes, grid: OccupancyGrid, goal: ArrayLike | None = None,
 def run_figure(log: RunLog, grid: OccupancyGrid, goal: ArrayLike | None = None,
                start: ArrayLike | None = None, title: str | None = None, *,
                shapes: Iterable[Shape] = (), figsize: tuple[float, float] | None = None,
-               dpi: float = 100.0) -> Figure:
+               dpi: float = 100.0, metrics: MetricSpec | None = None) -> Figure:
     """The summary figure of a run (what :func:`plot_run` saves).
 
     Shows the map, each robot's trajectory (legend "robot i"; a colour bar of
     robot indices for more than :data:`MAX_LEGEND_ROBOTS` robots), the virtual
-    leader's path (dashed black), the final robot discs with heading lines, the
-    final formation slots (hollow circles), and the moving obstacles'
-    trajectories (thin grey) with their final discs.
+    leader's path (dashed black, below the robots' lines), the final robot discs
+    with heading lines, the final formation slots (hollow circles), the moving
+    obstacles' trajectories (thin grey) with their final discs, and the first
+    contact, if any (:func:`draw_contacts`). The title's second line is the
+    run's outcome (:func:`outcome_title`).
 
     Args:
         log: The run.
         grid: The map the run used.
         goal: Leader goal ``(x, y)`` in m.
         start: Leader start ``(x, y)`` in m.
-        title: Figure title; default ``"{scenario} - {controller} - seed {seed}"``.
+        title: First line of the title; default ``"{scenario} - {controller} - seed {seed}"``.
         shapes: Exact static shapes to outline.
         figsize: ``(width, height)`` in inches; None:
             :data:`~dfcoa_opt.figure_layout.MAP_FIGURE_WIDTH` wide and as tall as the map needs.
         dpi: Pixels per inch (image is ``figsize * dpi`` pixels).
+        metrics: The scenario's metric settings (the deadlock test of the outcome);
+            default ``MetricSpec()``.
 
     Raises:
         ValueError: On an empty log.
@@ -152,17 +171,20 @@ def run_figure(log: RunLog, grid: OccupancyGrid, goal: ArrayLike | None = None,
     pose = np.asarray(log.pose, dtype=float)
     for i, color in enumerate(colors):
         ax.plot(pose[:, i, 0], pose[:, i, 1], "-", color=color, linewidth=2.0,
-                label=_robot_label(i, len(colors)), zorder=3)
+                label=_robot_label(i, len(colors)), zorder=Z_ROBOT)
     leader = np.asarray(log.leader, dtype=float)
-    ax.plot(leader[:, 0], leader[:, 1], "--", color="black", linewidth=1.5, label="leader",
-            zorder=4)
+    ax.plot(leader[:, 0], leader[:, 1], label="leader", zorder=Z_LEADER, **LEADER_STYLE)
     dyn = np.asarray(log.dyn_pos, dtype=float)
     for j in range(dyn.shape[1]):
         ax.plot(dyn[:, j, 0], dyn[:, j, 1], "-", color=OBSTACLE_COLOR, linewidth=0.8,
-                label="moving obstacle" if j == 0 else None, zorder=2)
+                label="moving obstacle" if j == 0 else None, zorder=Z_OBSTACLE_TRACK)
     final = _Frame(ax, colors, radius, np.asarray(log.dyn_radius, dtype=float))
     final.update(pose[-1], np.asarray(log.slots, dtype=float)[-1], dyn[-1])
-    ax.set_title(_default_title(log) if title is None else title)
+    text, k0, contacts = outcome_title(log, grid, metrics)
+    if k0 is not None:
+        draw_contacts(ax, log, k0, contacts, radius)
+    ax.set_title(_title(fig, _default_title(log) if title is None else title, text),
+                 fontsize=TITLE_PT)
     _set_view(ax, grid, log, radius, goal, start)
     legend_and_fit(fig, ax, colors, fit=figsize is None)
     return fig
@@ -171,7 +193,7 @@ def run_figure(log: RunLog, grid: OccupancyGrid, goal: ArrayLike | None = None,
 def plot_run(log: RunLog, grid: OccupancyGrid, path: str | Path, goal: ArrayLike | None = None,
              start: ArrayLike | None = None, title: str | None = None, *,
              shapes: Iterable[Shape] = (), figsize: tuple[float, float] | None = None,
-             dpi: float = 100.0) -> Path:
+             dpi: float = 100.0, metrics: MetricSpec | None = None) -> Path:
     """Save :func:`run_figure` of a run as a PNG at ``path`` (folders are created).
 
     The other arguments are :func:`run_figure`'s.
@@ -182,8 +204,71 @@ def plot_run(log: RunLog, grid: OccupancyGrid, path: str | Path, goal: ArrayLike
     Raises:
         ValueError: On an empty log.
     """
-    fig = run_figure(log, grid, goal, start, title, shapes=shapes, figsize=figsize, dpi=dpi)
+    fig = run_figure(log, grid, goal, start, title, shapes=shapes, figsize=figsize, dpi=dpi,
+                     metrics=metrics)
     return save_png(fig, path)
+
+
+def outcome_title(log: RunLog, grid: OccupancyGrid | None = None,
+                  metrics: MetricSpec | None = None) -> tuple[str, int | None, list[Contact]]:
+    """A run's outcome in words, the instant of its first contact and the contacts there.
+
+    The outcome is :func:`dfcoa_opt.outcome.classify`'s, worded by
+    :func:`~dfcoa_opt.outcome.outcome_text`; a collision names what touched
+    (:func:`dfcoa_opt.contacts.describe`).
+
+    Args:
+        log: The run.
+        grid: Its map (places contacts with the static map on the obstacle).
+        metrics: The scenario's metric settings; default ``MetricSpec()``.
+
+    Returns:
+        ``(text, k, contacts)``: e.g. ``"collision at t = 29.20 s (robot 4 and a static
+        obstacle)"``; the first contact's step index (None without contact); its contacts.
+    """
+    end = classify(log, metrics)
+    k0 = first_contact_step(log)
+    contacts = contacts_at(log, k0, grid) if k0 is not None else []
+    return (outcome_text(end["outcome"], end["first_contact_time"], end["deadlock_time"],
+                         describe(contacts)), k0, contacts)
+
+
+def draw_contacts(ax: Axes, log: RunLog, k: int, contacts: Sequence[Contact],
+                  radius: float) -> list[Artist]:
+    """Mark the contacts of instant ``k``: where they touched, and who.
+
+    A red ``X`` at each contact point (legend "contact"), and a red ring around
+    every robot and moving disc involved, where it was at ``k`` (legend "in
+    contact"), above everything else.
+
+    Args:
+        ax: Target axes.
+        log: The run.
+        k: The instant of the contacts.
+        contacts: Its contacts (:func:`dfcoa_opt.contacts.contacts_at`).
+        radius: The robots' drawn radius, m (the rings are a little wider).
+
+    Returns:
+        The artists (rings first, then the markers); none without contacts.
+    """
+    if not contacts:
+        return []
+    pose, dyn = np.asarray(log.pose[k], dtype=float), np.asarray(log.dyn_pos[k], dtype=float)
+    robots = sorted({c.robot for c in contacts} | {c.other for c in contacts
+                                                   if c.kind == "robot"})
+    discs = sorted({c.other for c in contacts if c.kind == "moving"})
+    rings = [CirclePatch((float(pose[i, 0]), float(pose[i, 1])), 1.4 * radius) for i in robots]
+    rings += [CirclePatch((float(dyn[j, 0]), float(dyn[j, 1])),
+                          float(log.dyn_radius[j]) + 0.4 * radius) for j in discs]
+    for n, ring in enumerate(rings):
+        ring.set(fill=False, edgecolor=CONTACT_COLOR, linewidth=2.0, zorder=Z_CONTACT,
+                 label="in contact" if n == 0 else None)
+        ax.add_artist(ring)  # not add_patch: the view is set from the run, not from the marks
+    xy = np.array([c.point for c in contacts])
+    (mark,) = ax.plot(xy[:, 0], xy[:, 1], "X", color=CONTACT_COLOR, markeredgecolor="black",
+                      markeredgewidth=0.8, markersize=11, linestyle="none", label="contact",
+                      zorder=Z_CONTACT + 0.1)
+    return [*rings, mark]
 
 
 def plot_timeseries(log: RunLog, series: Mapping[str, ArrayLike], path: str | Path,
@@ -281,6 +366,12 @@ def _robot_radius(log: RunLog, grid: OccupancyGrid) -> float:
 def _default_title(log: RunLog) -> str:
     m = log.meta
     return f"{m.get('scenario', '?')} - {m.get('controller', '?')} - seed {m.get('seed', '?')}"
+
+
+def _title(fig: Figure, head: str, outcome: str) -> str:
+    """``head`` over ``outcome``, wrapped to the width the map leaves (the legend takes ~2 in)."""
+    width = max(float(fig.get_size_inches()[0]) - 2.0, 3.0)
+    return wrap_text(f"{head}\n{outcome}", width, TITLE_PT)
 
 
 def _set_view(ax: Axes, grid: OccupancyGrid, log: RunLog, radius: float,

@@ -6,10 +6,16 @@
   ``Params`` (the ``[controllers.<id>]`` keys), from their field metadata,
   with the ranges ``dfcoa tune`` searches;
 - ``world-families.md``: every world family's options (``[world.generate.options]``).
+
+It also lets a dotted key of these pages' tables wrap only at its dots, and drops the
+MathJax 2 loader that nbconvert puts in the rendered notebook (the site serves its own
+MathJax, docs/assets/mathjax/).
 """
 
 from __future__ import annotations
 
+import html
+import re
 from pathlib import Path
 
 from mkdocs.structure.files import File
@@ -81,3 +87,34 @@ def on_files(files, config):  # noqa: ANN001, ANN201 - mkdocs hook signature
     files.append(File.generated(config, "controller-params.md", content=_params_page()))
     files.append(File.generated(config, "world-families.md", content=_families_page()))
     return files
+
+
+# the first cell of a table row when it is a dotted key (`world.clutter.density`), not a
+# number such as `10.0`
+_KEY_CELL = re.compile(r"(<tr>\s*<td>)<code>([A-Za-z_][^<\s]*\.[A-Za-z_][^<\s]*)</code>")
+_KEY_PAGES = {"scenario-keys.md", "controller-params.md", "world-families.md"}
+# nbconvert's template loads MathJax 2 (from a CDN, or from mkdocs-jupyter's empty
+# custom_mathjax_url) and configures it in a script block
+_NOTEBOOK_MATHJAX = re.compile(
+    r'<!-- Load mathjax -->\s*<script src="[^"]*">\s*</script>'
+    r'|<script type="text/x-mathjax-config">.*?</script>', re.DOTALL)
+
+
+def _break_at_dots(match: re.Match[str]) -> str:
+    key = html.unescape(match[2])
+    wrapped = ".<wbr>".join(html.escape(part) for part in key.split("."))
+    return f'{match[1]}<code class="dotted-key">{wrapped}</code>'
+
+
+def on_page_content(html_text, page, config, files):  # noqa: ANN001, ANN201 - mkdocs hook
+    """Put a line-break opportunity after each dot of the key column of the key tables."""
+    if page.file.src_uri in _KEY_PAGES:
+        return _KEY_CELL.sub(_break_at_dots, html_text)
+    return html_text
+
+
+def on_post_page(output, page, config):  # noqa: ANN001, ANN201 - mkdocs hook signature
+    """Drop the MathJax 2 that nbconvert adds to the notebook's page (it has no maths)."""
+    if page.file.src_uri.endswith(".ipynb"):
+        return _NOTEBOOK_MATHJAX.sub("", output)
+    return output

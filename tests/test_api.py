@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -140,6 +141,27 @@ def test_only_controllers_registered_here_keep_a_sweep_in_this_process(hold_regi
 
     assert known_to_workers("dfcoa") and known_to_workers("goto_slot+cbf")
     assert not known_to_workers("api_test_hold") and not known_to_workers("api_test_hold+cbf")
+
+
+def test_each_dict_sweep_gets_its_own_default_folder(tmp_path, monkeypatch):
+    """Two different dict sweeps never share a folder (nor rows); the same one resumes."""
+    monkeypatch.chdir(tmp_path)
+    one = {"scenarios": [str(EMPTY)], "controllers": ["goto_slot"], "seeds": 1}
+    two = {**one, "seeds": 2}
+    first = d.sweep(one, jobs=1, overrides={"t_max": 3.0})
+    second = d.sweep(two, jobs=1, overrides={"t_max": 3.0})
+    assert first.folder != second.folder
+    assert re.fullmatch(r"results/sweep-[0-9a-f]{8}", first.folder.as_posix())
+    assert [r["seed"] for r in first.rows] == [0]
+    assert [r["seed"] for r in second.rows] == [0, 1]
+    assert len(list((first.folder / "rows").glob("*.json"))) == 1  # nothing of the second
+    other = d.sweep(one, jobs=1, overrides={"t_max": 2.0})  # the same dict, other settings
+    assert other.folder not in (first.folder, second.folder)
+    again = d.sweep(one, jobs=1, overrides={"t_max": 3.0})  # the same sweep: its folder, resumed
+    assert again.folder == first.folder
+    assert [r["digest"] for r in again.rows] == [r["digest"] for r in first.rows]
+    named = d.sweep({**one, "name": "mine"}, jobs=1, overrides={"t_max": 3.0})
+    assert named.folder.name.startswith("mine-")
 
 
 def test_a_bad_sweep_dict_is_one_line_naming_the_key(tmp_path):

@@ -21,7 +21,11 @@ def test_run_json_prints_exactly_one_object(tmp_path):
                           capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     obj = json.loads(proc.stdout)  # the whole stdout is one JSON document
-    assert set(obj) == {"scenario", "controller", "seed", "metrics"}
+    assert set(obj) == {"scenario", "controller", "seed", "metrics", "units"}
+    assert list(obj["units"]) == list(obj["metrics"])  # every metric has its unit
+    assert obj["units"]["fce_rms"] == "m" and obj["units"]["time_to_goal"] == "s"
+    written = json.loads((tmp_path / "example_empty-goto_slot-s5.json").read_text())
+    assert written == obj
     assert obj["scenario"] == "example_empty" and obj["seed"] == 5
     assert all(k in obj["metrics"] for k in REQUIRED)
     assert obj["metrics"]["success"] is True and obj["metrics"]["reached"] is True
@@ -35,14 +39,49 @@ def test_plot_and_animate(tmp_path, capsys):
     code = main(["run", str(ROOT / "scenarios" / "example_empty.toml"), "--out", str(tmp_path),
                  "--plot", "--animate", str(gif)])
     assert code == 0
-    assert (tmp_path / "example_empty-goto_slot-s1.png").stat().st_size > 10_000
+    png = tmp_path / "example_empty-goto_slot-s1.png"
+    assert png.stat().st_size > 10_000
     assert gif.stat().st_size > 10_000
-    assert "reached goal" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "success (reached goal)" in out and " s simulated (" in out
+    lines = [line.split() for line in out.splitlines() if line.strip()]
+    # the key metrics with their units, and every file written
+    assert any(w[0] == "fce_rms" and w[-1] == "m" for w in lines)
+    assert any(w[0] == "time_to_goal" and w[-1] == "s" for w in lines)
+    assert any(w[0] == "collisions" and w[1:] == ["0"] for w in lines)
+    assert ["plot:", str(png)] in lines and ["animation:", str(gif)] in lines
+    assert ["log:", str(tmp_path / "example_empty-goto_slot-s1.npz")] in lines
+    assert ["metrics:", str(tmp_path / "example_empty-goto_slot-s1.json")] in lines
+    assert "risk_raw" not in out  # the rest is in the .json
+
+
+def test_run_summary_names_the_contact_time():
+    from dfcoa_opt.cli_text import run_summary
+
+    summary = {"outcome": "collision", "reached": False, "first_contact_time": 12.3,
+               "deadlock_time": float("nan"), "fce_rms": 0.25, "time_to_goal": float("nan"),
+               "min_inter_robot_distance": 0.31, "min_obstacle_clearance": -0.05,
+               "path_length_mean": 8.0, "collisions": 2}
+    text = run_summary("s / c / seed 0", summary, 30.0, 0.5, {"log": "x.npz"})
+    first, *rest = text.splitlines()
+    assert first == ("s / c / seed 0: collision at t = 12.30 s (did not reach goal); "
+                     "30.0 s simulated (0.50 s wall)")
+    assert "  time_to_goal               n/a" in rest
+    assert "  min_obstacle_clearance     -0.05 m" in rest and rest[-1] == "  log: x.npz"
+    short = run_summary("s", {**summary, "outcome": "deadlock", "deadlock_time": 4.0}, 9.0,
+                        0.1, {}, detail=False)
+    assert short == ("s: deadlock from t = 4.00 s (did not reach goal); 9.0 s simulated "
+                     "(0.10 s wall)")
 
 
 def test_list(capsys):
     assert main(["list", "controllers"]) == 0
-    assert "goto_slot" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "goto_slot" in out and "`" not in out and ":func:" not in out
+    assert "goto_slot            Velocity command u_i = kp (slot_i - p_i) + d/dt slot_i." in out
+    assert "Safety filters: cbf, orca. Add one to any controller as <controller>+<filter>, " \
+           "e.g. goto_slot+cbf." in out
+    assert "policy:PATH" in out
     assert main(["list", "scenarios", "--dir", str(ROOT / "scenarios")]) == 0
     assert "example_empty.toml" in capsys.readouterr().out
 

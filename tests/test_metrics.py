@@ -12,7 +12,9 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from dfcoa_opt import metrics as m
+from dfcoa_opt import metrics_risk, metrics_units, metrics_world
 from dfcoa_opt import metrics_robots as mr
+from dfcoa_opt.bench.runner import jsonable
 from dfcoa_opt.outcome import OUTCOMES
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.sim.schema import MetricSpec
@@ -182,7 +184,7 @@ def test_obstacle_risk_static_and_moving(monkeypatch):
     np.testing.assert_allclose(m.collision_risk(log, spec), want)
     # lambda1 = 0: R_ref = lambda2 / d_ref^2 = 8
     np.testing.assert_allclose(m.collision_risk_normalised(log, spec), np.minimum(want / 8, 1))
-    monkeypatch.setattr(m, "_CHUNK_ELEMS", 1)
+    monkeypatch.setattr(metrics_risk, "CHUNK_ELEMS", 1)
     np.testing.assert_allclose(m.collision_risk(log, spec), want)
     s = m.summary(log, spec)
     assert s["risk_max"] == pytest.approx(1.0)
@@ -198,6 +200,26 @@ def test_overlapping_robots_give_finite_risk():
     r = m.collision_risk(log, MetricSpec())
     assert np.isfinite(r).all() and r[0] > 1e6
     assert m.collision_risk_normalised(log, MetricSpec())[0] == 1.0
+
+
+@pytest.mark.parametrize("kind", ["robot_contacts", "obstacle_contacts", "dynamic_contacts"])
+def test_raw_risk_of_a_run_with_a_contact_is_inf(kind):
+    """A contact of any kind: the raw risk summaries are inf (null in JSON), not 1e12."""
+    pose = np.zeros((3, 2, 2)) + [[0.0, 0.0], [1.0, 0.0]]
+    pose[1, 1] = [0.0, 0.0]  # robots on top of each other at t1: 1/d^2 at the floor
+    contact = np.array([0, 1, 0], dtype=np.int32)
+    log = make_log(pose=pose, **{kind: contact})
+    s = m.summary(log)
+    assert s["outcome"] == "collision"
+    assert s["risk_raw_mean"] == math.inf and s["risk_raw_max"] == math.inf
+    assert m.collision_risk(log)[1] == pytest.approx(2 / m.RISK_DISTANCE_FLOOR**2)  # the series
+    assert s["risk_max"] == 1.0  # the normalised risk stays at its clip
+    row = jsonable(s)
+    assert row["risk_raw_mean"] is None and row["risk_raw_max"] is None
+    clean = m.summary(make_log(pose=pose))  # the same geometry, no contact logged
+    assert clean["outcome"] != "collision"
+    assert clean["risk_raw_max"] == pytest.approx(2 / m.RISK_DISTANCE_FLOOR**2)
+    assert clean["risk_raw_mean"] == pytest.approx(np.mean(m.collision_risk(log)))
 
 
 # ------------------------------------------------------------------ general
@@ -323,6 +345,37 @@ def test_summary_keys_types_and_json():
     text = json.dumps(s, allow_nan=True)
     back = json.loads(text)
     assert math.isnan(back["min_inter_robot_distance"]) and math.isnan(back["time_to_goal"])
+
+
+def test_every_summary_key_has_a_unit():
+    """A new metric without a unit in metrics_units.UNITS fails here."""
+    log = make_log(pose=np.zeros((4, 2, 2)) + [[0.0, 0.0], [2.0, 0.0]],
+                   meta={"controller_counters": {"replans": 2}})
+    keys = list(m.summary(log, MetricSpec()))
+    assert "ctl_replans" in keys
+    missing = [k for k in keys if k not in metrics_units.UNITS
+               and not k.startswith(metrics_units.COUNTER_PREFIX)]
+    assert missing == []
+    assert metrics_units.units(keys)["ctl_replans"] == "1"
+    assert {k: metrics_units.unit(k) for k in ("fce_rms", "time_to_goal", "risk_raw_max",
+                                                "collisions", "stability_pct", "w_rms")} == {
+        "fce_rms": "m", "time_to_goal": "s", "risk_raw_max": "1/m^2", "collisions": "1",
+        "stability_pct": "%", "w_rms": "rad/s"}
+    with pytest.raises(KeyError, match="no unit"):
+        metrics_units.unit("no_such_metric")
+    # no unit of a key that no summary or world-difficulty table has
+    world = [k for k, _, _ in metrics_world.INDEX_SCALES]
+    world += ["world_difficulty", "world_path_length", "world_reference_time"]
+    assert set(metrics_units.UNITS) == set(keys) - {"ctl_replans"} | set(world)
+
+
+def test_with_unit_formats_values_for_people():
+    assert metrics_units.with_unit(0.0027474, "fce_rms") == "0.002747 m"
+    assert metrics_units.with_unit(65.4, "time_to_goal") == "65.4 s"
+    assert metrics_units.with_unit(3, "collisions") == "3"
+    assert metrics_units.with_unit(math.nan, "time_to_goal") == "n/a"
+    assert metrics_units.with_unit(math.inf, "risk_raw_max") == "inf 1/m^2"
+    assert metrics_units.with_unit("collision", "outcome") == "collision"
 
 
 def test_summary_accepts_scenario_like_settings():

@@ -93,6 +93,12 @@ def test_peak_risk_divides_by_the_larger_peak_of_the_same_seed_mode_and_reading(
     assert got[:4] == [(0.4, 1.0), (0.2, 0.5), (3.0 / 8.0, 0.75), (1.0 / 8.0, 1.0)]
     # no S2 run with that mode (or that reading): no peak over both
     assert all(np.isnan(v) for v in got[4] + got[5])
+    # a run with a contact has no raw risk (null): no peak for its seed, no error
+    touched = [_row("dfcoa_s1", "truth", 2, {"risk_raw_mean": None, "risk_raw_max": None}),
+               _row("dfcoa_s2", "truth", 2, {"risk_raw_mean": 1.0, "risk_raw_max": 3.0})]
+    peaks = [(r["metrics"]["risk_peak_mean"], r["metrics"]["risk_peak_max"])
+             for r in recipes_dfcoa.with_peak_risk(touched)]
+    assert all(np.isnan(v) for pair in peaks for v in pair)
 
 
 def test_table5_prints_each_reading_beside_the_tables_truth_column(tmp_path):

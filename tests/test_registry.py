@@ -1,17 +1,37 @@
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from dfcoa_opt.control import registry
-from dfcoa_opt.errors import ScenarioError, UnknownNameError
+from dfcoa_opt.errors import ScenarioError, UnknownNameError, did_you_mean
 from dfcoa_opt.params import param
+from dfcoa_opt.sim.loader import load_scenario
 
 
 def test_builtin_listed_and_unknown_id_has_hint():
     assert "goto_slot" in registry.available()
     with pytest.raises(UnknownNameError, match="did you mean 'goto_slot'"):
         registry.controller_class("goto_slat")
+
+
+def test_did_you_mean_ignores_case():
+    assert did_you_mean("kP", ["kp", "ki"]) == " (did you mean 'kp'?)"
+    assert did_you_mean("KPP", ["kp", "ki"]) == " (did you mean 'kp'?)"
+    assert did_you_mean("Goto_Slat", ["goto_slot", "dfcoa"]) == " (did you mean 'goto_slot'?)"
+    assert did_you_mean("zzz", ["kp"]) == ""
+
+
+@pytest.mark.parametrize("key", ["kP", "kpp", "KP"])
+def test_a_controller_key_in_the_wrong_case_gets_a_hint(tmp_path, key):
+    text = (Path(__file__).resolve().parents[1] / "scenarios" / "example_empty.toml").read_text()
+    path = tmp_path / "s.toml"
+    path.write_text(f"{text}\n[controllers.goto_slot]\n{key} = 1.0\n")
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(path)
+    assert str(err.value) == (f"{path}: controllers.goto_slot.{key}: unknown key "
+                              "(did you mean 'kp'?)")
 
 
 def test_overrides_are_validated_with_key_path():

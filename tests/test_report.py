@@ -159,6 +159,29 @@ def test_csv_has_the_four_outcome_rates_with_intervals():
     assert float(b["fce_rms_mean"]) == 0.5 and float(b["timeout_rate"]) == 1.0
 
 
+def test_paired_risk_leaves_out_and_counts_the_runs_with_a_contact():
+    """A raw risk after a contact is inf, null in the row: no +1e9 median, a stated count."""
+    from dfcoa_opt.bench import paired
+
+    risk_a = [5.0, None, 6.0, None, 6.0]  # seeds 1 and 3 touched something (null in JSON)
+    risk_b = [4.0, 3.0, 5.0, 2.0, 5.0]
+    rows = [row(f"{v}{s}", controller=v, seed=s, outcome="collision" if r is None else
+                "success", risk_raw_mean=r) for v, risks in (("a", risk_a), ("b", risk_b))
+            for s, r in enumerate(risks)]
+    comps = paired.compare(rows, "b", metrics=("risk_raw_mean",))
+    risk = next(c for c in comps if c.metric == "risk_raw_mean")
+    assert (risk.n, risk.excluded, risk.estimate) == (3, 2, 1.0)
+    success = next(c for c in comps if c.metric == "success")
+    assert (success.n, success.excluded) == (5, 0)
+    md = tables.paired_table(comps, ("risk_raw_mean",), "b")
+    cell = md.splitlines()[2].split(" | ")[-1]
+    assert cell.startswith("+1.000 [1.000, 1.000] p=") and cell.endswith("(2 excluded) |")
+    assert "left out of that metric: `(k excluded)`" in md
+    out = list(csv.DictReader(io.StringIO(tables.paired_csv(comps))))
+    assert [(r["metric"], r["n"], r["excluded"]) for r in out] == [
+        ("success", "5", "0"), ("risk_raw_mean", "3", "2")]
+
+
 # ----------------------------------------------------------------------- environment
 def test_environment_header(tmp_path, monkeypatch):
     rows = synthetic_rows()

@@ -7,9 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from matplotlib.colors import to_rgb
 from matplotlib.patches import Circle as CirclePatch
 from test_metrics import make_log
 
+from dfcoa_opt import contacts, figure_layout, plotting
 from dfcoa_opt.bench import plots, report, trajectories
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
@@ -20,14 +22,18 @@ ROOT = Path(__file__).resolve().parents[1]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
-def test_contacts_at_marks_exactly_the_robots_that_touch():
+def test_contacts_at_names_exactly_the_robots_that_touch_and_what():
     pose = np.array([[[0.0, 0.0], [0.3, 0.0], [5.0, 0.0], [9.0, 0.0]]])  # 0-1 overlap (0.3 < 0.4)
     clearance = np.array([[5.0, 5.0, 5.0, 0.1]])  # robot 3 against a wall
     log = make_log(pose=pose, clearance=clearance, dyn_pos=np.array([[[5.0, 0.5]]]),
                    dyn_radius=np.array([0.4]))  # robot 2 overlaps a moving disc (0.5 < 0.6)
-    assert trajectories.contacts_at(log, 0).tolist() == [True, True, True, True]
+
+    def found():
+        return [(c.kind, c.robot, c.other) for c in contacts.contacts_at(log, 0)]
+
+    assert found() == [("robot", 0, 1), ("obstacle", 3, -1), ("moving", 2, 0)]
     log.dyn_pos[:] = [[[5.0, 0.7]]]  # 0.7 > 0.6: no longer
-    assert trajectories.contacts_at(log, 0).tolist() == [True, True, False, True]
+    assert found() == [("robot", 0, 1), ("obstacle", 3, -1)]
 
 
 def test_nearest_step():
@@ -53,10 +59,43 @@ def test_ladder_figure_draws_one_line_per_variant_with_the_given_points(tmp_path
     ax = captured["fig"].axes[0]
     assert ax.get_xscale() == "log" and ax.get_ylabel() == "success rate (%)"
     lines = [c.lines[0] for c in ax.containers]  # the data line of each error-bar plot
-    assert len(lines) == 2
-    assert sorted(tuple(ln.get_ydata()) for ln in lines) == [(0.0, 0.0), (100.0, 50.0)]
-    labels = [t.get_text() for t in captured["fig"].legends[0].get_texts()]
-    assert labels == ["a (n=10-40)", "b (n=10)"]
+    assert len(lines) == 1  # b, at 0 % on both rungs, is named, not drawn
+    assert sorted(tuple(ln.get_ydata()) for ln in lines) == [(100.0, 50.0)]
+    labels = [" ".join(t.get_text().split()) for t in captured["fig"].legends[0].get_texts()]
+    assert labels == ["a (n=10-40)", "0 % on every rung (see the table): b"]
+
+
+def _bbox_in(artist, fig):
+    """An artist's box in figure pixels, after the figure was drawn once."""
+    return artist.get_window_extent(fig.canvas.get_renderer())
+
+
+def test_ladder_figure_names_the_variants_at_0_percent_on_every_rung_in_a_note(tmp_path,
+                                                                               monkeypatch):
+    """11 of 13 variants at 0 % stacked their error bars into one block: they get a note."""
+    figs = _capture(monkeypatch, plots)
+    zero = [(v, 0.0, 0.0, 0.49, 4) for v in (0.0, 0.1, 0.3, 0.5, 1.0)]
+    series = {"consensus": zero, "dfcoa": zero, "lf_vo": [(v, 1.0, 0.51, 1.0, 4) for v in
+                                                          (0.0, 0.1, 0.3, 0.5, 1.0)],
+              "orca_nav": zero, "reshape": [*zero[:2], (0.3, 0.4, 0.22, 0.61, 20), *zero[3:]],
+              "virtual_spring": zero}
+    plots.ladder_figure(series, "message latency (s)", tmp_path / "l.png", "t")
+    fig = figs[0]
+    ax = fig.axes[0]
+    drawn = [c.lines[0] for c in ax.containers]
+    assert len(drawn) == 2  # lf_vo and reshape, the ones with a curve
+    texts = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert texts[:2] == ["lf_vo (n=4)", "reshape (n=4-20)"]
+    note = " ".join(texts[2].split())
+    assert note == "0 % on every rung (see the table): consensus, dfcoa, orca_nav, virtual_spring"
+    assert not _bbox_in(fig.legends[0], fig).overlaps(_bbox_in(ax, fig))  # off the data
+    # every variant at 0 %: nothing drawn, the note names them all, the rungs set the axis
+    plots.ladder_figure({"a": zero, "b": zero}, "latency (s)", tmp_path / "z.png", "t")
+    ax = figs[1].axes[0]
+    assert not ax.containers and ax.get_xlim()[0] < 0.0 and ax.get_xlim()[1] > 1.0
+    assert "no variant succeeds on any rung" in [t.get_text() for t in ax.texts]
+    assert [" ".join(t.get_text().split()) for t in figs[1].legends[0].get_texts()] == [
+        "0 % on every rung (see the table): a, b"]
 
 
 @pytest.fixture(scope="module")
@@ -115,6 +154,14 @@ def test_panels_have_one_titled_panel_per_variant_with_the_same_axes(ladder_resu
     assert [ax.get_title() for ax in axes] == ["broken — run failed", "goto_slot — timeout",
                                                "orca_nav — timeout"]
     assert len({(ax.get_xlim(), ax.get_ylim()) for ax in axes}) == 1
+    assert {(ax.get_xlabel(), ax.get_ylabel()) for ax in axes} == {("x (m)", "y (m)")}
+    (legend,) = fig.legends
+    texts = [t.get_text() for t in legend.get_texts()]
+    assert texts[:6] == ["robots (a colour each)", "final position", "leader path", "start",
+                         "goal", "obstacle"]
+    assert "first contact" not in texts  # no panel has a contact to mark
+    figure_layout.png_bytes(fig)  # laid out and drawn: the legend is clear of every panel
+    assert not any(_bbox_in(legend, fig).overlaps(_bbox_in(ax, fig)) for ax in fig.axes)
     assert "boom" in " ".join(t.get_text() for t in axes[0].texts)
     with pytest.raises(ValueError, match="mix"):
         trajectories.panels_figure(res.store.rows(), res.store.root)
@@ -139,8 +186,8 @@ def test_variant_name_and_outcome_text_fall_back_for_old_rows():
         return {"status": "ok", "metrics": metrics}
 
     text = trajectories.outcome_text
-    assert text(ok(outcome="collision", first_contact_time=12.34)) == "collision at 12.3 s"
-    assert text(ok(outcome="deadlock", deadlock_time=40)) == "deadlock from 40.0 s"
+    assert text(ok(outcome="collision", first_contact_time=12.34)) == "collision at t = 12.34 s"
+    assert text(ok(outcome="deadlock", deadlock_time=40)) == "deadlock from t = 40.00 s"
     assert text(ok(outcome="success", first_contact_time=None)) == "success"
     assert text(ok(outcome="collision", first_contact_time=None)) == "collision"
     assert text(ok(fce_rms=1.0)) == "?"  # old row: outcome unknown
@@ -195,8 +242,8 @@ def test_panels_one_per_variant_span_every_trajectory_and_name_no_hash(ladder_re
     titled = [ax for ax in fig.axes if ax.get_title()]
     assert [ax.get_title() for ax in titled] == [
         "broken — run failed", "gone — timeout", "goto_slot — timeout",
-        "goto_slot+hit — collision at 1.2 s", "orca_nav — timeout",
-        "orca_nav+stuck — deadlock from 2.0 s"]
+        "goto_slot+hit — collision at t = 1.25 s", "orca_nav — timeout",
+        "orca_nav+stuck — deadlock from t = 2.00 s"]
     assert len(fig.axes) == 8 and sum(not ax.axison for ax in fig.axes) == 2  # 2 rows of 4
     assert fig.get_suptitle() == "example_obstacles — seed 0"
     assert not any(HASH.search(ax.get_title()) for ax in titled)
@@ -213,6 +260,35 @@ def test_panels_reject_mixed_scenarios(ladder_results):
     rows = [r for r in res.store.rows() if r["seed"] == 0 and r["ladder_value"] == 2.0]
     with pytest.raises(ValueError, match="mix"):
         trajectories.panels_figure([rows[0], {**rows[1], "scenario": "other"}], res.store.root)
+
+
+def test_panel_of_a_collision_marks_its_first_contact(ladder_results, monkeypatch):
+    _, res = ladder_results
+    row = next(r for r in res.store.rows() if r["seed"] == 0 and r["ladder_value"] == 3.0
+               and r["controller"] == "goto_slot")
+    k = 12
+
+    def bump(log):  # robots 1 and 2 overlap from step k on (0.3 m < 2 x 0.2 m)
+        log.pose[k:, 2, :2] = log.pose[k:, 1, :2] + (0.0, 0.3)
+        log.clearance[:] = 5.0
+        log.robot_contacts[k:] = 1
+
+    hit = _save_edited(res, row, "bumping", bump)
+    hit = {**hit, "variant": "goto_slot+hit", "metrics": {
+        **row["metrics"], "outcome": "collision", "first_contact_time": k * 0.1}}
+    fig = trajectories.panels_figure([hit], res.store.root)
+    ax = fig.axes[0]
+    assert ax.get_title() == f"goto_slot+hit — collision at t = {k * 0.1:.2f} s"
+    log = read_log(res.store.root, hit)
+    (mark,) = [ln for ln in ax.lines if ln.get_marker() == "X"]
+    assert np.allclose(np.column_stack(mark.get_data()), [log.pose[k, 1, :2] + (0.0, 0.15)])
+    red = [p for p in ax.patches if isinstance(p, CirclePatch) and not p.get_fill()]
+    assert sorted(tuple(p.center) for p in red) == sorted(
+        tuple(log.pose[k, i, :2]) for i in (1, 2))
+    assert {"in contact", "first contact"} <= {t.get_text() for t in fig.legends[0].get_texts()}
+    lead = next(ln for ln in ax.lines if ln.get_label() == "leader path")
+    assert lead.get_zorder() < min(c.get_zorder() for c in ax.collections
+                                   if c.get_label() == "trajectories")
 
 
 def test_snapshot_draws_the_nearest_step_and_marks_exactly_the_robots_in_contact(
@@ -237,10 +313,23 @@ def test_snapshot_draws_the_nearest_step_and_marks_exactly_the_robots_in_contact
     discs = [p for p in ax.patches if isinstance(p, CirclePatch)
              and np.isclose(p.get_radius(), 0.2)]
     assert len(discs) == 3
-    red = sorted(tuple(p.center) for p in discs if tuple(p.get_edgecolor()[:3]) == (1, 0, 0))
-    assert red == [(4.0, 7.0), (4.3, 7.0)]
-    assert ax.get_title() == ("example_obstacles / orca_nav / seed 0 at t = 1.0 s "
-                              "(2 robot(s) in contact)")
+    red = np.asarray(to_rgb(plotting.CONTACT_COLOR))
+    rings = sorted(tuple(p.center) for p in ax.patches if isinstance(p, CirclePatch)
+                   and not p.get_fill() and np.allclose(p.get_edgecolor()[:3], red))
+    assert rings == [(4.0, 7.0), (4.3, 7.0)]  # robots 0 and 1, not 2
+    (mark,) = [ln for ln in ax.lines if ln.get_marker() == "X"]
+    assert np.allclose(np.column_stack(mark.get_data()), [(4.15, 7.0)])
+    assert ax.get_title() == ("example_obstacles / orca_nav / seed 0\ntimeout\n"
+                              "at t = 1.00 s: robot 0 and robot 1")
+    # the legend says what the crosses (slots), the triangle (leader) and the X mean
+    legend = figs[0].legends[0]
+    marks = {t.get_text(): getattr(h, "get_marker", lambda: None)()
+             for h, t in zip(legend.legend_handles, legend.get_texts(), strict=True)}
+    assert marks["formation slots"] == "x" and marks["leader"] == "^"
+    assert marks["contact"] == "X" and "in contact" in marks
+    fig = figs[0]  # drawn by save_png: the title is inside the figure
+    title = fig.axes[0].title.get_window_extent(fig.canvas.get_renderer())
+    assert title.x0 >= 0 and title.x1 <= fig.bbox.x1 and title.y1 <= fig.bbox.y1
     grey = [p for p in ax.patches if isinstance(p, CirclePatch)
             and np.isclose(p.get_radius(), 0.3)]  # the moving disc, where the log has it
     assert len(grey) == 1 and np.allclose(grey[0].center, log.dyn_pos[k, 0])

@@ -69,7 +69,10 @@ def test_paired_difference_is_reproducible_and_drops_undefined_pairs():
     assert a.median == pytest.approx(np.median(x - y))
     xs, ys = list(x), list(y)
     xs[0], ys[1], xs[2] = None, float("nan"), float("inf")
-    assert stats.paired_difference(xs, ys).n == 17
+    dropped = stats.paired_difference(xs, ys)
+    assert (dropped.n, dropped.excluded, a.excluded) == (17, 3, 0)
+    none = stats.paired_difference([float("inf")] * 2, [1.0, 2.0])
+    assert (none.n, none.excluded) == (0, 2) and math.isnan(none.median)
 
 
 def test_a_constant_shift_has_a_degenerate_interval():

@@ -94,7 +94,7 @@ SQP_MAX_ITER, IPOPT_MAX_ITER = 20, 100
 
 @register("nmpc")
 class Nmpc(PlanBuffers, BatchedController):
-    """Distributed NMPC tracking the formation slot (module docstring); batched.
+    """Distributed NMPC: each robot tracks its formation slot over a short horizon; batched.
 
     One object steps every run of a batch (:class:`BatchedController`): the
     set-up of every row's problem (references, shifted plans and multipliers,

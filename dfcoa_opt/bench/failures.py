@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from dfcoa_opt.bench import plots, trajectories
+from dfcoa_opt.bench.logs import LogCompacted
 from dfcoa_opt.bench.sweep import safe_name
 from dfcoa_opt.errors import DfcoaError
 
@@ -86,6 +87,8 @@ def explain(groups: Sequence[Mapping[str, Any]], rows: Sequence[Row], results_di
             if not first.get("log"):
                 raise DfcoaError("the run has no log")
             path = trajectories.snapshot_figure(first, results_dir, out_dir / name, t)
+        except LogCompacted:
+            raise  # ``make figures`` runs the run again and renders anew
         except DfcoaError as exc:
             lines.append(f"{text} (no snapshot: {exc})")
             continue

@@ -7,8 +7,10 @@
 from __future__ import annotations
 
 import contextlib
+import hashlib
+import json
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,7 +19,14 @@ from dfcoa_opt.bench import precision
 from dfcoa_opt.bench.executors import ExecutorConfig, run_all
 from dfcoa_opt.bench.lifecycle import Interrupted, SweepInterrupted, interruptible
 from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.bench.sweep import RunSpec, Sweep, describe_runs, load_sweep
+from dfcoa_opt.bench.sweep import (
+    DICT_SOURCE,
+    RunSpec,
+    Sweep,
+    describe_runs,
+    load_sweep,
+    safe_name,
+)
 
 
 @dataclass(frozen=True)
@@ -55,6 +64,30 @@ def _progress(total: int, desc: str, enabled: bool | None):
         enabled = sys.stdout.isatty()
     return tqdm(total=total, desc=desc, unit="run", disable=not enabled, file=sys.stderr,
                 dynamic_ncols=True, smoothing=0.1)
+
+
+def default_folder(sweep: Sweep, seeds: int | None = None,
+                   overrides: Mapping[str, Any] | None = None) -> Path:
+    """The results folder of a sweep when none is given.
+
+    A sweep file: ``results/<sweep name>`` (``dfcoa bench``). A sweep given as a
+    dict (the Python facade's): ``results/<name>-<8 hex digits>``, the digits
+    the start of the SHA-256 over the dict's canonical JSON (``sweep.sha256``,
+    as the manifest records it) with the ``seeds`` and ``overrides`` it runs
+    with. The same dict resumes in its folder; a different one gets its own,
+    so two sweeps never share rows.
+
+    Args:
+        sweep: The loaded sweep.
+        seeds: The seed count that replaces the sweep's, if any.
+        overrides: Dotted scenario keys set in every run, if any.
+    """
+    if sweep.source != DICT_SOURCE:
+        return Path("results") / sweep.name
+    content = json.dumps([sweep.sha256, seeds, dict(overrides or {})], sort_keys=True,
+                         default=str)
+    digest = hashlib.sha256(content.encode()).hexdigest()[:8]
+    return Path("results") / f"{safe_name(sweep.name)}-{digest}"
 
 
 def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig | None = None,

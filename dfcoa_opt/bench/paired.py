@@ -4,8 +4,9 @@ All variants run on the same seeds of each scenario, so a variant and the
 baseline are compared seed by seed (:mod:`dfcoa_opt.bench.stats`):
 
 - a metric: the median of the per-seed differences ``variant - baseline``, its
-  bootstrap 95 % CI, and the two-sided Wilcoxon signed-rank p-value (seeds where
-  either value is undefined, e.g. no time to goal, are left out);
+  bootstrap 95 % CI, and the two-sided Wilcoxon signed-rank p-value; seeds where
+  either value is not finite (a failed run, no time to goal, a raw risk after a
+  contact, which is ``inf``) are left out and counted (``excluded``);
 - success: the difference of the success rates and McNemar's exact test (a
   failed run counts as no success).
 
@@ -52,6 +53,8 @@ class Comparison:
         p_value: Two-sided p-value (McNemar exact or Wilcoxon).
         p_holm: Holm-corrected p-value within the table.
         verdict: ``"better"``, ``"worse"`` or ``"no difference"`` (at 5 %, after Holm).
+        excluded: Seeds left out of a metric's comparison because either value was
+            not finite (0 for success).
     """
 
     table: tuple[str, str, float | None]
@@ -64,6 +67,7 @@ class Comparison:
     p_value: float
     p_holm: float = math.nan
     verdict: str = "no difference"
+    excluded: int = 0
 
 
 def table_of(row: Row) -> tuple[str, str, float | None]:
@@ -119,7 +123,7 @@ def compare(rows: Sequence[Row], baseline: str,
                 y = [_metric(base[s], metric) for s in seeds]
                 d = stats.paired_difference(x, y, seed=seed)
                 cells.append(Comparison(table, variant, metric, d.n, d.median, d.ci_low,
-                                        d.ci_high, d.p_value))
+                                        d.ci_high, d.p_value, excluded=d.excluded))
         adjusted = stats.holm([c.p_value for c in cells])
         out += [replace(c, p_holm=float(p), verdict=stats.verdict(
             c.estimate, float(p), c.metric in HIGHER_IS_BETTER)) for c, p in zip(

@@ -14,10 +14,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from matplotlib.lines import Line2D
 
 from dfcoa_opt.bench.logs import read_log
 from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.figure_layout import new_figure, save_png
+from dfcoa_opt.figure_layout import new_figure, save_png, wrap_text
+from dfcoa_opt.metrics_units import UNITS
 from dfcoa_opt.plotting import robot_colors
 from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.log import RunLog
@@ -27,35 +29,33 @@ if TYPE_CHECKING:
 
 Row = Mapping[str, Any]
 
-#: Summary key -> (label, unit) for table headers and axes; units as in docs/metrics.md.
-METRIC_INFO: dict[str, tuple[str, str]] = {
-    "fce_open_rms": ("FCE RMS on open stretches", "m"),
-    "fse_open_rms": ("FSE RMS on open stretches", "m"), "open_pct": ("open steps", "%"),
-    "fce_rms": ("FCE RMS", "m"), "fce_mean": ("FCE mean", "m"), "fce_max": ("FCE max", "m"),
-    "fce_x_rms": ("FCE x RMS", "m"), "fce_y_rms": ("FCE y RMS", "m"), "fse_rms": ("FSE RMS", "m"),
-    "fse_mean": ("FSE mean", "m"), "fste_max": ("FStE max", "m"), "fste_final": ("FStE final", "m"),
-    "stability_pct": ("Stability", "%"), "vce_rms": ("VCE RMS", "m/s, rad/s mixed"),
-    "v_rms": ("RMS v", "m/s"), "w_rms": ("RMS ω", "rad/s"), "risk_mean": ("Risk mean", ""),
-    "risk_max": ("Risk max", ""), "risk_raw_mean": ("Risk mean, eq 11", "1/m²"),
-    "risk_raw_max": ("Risk max, eq 11", "1/m²"), "risk_clip_pct": ("Risk at clip", "%"),
-    "first_contact_time": ("First contact", "s"), "deadlock_time": ("Deadlock onset", "s"),
-    "min_inter_robot_distance": ("Min robot distance", "m"),
-    "min_obstacle_clearance": ("Min obstacle clearance", "m"), "collisions": ("Collisions", ""),
-    "robot_contact_steps": ("Robot contacts", "steps"),
-    "obstacle_contact_steps": ("Obstacle contacts", "steps"),
-    "dynamic_contact_steps": ("Moving-obstacle contacts", "steps"),
-    "path_length_mean": ("Path length", "m"), "time_to_goal": ("Time to goal", "s"),
-    "success": ("Success", ""), "filter_interventions": ("Filter interventions", ""),
-    "filter_fallbacks": ("Filter fallbacks", ""), "filter_solver_failures": ("Solver failures", ""),
-    "filter_time_median": ("Filter time median", "s"), "mse_mean": ("MSE mean", "m²"),
-    "lf_error_mean": ("Slot error mean", "m"), "steps": ("Steps", ""),
+#: Summary key -> its name in tables and axes; the unit comes from
+#: :data:`dfcoa_opt.metrics_units.UNITS`.
+METRIC_LABELS: dict[str, str] = {
+    "fce_open_rms": "FCE RMS on open stretches", "fse_open_rms": "FSE RMS on open stretches",
+    "open_pct": "open steps", "fce_rms": "FCE RMS", "fce_mean": "FCE mean", "fce_max": "FCE max",
+    "fce_x_rms": "FCE x RMS", "fce_y_rms": "FCE y RMS", "fse_rms": "FSE RMS",
+    "fse_mean": "FSE mean", "fste_max": "FStE max", "fste_final": "FStE final",
+    "stability_pct": "Stability", "vce_rms": "VCE RMS", "v_rms": "RMS v", "w_rms": "RMS ω",
+    "risk_mean": "Risk mean", "risk_max": "Risk max", "risk_raw_mean": "Risk mean, eq 11",
+    "risk_raw_max": "Risk max, eq 11", "risk_clip_pct": "Risk at clip",
+    "first_contact_time": "First contact", "deadlock_time": "Deadlock onset",
+    "min_inter_robot_distance": "Min robot distance",
+    "min_obstacle_clearance": "Min obstacle clearance", "collisions": "Collisions",
+    "robot_contact_steps": "Robot contacts", "obstacle_contact_steps": "Obstacle contacts",
+    "dynamic_contact_steps": "Moving-obstacle contacts", "path_length_mean": "Path length",
+    "time_to_goal": "Time to goal", "success": "Success",
+    "filter_interventions": "Filter interventions", "filter_fallbacks": "Filter fallbacks",
+    "filter_solver_failures": "Solver failures", "filter_time_median": "Filter time median",
+    "mse_mean": "MSE mean", "lf_error_mean": "Slot error mean", "steps": "Steps",
 }
 
 
 def metric_header(metric: str) -> str:
     """Column title ``"label (unit)"`` of a summary key (the key itself when unknown)."""
-    label, unit = METRIC_INFO.get(metric, (metric, ""))
-    return f"{label} ({unit})" if unit else label
+    label = METRIC_LABELS.get(metric, metric)
+    unit = UNITS.get(metric, "").replace("^2", "²")
+    return f"{label} ({unit})" if unit not in ("", "1") else label
 
 
 def scenario_for_row(row: Row) -> Scenario:
@@ -144,11 +144,18 @@ _STYLES = ("-", "--", "-.", ":")
 _MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 
 
+#: Width of the ladder figures' note of always-0 % variants, inches (the legend's column).
+_NOTE_IN = 2.4
+
+
 def ladder_figure(series: Mapping[str, Sequence[tuple[float, float, float, float, int]]],
                   xlabel: str, path: str | Path, title: str, log_x: bool = False) -> Path:
     """Success rate against a ladder's value, one line per variant, with Wilson intervals.
 
-    The lines are shifted sideways by 1 % of the axis each, so variants with the
+    Only the variants that succeed on some rung are drawn; those at 0 % on every
+    rung are named in a note at the end of the legend ("0 % on every rung: a, b,
+    c"); the ladder's table keeps every variant with its intervals. The drawn
+    lines are shifted sideways by 1 % of the axis each, so variants with the
     same rate at a rung do not hide each other.
 
     Args:
@@ -165,14 +172,23 @@ def ladder_figure(series: Mapping[str, Sequence[tuple[float, float, float, float
     fig = new_figure((8.0, 4.8))
     ax = fig.add_subplot()
     names = list(series)
-    colors = robot_colors(max(1, len(names)))
+    colors = robot_colors(max(1, len(names)))  # by place among all variants: stable colours
     values = [p[0] for pts in series.values() for p in pts]
     span = (max(values) - min(values)) if values else 0.0
-    for i, name in enumerate(names):
+    # Variants at 0 % on every rung are named, not drawn. They have no curve to read (no
+    # break point, the same flat line), and a dozen of them stacked their identical error
+    # bars on 0 % into one block that hid the few curves that differ (crossing, message
+    # latency: 11 of 13). Small multiples would keep them apart but spend a panel on each
+    # flat line and shrink the informative curves to a thirteenth of the figure; a note
+    # says the same in one line, and the report's table keeps every variant's numbers.
+    drawn = [name for name in names if any(p[1] > 0 for p in series[name])]
+    never = [name for name in names if name not in drawn]
+    for place, name in enumerate(drawn):
+        i = names.index(name)
         pts = sorted(series[name])
         x = np.array([p[0] for p in pts], dtype=float)
         # dodge the lines sideways (1 % of the axis per line) so equal rates stay apart
-        dodge = 0.01 * (i - (len(names) - 1) / 2)
+        dodge = 0.01 * (place - (len(drawn) - 1) / 2)
         x = x * (1.0 + dodge) if log_x else x + dodge * span
         y = 100.0 * np.array([p[1] for p in pts])
         lo = 100.0 * np.array([p[2] for p in pts])
@@ -185,10 +201,22 @@ def ladder_figure(series: Mapping[str, Sequence[tuple[float, float, float, float
                     label=f"{name} ({n})")
     if log_x:
         ax.set_xscale("log")
+    if values and not drawn:  # nothing drawn: the rungs' range all the same
+        lo_x, hi_x = min(values), max(values)
+        pad = 0.05 * (hi_x - lo_x) or 0.5
+        ax.set_xlim(*((lo_x / 1.2, hi_x * 1.2) if log_x and lo_x > 0 else
+                      (lo_x - pad, hi_x + pad)))
+        ax.text(0.5, 0.5, "no variant succeeds on any rung", transform=ax.transAxes,
+                ha="center", va="center", color="0.4")
     ax.set_ylim(-3, 103)
     ax.set_xlabel(xlabel)
     ax.set_ylabel("success rate (%)")
     ax.set_title(title)
     ax.grid(True, alpha=0.3)
-    fig.legend(loc="outside right upper", fontsize="small")
+    handles, labels = ax.get_legend_handles_labels()
+    if never:  # a handle-less entry: the note, in the legend's column, off the data
+        handles.append(Line2D([], [], linestyle="none"))
+        labels.append(wrap_text(f"0 % on every rung (see the table): {', '.join(never)}",
+                                _NOTE_IN, 8.33))
+    fig.legend(handles, labels, loc="outside right upper", fontsize="small")
     return save_png(fig, path)

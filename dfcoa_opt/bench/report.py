@@ -270,7 +270,8 @@ LEGEND = ("Outcome of every run (docs/metrics.md, outcomes): **success** = the g
           "Metric cells: mean ± half-width of the Student-t 95 % confidence interval over the "
           "seeds whose run did not fail; `(n=k)`: only k of them had a value (time to goal exists "
           "only for runs that reached the goal); — : undefined. Risk is paper 000's eq 11 "
-          "without normalisation (1/m²).")
+          "without normalisation (1/m²); it is undefined (inf) for a run with a contact, so its "
+          "mean covers the runs without contact, and such runs sit in the collision column.")
 
 
 def make_report(results_dir: str | Path, out_dir: str | Path | None = None,

@@ -91,6 +91,8 @@ class PairedDifference:
 
     Attributes:
         n: Pairs used (both values finite).
+        excluded: Pairs left out because a value was not finite (None, NaN or inf:
+            a failed run, no time to goal, a risk after a contact).
         median: Median of the differences, in the values' unit (NaN when n = 0).
         ci_low: Lower end of the percentile bootstrap CI of the median (NaN when n < 2).
         ci_high: Upper end.
@@ -103,6 +105,7 @@ class PairedDifference:
     ci_low: float
     ci_high: float
     p_value: float
+    excluded: int = 0
 
 
 def paired_difference(x: Sequence[Any], y: Sequence[Any], *, seed: int = 0,
@@ -117,25 +120,28 @@ def paired_difference(x: Sequence[Any], y: Sequence[Any], *, seed: int = 0,
         confidence: Confidence level of the CI.
 
     Returns:
-        The :class:`PairedDifference`. With identical differences the CI is that
-        value (no resampling can change it); with fewer than two pairs it is NaN.
+        The :class:`PairedDifference` of the pairs whose values are both finite
+        (``excluded`` counts the others). With identical differences the CI is
+        that value (no resampling can change it); with fewer than two pairs it
+        is NaN.
     """
     a, b = _finite_pairs(x, y)
     d = a - b
     n = int(d.size)
+    excluded = len(x) - n
     if n == 0:
-        return PairedDifference(0, math.nan, math.nan, math.nan, math.nan)
+        return PairedDifference(0, math.nan, math.nan, math.nan, math.nan, excluded)
     med = float(np.median(d))
     if np.all(d == d[0]):
         lo = hi = med if n >= 2 else math.nan
-        return PairedDifference(n, med, lo, hi, 1.0 if d[0] == 0 else _wilcoxon(d))
+        return PairedDifference(n, med, lo, hi, 1.0 if d[0] == 0 else _wilcoxon(d), excluded)
     lo = hi = math.nan
     if n >= 2:
         res = sps.bootstrap((d,), np.median, n_resamples=n_resamples, vectorized=True,
                             confidence_level=confidence, method="percentile",
                             rng=np.random.default_rng(seed))
         lo, hi = float(res.confidence_interval.low), float(res.confidence_interval.high)
-    return PairedDifference(n, med, lo, hi, _wilcoxon(d))
+    return PairedDifference(n, med, lo, hi, _wilcoxon(d), excluded)
 
 
 def _wilcoxon(d: NDArray[np.float64]) -> float:

@@ -77,9 +77,9 @@ CSV_FIELDS = ("key", "scenario", "variant", "controller", "seed", "ladder", "lad
 #: :func:`code_fingerprint`, so editing a table, a figure or the scheduler re-renders or
 #: resumes without re-simulating; ``tests/test_bench.py`` checks that no run imports them.
 #: (``dfcoa_opt/environment.py`` is fingerprinted: the runner records numpy's SIMD level.)
-NOT_RUN = ("dfcoa_opt/__main__.py", "dfcoa_opt/cli.py", "dfcoa_opt/figures.py",
-           "dfcoa_opt/plotting.py", "dfcoa_opt/animation.py", "dfcoa_opt/sim/docs.py",
-           "dfcoa_opt/bench/")
+NOT_RUN = ("dfcoa_opt/__main__.py", "dfcoa_opt/cli.py", "dfcoa_opt/cli_text.py",
+           "dfcoa_opt/figures.py", "dfcoa_opt/plotting.py", "dfcoa_opt/animation.py",
+           "dfcoa_opt/sim/docs.py", "dfcoa_opt/bench/")
 #: The harness sources a run does execute (loading the run's scenario, summarising it).
 RUN_SOURCES = ("dfcoa_opt/bench/__init__.py", "dfcoa_opt/bench/runner.py",
                "dfcoa_opt/bench/sweep.py", "dfcoa_opt/bench/variants.py")

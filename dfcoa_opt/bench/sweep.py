@@ -57,6 +57,8 @@ from dfcoa_opt.sim.loader import load_scenario, read_toml
 from dfcoa_opt.sim.scenario import Scenario
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.+-]+")
+#: The source of a sweep given as a dict (:func:`sweep_from_dict`), as its errors name it.
+DICT_SOURCE = "<dict>"
 
 
 def safe_name(name: Any) -> str:
@@ -356,7 +358,7 @@ def sweep_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".",
     """
     data = {"name": "sweep", **dict(data)}
     text = json.dumps(data, sort_keys=True, default=str)
-    return expand_sweep(data, "<dict>", Path(base_dir), text, seeds, overrides)
+    return expand_sweep(data, DICT_SOURCE, Path(base_dir), text, seeds, overrides)
 
 
 def expand_sweep(data: dict[str, Any], src: str, base: Path, text: str,

@@ -160,9 +160,13 @@ def csv_table(groups: Sequence[Mapping[str, Any]], metrics: Sequence[str]) -> st
 
 
 def _diff_cell(c: Comparison) -> str:
-    """``"-0.120 [-0.200, -0.050] p=0.004 better"`` (success: rate difference in points)."""
+    """``"-0.120 [-0.200, -0.050] p=0.004 better"`` (success: rate difference in points).
+
+    ``"(k excluded)"`` follows when k seeds had no finite value on either side.
+    """
+    excluded = f" ({c.excluded} excluded)" if c.excluded else ""
     if c.n == 0 or not math.isfinite(c.estimate):
-        return "—"
+        return "—" + excluded
     if c.metric == "success":
         text = f"{100 * c.estimate:+.0f} pts"
     else:
@@ -170,7 +174,7 @@ def _diff_cell(c: Comparison) -> str:
         if math.isfinite(c.ci_low):
             text += f" [{number(c.ci_low)}, {number(c.ci_high)}]"
     verdict = {"better": "**better**", "worse": "**worse**"}.get(c.verdict, "")
-    return f"{text} p={c.p_holm:.3g} {verdict}".rstrip()
+    return f"{text} p={c.p_holm:.3g} {verdict}".rstrip() + excluded
 
 
 def paired_table(comparisons: Sequence[Comparison], metrics: Sequence[str],
@@ -189,6 +193,8 @@ def paired_table(comparisons: Sequence[Comparison], metrics: Sequence[str],
     lines += ["", f"Each cell: the median over seeds of (variant − {md_escape(baseline)}) with "
               "its bootstrap 95 % CI, and the Wilcoxon signed-rank p-value; success: the "
               "difference of the success rates in points and McNemar's exact p-value. "
+              "A seed where either run has no finite value (a failed run, no time to goal, "
+              "a raw risk after a contact) is left out of that metric: `(k excluded)`. "
               "p-values are Holm-corrected across this table; **better**/**worse** at 5 %. "
               f"Higher is better for {better}; lower for the rest."]
     return "\n".join(lines) + "\n"
@@ -256,13 +262,17 @@ def overrides_note(groups: Sequence[Mapping[str, Any]]) -> list[str]:
 
 
 def paired_csv(comparisons: Sequence[Comparison]) -> str:
-    """CSV of every paired comparison (one row per table, variant and metric)."""
+    """CSV of every paired comparison (one row per table, variant and metric).
+
+    ``n`` seeds paired, ``excluded`` seeds left out (a value not finite); an
+    undefined number is an empty cell.
+    """
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["scenario", "ladder", "ladder_value", "variant", "metric", "n", "estimate",
-                "ci_low", "ci_high", "p_value", "p_holm", "verdict"])
+    w.writerow(["scenario", "ladder", "ladder_value", "variant", "metric", "n", "excluded",
+                "estimate", "ci_low", "ci_high", "p_value", "p_holm", "verdict"])
     for c in comparisons:
         w.writerow([*c.table[:2], "" if c.table[2] is None else c.table[2], c.variant, c.metric,
-                    c.n, *(repr(v) if math.isfinite(v) else "" for v in
+                    c.n, c.excluded, *(repr(v) if math.isfinite(v) else "" for v in
                            (c.estimate, c.ci_low, c.ci_high, c.p_value, c.p_holm)), c.verdict])
     return buf.getvalue()

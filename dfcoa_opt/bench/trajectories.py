@@ -3,7 +3,9 @@
 Built on :mod:`dfcoa_opt.plotting` (bare ``Figure`` + Agg, never pyplot). The
 map is rebuilt from the row's scenario file with the row's seed and overrides
 (maps may depend on both); runs are read from their saved logs, never
-re-simulated.
+re-simulated. Contacts are marked as in the single-run figures
+(:func:`dfcoa_opt.plotting.draw_contacts`), outcomes worded by
+:func:`dfcoa_opt.outcome.outcome_text`. Axes are in metres.
 """
 
 from __future__ import annotations
@@ -15,40 +17,61 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib.collections import LineCollection
+from matplotlib.lines import Line2D
 from matplotlib.patches import Circle as CirclePatch
+from matplotlib.patches import Patch
 
-from dfcoa_opt.bench.logs import read_log
+from dfcoa_opt import outcome
+from dfcoa_opt.bench.logs import LogCompacted, read_log
 from dfcoa_opt.bench.plots import save_png, scenario_for_row, variant_name
 from dfcoa_opt.bench.store import file_sha256
 from dfcoa_opt.bench.sweep import safe_name
+from dfcoa_opt.contacts import contacts_at, describe, first_contact_step, robot_radius
 from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.figure_layout import new_figure
-from dfcoa_opt.plotting import draw_world, robot_colors
+from dfcoa_opt.figure_layout import legend_and_fit, map_figure, new_figure, wrap_text
+from dfcoa_opt.plotting import (
+    CONTACT_COLOR,
+    LEADER_STYLE,
+    OCCUPIED_COLOR,
+    TITLE_PT,
+    Z_LEADER,
+    Z_ROBOT,
+    _robot_label,
+    draw_contacts,
+    draw_world,
+    robot_colors,
+)
 from dfcoa_opt.sim.log import RunLog
 
 if TYPE_CHECKING:
+    from matplotlib.artist import Artist
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
+
+    from dfcoa_opt.world.grid import OccupancyGrid
 
 Row = Mapping[str, Any]
 #: Panels per row of a trajectory figure.
 COLUMNS = 4
 #: Size of one panel, inches.
 PANEL_IN = 3.4
-#: Robot radius assumed for logs that do not record it (``RobotSpec`` default), m.
-DEFAULT_RADIUS = 0.2
+#: Font size of the panels' titles ("small"), pt.
+PANEL_TITLE_PT = 8.33
+#: The leader's path in a panel: the single-run style, narrower for the thinner robot lines.
+PANEL_LEADER: dict[str, Any] = {**LEADER_STYLE, "linewidth": 2.0}
 
 
 def outcome_text(row: Row) -> str:
-    """``"collision at 12.3 s"``, ``"deadlock from 40.0 s"``, ``"success"``, ``"run failed"``."""
+    """``"collision at t = 12.30 s"``, ``"deadlock from t = 40.00 s"``, ``"success"``, ...
+
+    :func:`dfcoa_opt.outcome.outcome_text` of the row's metrics; ``"run failed"``
+    for a run that raised, ``"?"`` for an old row without an outcome.
+    """
     if row.get("status") != "ok":
         return "run failed"
     m = row.get("metrics") or {}
-    outcome = str(m.get("outcome", "?"))
-    t = m.get("first_contact_time" if outcome == "collision" else "deadlock_time")
-    if outcome in ("collision", "deadlock") and isinstance(t, (int, float)):
-        return f"{outcome} {'at' if outcome == 'collision' else 'from'} {t:.1f} s"
-    return outcome
+    return outcome.outcome_text(str(m.get("outcome", "?")), m.get("first_contact_time"),
+                                m.get("deadlock_time"))
 
 
 def _view(logs: Sequence[RunLog], extent: tuple[float, float, float, float]
@@ -66,16 +89,54 @@ def _view(logs: Sequence[RunLog], extent: tuple[float, float, float, float]
 
 
 def _draw_run(ax: Axes, log: RunLog, upto: int | None = None, alpha: float = 1.0) -> None:
-    """Every robot's trajectory (own colour), its final dot, and the leader's track dashed."""
+    """Every robot's trajectory (own colour), its final dot, and the leader's path below them."""
     pose = np.asarray(log.pose, dtype=float)[:upto]
     # one collection, not a line per robot (a 100-robot panel drew 100 Line2D)
     ax.add_collection(LineCollection(list(pose[:, :, :2].transpose(1, 0, 2)),
                                      colors=robot_colors(pose.shape[1]), linewidths=1.0,
-                                     alpha=alpha, zorder=3), autolim=False)
+                                     alpha=alpha, zorder=Z_ROBOT, label="trajectories"),
+                      autolim=False)
     if len(pose) and upto is None:
         ax.plot(pose[-1, :, 0], pose[-1, :, 1], "o", color="black", markersize=2.5, zorder=4)
     lead = np.asarray(log.leader, dtype=float)[:upto, :2]
-    ax.plot(lead[:, 0], lead[:, 1], "--", color="black", linewidth=0.8, zorder=4)
+    ax.plot(lead[:, 0], lead[:, 1], zorder=Z_LEADER, label="leader path",
+            **{**PANEL_LEADER, "alpha": PANEL_LEADER["alpha"] * alpha})
+
+
+def _mark_first_contact(ax: Axes, row: Row, log: RunLog, grid: OccupancyGrid) -> bool:
+    """Mark a collision's first contact (:func:`~dfcoa_opt.plotting.draw_contacts`).
+
+    Only a row whose outcome is ``collision`` reads the log's contact fields.
+
+    Returns:
+        Whether anything was drawn.
+    """
+    if (row.get("metrics") or {}).get("outcome") != "collision":
+        return False
+    k = first_contact_step(log)
+    return k is not None and bool(draw_contacts(ax, log, k, contacts_at(log, k, grid),
+                                                robot_radius(log)))
+
+
+def _panel_legend(fig: Figure, n_robots: int, contact: bool) -> None:
+    """The panels' legend, under them: robots, leader, start, goal, obstacles, contacts."""
+    color = robot_colors(max(n_robots, 1))
+    handles: list[Artist] = [
+        Line2D([], [], color=color[0], linewidth=1.0, label="robots (a colour each)"),
+        Line2D([], [], marker="o", color="black", markersize=2.5, linestyle="none",
+               label="final position"),
+        Line2D([], [], label="leader path", **PANEL_LEADER),
+        Line2D([], [], marker="s", color="black", markerfacecolor="none", markersize=9,
+               linestyle="none", label="start"),
+        Line2D([], [], marker="*", color="gold", markeredgecolor="black", markersize=15,
+               linestyle="none", label="goal"),
+        Patch(facecolor=OCCUPIED_COLOR, edgecolor="black", label="obstacle")]
+    if contact:
+        handles += [Patch(fill=False, edgecolor=CONTACT_COLOR, linewidth=2.0, label="in contact"),
+                    Line2D([], [], marker="X", color=CONTACT_COLOR, markeredgecolor="black",
+                           markersize=11, linestyle="none", label="first contact")]
+    fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4),
+               fontsize="small")
 
 
 def panels_figure(rows: Sequence[Row], results_dir: str | Path) -> Figure:
@@ -108,26 +169,29 @@ def panels_figure(rows: Sequence[Row], results_dir: str | Path) -> Figure:
     view = _view(list(logs.values()), sc.world.grid.extent)
     cols = min(COLUMNS, len(rows))
     nrows = math.ceil(len(rows) / cols)
-    fig = new_figure((PANEL_IN * cols, PANEL_IN * nrows * 0.9 + 0.4))
+    fig = new_figure((PANEL_IN * cols, PANEL_IN * nrows * 0.9 + 1.0))
     axes = fig.subplots(nrows, cols, squeeze=False).ravel()
+    contact = False
     for ax, row in zip(axes, rows, strict=False):
         name = variant_name(row)
         draw_world(ax, sc.world.grid, sc.spec.leader.goal, sc.spec.leader.start,
-                   shapes=sc.world.shapes)
+                   shapes=sc.world.shapes)  # and the axis labels, x (m) and y (m)
         if name in logs:
             _draw_run(ax, logs[name])
+            contact |= _mark_first_contact(ax, row, logs[name], sc.world.grid)
         else:
             err = " ".join(str(row.get("error") or "no log").split())
             ax.text(0.5, 0.5, f"run failed:\n{err[:60]}", transform=ax.transAxes,
                     ha="center", va="center", fontsize="small", wrap=True)
         ax.set_xlim(view[0], view[1])
         ax.set_ylim(view[2], view[3])
-        ax.set_title(f"{name} — {outcome_text(row)}", fontsize="small")
-        ax.set_xlabel("")
-        ax.set_ylabel("")
+        ax.set_title(wrap_text(f"{name} — {outcome_text(row)}", PANEL_IN - 0.2,
+                               PANEL_TITLE_PT), fontsize=PANEL_TITLE_PT)
     for ax in axes[len(rows):]:
         ax.set_axis_off()
     fig.suptitle(f"{scen} — seed {seed}")
+    n_robots = max((np.asarray(log.pose).shape[1] for log in logs.values()), default=1)
+    _panel_legend(fig, n_robots, contact)
     return fig
 
 
@@ -169,6 +233,8 @@ def overlay_figures(rows: Sequence[Row], results_dir: str | Path, out_dir: str |
         path = Path(out_dir) / f"traj_{safe_name(scen)}_s{pick}.png"
         try:
             written[scen] = [save_png(panels_figure(chosen, results_dir), path)]
+        except LogCompacted:
+            raise  # ``make figures`` runs the run again and renders anew
         except DfcoaError as exc:
             notes.append(f"{scen}: trajectory figure skipped: {exc}")
             continue
@@ -185,40 +251,26 @@ def nearest_step(log: RunLog, t: float) -> int:
     return int(np.argmin(np.abs(np.asarray(log.t) - t)))
 
 
-def contacts_at(log: RunLog, k: int) -> np.ndarray:
-    """``(N,)`` which robots touch something at instant ``k``.
-
-    A robot touches a static obstacle when its clearance is below its radius,
-    another robot when their centres are closer than two radii, and a moving
-    disc when it overlaps it -- the simulator's contact rules.
-    """
-    r = float(log.meta.get("robot_radius", DEFAULT_RADIUS))
-    pos = np.asarray(log.pose[k, :, :2], dtype=float)
-    hit = np.asarray(log.clearance[k]) < r
-    if len(pos) > 1:
-        d = np.linalg.norm(pos[:, None] - pos[None], axis=-1)
-        np.fill_diagonal(d, np.inf)
-        hit |= (d < 2.0 * r).any(axis=1)
-    if len(log.dyn_radius):
-        dd = np.linalg.norm(pos[:, None] - np.asarray(log.dyn_pos[k])[None], axis=-1)
-        hit |= (dd < r + np.asarray(log.dyn_radius)[None]).any(axis=1)
-    return hit
-
-
 def snapshot_figure(row: Row, results_dir: str | Path, path: str | Path, t: float,
                     title: str | None = None) -> Path:
     """The map and the robots at the logged instant nearest ``t`` (s).
 
-    Robots are discs of their true radius, red-edged when in contact
-    (:func:`contacts_at`); moving obstacles grey discs; formation slots small
-    crosses; the trajectories up to ``t`` faded; the leader a black triangle.
+    Robots are discs of their true radius (legend "robot i", or a colour bar of
+    indices for large teams); the contacts of that instant are marked
+    (:func:`~dfcoa_opt.plotting.draw_contacts`: a red ``X`` where they touch, red
+    rings around the robots and moving discs involved); moving obstacles are grey
+    discs, formation slots small black crosses (×), the leader a black triangle
+    (▲) on its dashed path, and the trajectories up to ``t`` faded. The legend
+    names every marker; the figure is sized to the map and the title wrapped to
+    its width.
 
     Args:
         row: The run's row.
         results_dir: The results folder.
         path: Output ``.png``.
         t: Time to show, s (``inf``: the last instant).
-        title: Figure title; default ``"<scenario> / <variant> / seed <s> at t = <t> s"``.
+        title: Figure title; default three lines: ``"<scenario> / <variant> / seed <s>"``,
+            the outcome, ``"at t = <t> s: <what touches, or no contact>"``.
 
     Returns:
         The written path.
@@ -228,28 +280,38 @@ def snapshot_figure(row: Row, results_dir: str | Path, path: str | Path, t: floa
     """
     log = read_log(results_dir, row)
     sc = scenario_for_row(row)
+    grid = sc.world.grid
     k = nearest_step(log, t)
-    fig = new_figure((7.0, 6.0))
+    fig = map_figure(grid, None, 100.0)
     ax = fig.add_subplot()
-    draw_world(ax, sc.world.grid, sc.spec.leader.goal, sc.spec.leader.start,
-               shapes=sc.world.shapes)
+    draw_world(ax, grid, sc.spec.leader.goal, sc.spec.leader.start, shapes=sc.world.shapes)
     _draw_run(ax, log, upto=k + 1, alpha=0.35)
-    r = float(log.meta.get("robot_radius", DEFAULT_RADIUS))
-    hit = contacts_at(log, k)
-    for i, (color, touching) in enumerate(zip(robot_colors(log.pose.shape[1]), hit,
-                                              strict=True)):
+    r = robot_radius(log)
+    colors = robot_colors(log.pose.shape[1])
+    for i, color in enumerate(colors):
         # add_artist, not add_patch: the limits are set below, and add_patch's update
         # of them from every disc's Bezier extrema took most of a 100-robot snapshot
-        ax.add_artist(CirclePatch(log.pose[k, i, :2], r, facecolor=color, alpha=0.8, zorder=6,
-                                  edgecolor="red" if touching else "black",
-                                  linewidth=2.0 if touching else 0.5))
-    for c, rad in zip(np.asarray(log.dyn_pos[k]), np.asarray(log.dyn_radius), strict=True):
-        ax.add_artist(CirclePatch(c, rad, facecolor="grey", alpha=0.6, zorder=5))
-    ax.plot(log.slots[k, :, 0], log.slots[k, :, 1], "x", color="black", markersize=4, zorder=7)
-    ax.plot([log.leader[k, 0]], [log.leader[k, 1]], "^", color="black", markersize=7, zorder=7)
-    view = _view([log], sc.world.grid.extent)
+        xy = (float(log.pose[k, i, 0]), float(log.pose[k, i, 1]))
+        ax.add_artist(CirclePatch(xy, r, facecolor=color, alpha=0.8, zorder=6,
+                                  edgecolor="black", linewidth=0.5,
+                                  label=_robot_label(i, len(colors))))
+    for j, (c, rad) in enumerate(zip(np.asarray(log.dyn_pos[k]), np.asarray(log.dyn_radius),
+                                     strict=True)):
+        ax.add_artist(CirclePatch(c, rad, facecolor="grey", alpha=0.6, zorder=5,
+                                  label="moving obstacle" if j == 0 else None))
+    ax.plot(log.slots[k, :, 0], log.slots[k, :, 1], "x", color="black", markersize=4, zorder=7,
+            label="formation slots")
+    ax.plot([log.leader[k, 0]], [log.leader[k, 1]], "^", color="black", markersize=7, zorder=7,
+            label="leader")
+    contacts = contacts_at(log, k, grid)
+    draw_contacts(ax, log, k, contacts, r)
+    view = _view([log], grid.extent)
     ax.set_xlim(view[0], view[1])
     ax.set_ylim(view[2], view[3])
-    ax.set_title(title or f"{row['scenario']} / {variant_name(row)} / seed {row['seed']} at "
-                          f"t = {log.t[k]:.1f} s ({int(hit.sum())} robot(s) in contact)")
+    head = title or (f"{row['scenario']} / {variant_name(row)} / seed {row['seed']}\n"
+                     f"{outcome_text(row)}\nat t = {log.t[k]:.2f} s: "
+                     f"{describe(contacts) or 'no contact'}")
+    width = max(float(fig.get_size_inches()[0]) - 2.0, 3.0)  # the legend takes ~2 in
+    ax.set_title(wrap_text(head, width, TITLE_PT), fontsize=TITLE_PT)
+    legend_and_fit(fig, ax, colors, fit=True)
     return save_png(fig, path)

@@ -44,7 +44,8 @@ _TABLES = {
                  "CI over seeds), ranking, paired differences, why it fails",
     "report.csv": "the outcome rates and metrics as CSV",
     "ladders.csv": "the ladders' outcome rates and metrics as CSV",
-    "paired.csv": "every paired comparison with the baseline (estimate, CI, p, Holm, verdict)",
+    "paired.csv": "every paired comparison with the baseline (seeds paired and excluded, "
+                  "estimate, CI, p, Holm, verdict)",
 }
 
 

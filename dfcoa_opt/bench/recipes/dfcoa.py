@@ -19,7 +19,7 @@ import numpy as np
 from dfcoa_opt import metrics, plotting
 from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.logs import read_log
-from dfcoa_opt.bench.plots import save_png, scenario_for_row, variant_name
+from dfcoa_opt.bench.plots import as_number, save_png, scenario_for_row, variant_name
 from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.report import aggregate
 from dfcoa_opt.bench.store import ResultsStore
@@ -81,22 +81,24 @@ def with_peak_risk(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     Eq 11's raw mean and max of a run divided by the largest raw R(t) of the S1
     and S2 runs with the same variant, mode and seed: the reading of Table 5's
     "Normalized [0, 1]" in which only the riskier scenario reaches 1
-    (docs/reproduction.md, "Collision risk"). NaN without both runs.
+    (docs/reproduction.md, "Collision risk"). NaN without both runs, and for a
+    seed where either run has a contact (its raw risk is undefined, null in
+    the row: docs/metrics.md).
     """
     peak: dict[tuple[Any, ...], list[tuple[str, float]]] = {}
     for r in rows:
-        m = r.get("metrics") or {}
-        if r.get("status") == "ok" and np.isfinite(m.get("risk_raw_max", np.nan)):
+        top = as_number((r.get("metrics") or {}).get("risk_raw_max"))
+        if r.get("status") == "ok" and np.isfinite(top):
             key = (_reading(r), _mode(r), r["seed"])
-            peak.setdefault(key, []).append((r["scenario"], float(m["risk_raw_max"])))
+            peak.setdefault(key, []).append((r["scenario"], top))
     out = []
     for r in rows:
         m = dict(r.get("metrics") or {})
         both = peak.get((_reading(r), _mode(r), r.get("seed")), [])
         top = max((v for _, v in both), default=np.nan)
         ok = len({s for s, _ in both}) == len(SCENARIOS) and top > 0.0
-        m["risk_peak_mean"] = m.get("risk_raw_mean", np.nan) / top if ok else np.nan
-        m["risk_peak_max"] = m.get("risk_raw_max", np.nan) / top if ok else np.nan
+        m["risk_peak_mean"] = as_number(m.get("risk_raw_mean")) / top if ok else np.nan
+        m["risk_peak_max"] = as_number(m.get("risk_raw_max")) / top if ok else np.nan
         out.append({**r, "metrics": m})
     return out
 
@@ -268,7 +270,8 @@ def render_dfcoa(store: ResultsStore, dest: Path) -> list[Artefact]:
             tag = f"{scen}_{mode}_s{row['seed']}"
             title = f"{scen}, {mode}, seed {row['seed']}"
             plotting.plot_run(log, sc.world.grid, dest / f"map_{tag}.png", goal=sc.spec.leader.goal,
-                              start=sc.spec.leader.start, shapes=sc.world.shapes, title=title)
+                              start=sc.spec.leader.start, shapes=sc.world.shapes, title=title,
+                              metrics=sc.spec.metrics)
             _panels(log, dest / f"velocity_{tag}.png", title)
             _errors(log, dest / f"pose_error_{tag}.png", title)
             _metric_panels(log, sc.spec.metrics, dest / f"metrics_{tag}.png", title)

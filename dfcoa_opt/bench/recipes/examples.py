@@ -50,7 +50,7 @@ def render_examples(store: ResultsStore, dest: Path) -> list[Artefact]:
         png = f"{name}-{cid}.png"
         plotting.plot_run(read_log(store.root, row), sc.world.grid, dest / png,
                           goal=sc.spec.leader.goal, start=sc.spec.leader.start,
-                          shapes=sc.world.shapes)
+                          shapes=sc.world.shapes, metrics=sc.spec.metrics)
         arts.append(Artefact(png, "-", f"{name} with {cid}: trajectories, slots, map"))
     atomic_write(dest / "summary.md", "\n".join(lines) + "\n")
     return [Artefact("summary.md", "-", "metrics of every example run"), *arts]

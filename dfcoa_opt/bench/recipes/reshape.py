@@ -46,7 +46,7 @@ def render_reshape(store: ResultsStore, dest: Path) -> list[Artefact]:
         sc = scenario_for_row(row)
         log = read_log(store.root, row)
         kw = {"goal": sc.spec.leader.goal, "start": sc.spec.leader.start,
-              "shapes": sc.world.shapes}
+              "shapes": sc.world.shapes, "metrics": sc.spec.metrics}
         png = f"reshape_{name}.png"
         plotting.plot_run(log, sc.world.grid, dest / png, **kw)
         arts.append(Artefact(png, "-", f"reshape on {name}: trajectories, slots, map"))
