@@ -101,6 +101,17 @@ def test_peak_risk_divides_by_the_larger_peak_of_the_same_seed_mode_and_reading(
     assert all(np.isnan(v) for pair in peaks for v in pair)
 
 
+def test_a_table5_cell_says_when_fewer_runs_than_the_column_had_a_value():
+    group = {"_g": {"ok": 10},
+             "fce_rms": {"mean": 0.5, "ci95": 0.01, "n": 10},
+             "risk_peak_mean": {"mean": 0.25, "ci95": 0.02, "n": 7},
+             "time_to_goal": {"mean": float("nan"), "ci95": float("nan"), "n": 0}}
+    assert recipes_dfcoa._cell(group, "fce_rms") == "0.5000 ± 0.0100"
+    assert recipes_dfcoa._cell(group, "risk_peak_mean") == "0.2500 ± 0.0200 (n=7 of 10)"
+    assert recipes_dfcoa._cell(group, "time_to_goal") == "—"
+    assert recipes_dfcoa._cell({}, "fce_rms") == "—"
+
+
 def test_table5_prints_each_reading_beside_the_tables_truth_column(tmp_path):
     base = {"fce_rms": 1.0, "collisions": 0}
     rows = [_row(s, "truth", 0, base) for s in recipes_dfcoa.SCENARIOS]

@@ -68,11 +68,19 @@ def _reading(row: dict[str, Any]) -> str:
     return variant_name(row).split("[", 1)[0]
 
 
-def _cell(stat: dict[str, Any] | None) -> str:
+def _cell(group: dict[str, Any], key: str) -> str:
+    """``mean ± ci`` of ``key`` in an aggregated group; ``(n=k)`` when fewer runs had a value.
+
+    A risk is undefined for a run with a contact (docs/metrics.md), so its mean
+    can cover fewer seeds than the other rows of the same column.
+    """
+    stat = group.get(key)
     if not stat or not np.isfinite(stat["mean"]):
         return "—"
     ci = stat["ci95"]
-    return f"{stat['mean']:.4f}" + (f" ± {ci:.4f}" if np.isfinite(ci) else "")
+    runs = int(group.get("_g", {}).get("ok", stat["n"]))
+    return (f"{stat['mean']:.4f}" + (f" ± {ci:.4f}" if np.isfinite(ci) else "")
+            + (f" (n={stat['n']} of {runs})" if stat["n"] < runs else ""))
 
 
 def with_peak_risk(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -139,7 +147,7 @@ def _readings(groups: dict[tuple[str, str, str], dict[str, Any]],
         cells = []
         for i, s in enumerate(SCENARIOS):
             cells.append("—" if pv is None else f"{pv[i]:g}")
-            cells += [_cell(groups.get((s, v, "truth"), {}).get(key)) for v, _ in cols]
+            cells += [_cell(groups.get((s, v, "truth"), {}), key) for v, _ in cols]
         body.append(f"| {label} | {unit} | " + " | ".join(cells) + " |")
     return head + body
 
@@ -161,7 +169,7 @@ def _table5(store: ResultsStore, dest: Path) -> Path:
         cells = []
         for i, s in enumerate(SCENARIOS):
             cells.append("—" if pv is None else f"{pv[i]:g}")
-            cells += [_cell(stats.get((s, m), {}).get(key)) for m in MODES]
+            cells += [_cell(stats.get((s, m), {}), key) for m in MODES]
         body.append(f"| {label} | {unit} | " + " | ".join(cells) + " |")
     runs = ", ".join(f"{s} {m}: {g['_g']['runs']} runs, {g['_g']['failed']} failed, goal "
                      f"reached {100 * g['_g']['reached_rate']:.0f} %, success (reached with no "
