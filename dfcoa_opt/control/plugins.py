@@ -80,12 +80,10 @@ def load_plugin(spec: str, where: str = "--plugin") -> str:
             return name
         try:
             importlib.import_module(spec)
-        except ModuleNotFoundError as exc:
-            if exc.name is not None and spec.startswith(exc.name):
+        except Exception as exc:  # noqa: BLE001 - one line, not a traceback
+            if (isinstance(exc, ModuleNotFoundError) and exc.name is not None
+                    and spec.startswith(exc.name)):
                 raise DfcoaError(f"{where}: {spec}: no such module or .py file") from None
-            raise DfcoaError(f"{where}: {spec}: importing it raised ModuleNotFoundError: "
-                             f"{_first_line(exc)}") from None
-        except Exception as exc:  # noqa: BLE001
             raise DfcoaError(f"{where}: {spec}: importing it raised {type(exc).__name__}: "
                              f"{_first_line(exc)}") from None
     _LOADED[key] = name
