@@ -21,7 +21,7 @@ from pettingzoo.test.state_test import test_parallel_env as parallel_state_test
 
 from dfcoa_opt.control.adapters import convert
 from dfcoa_opt.control.registry import make_controller
-from dfcoa_opt.envs import RewardSpec, parallel_env, vector_env
+from dfcoa_opt.envs import OUTCOME_CODES, OUTCOME_NAMES, RewardSpec, parallel_env, vector_env
 from dfcoa_opt.envs.observation import ObservationSpec
 from dfcoa_opt.envs.rewards import path_arc_length
 from dfcoa_opt.errors import DfcoaError
@@ -200,6 +200,64 @@ def test_vector_env_keeps_the_vector_env_contract(path):
     assert env.episode_seeds().min() >= 5 + e  # every sub-env is in its second episode
 
 
+def test_infos_have_the_same_numeric_keys_at_the_reset_and_every_step():
+    """torchrl builds its info spec from the reset's infos: no key may appear later."""
+    env = parallel_env(OPEN, t_max=2.0)
+    _, infos = env.reset(seed=3)
+    seen = [infos]
+    while env.agents:
+        *_, infos = env.step({a: env.action_space(a).sample() for a in env.agents})
+        seen.append(infos)
+    for infos in seen:
+        for info in infos.values():
+            assert sorted(info) == ["outcome", "seed", "t"]
+            assert all(isinstance(v, (int, float)) for v in info.values())
+    assert [i["robot_0"]["outcome"] for i in seen[:-1]] == [0] * (len(seen) - 1)
+    assert OUTCOME_NAMES[seen[-1]["robot_1"]["outcome"]] == summary(env.episode_log())["outcome"]
+    assert seen[-1]["robot_0"]["t"] == env.episode_log().t[-1] and seen[-1]["robot_0"]["seed"] == 3
+    assert OUTCOME_NAMES == ("running", "success", "collision", "deadlock", "timeout")
+    assert all(OUTCOME_NAMES[code] == name for name, code in OUTCOME_CODES.items())
+    venv = vector_env(OPEN, num_envs=2, t_max=2.0)
+    _, infos = venv.reset(seed=0)
+    keys = sorted(infos)
+    ends = 0
+    for _ in range(30):
+        *_, term, trunc, infos = venv.step(venv.action_space.sample())
+        assert sorted(infos) == keys == ["_outcome", "_seed", "_t", "outcome", "seed", "t"]
+        assert all(infos[k].shape == (2,) and infos[k].dtype.kind in "bif" for k in keys)
+        assert ((infos["outcome"] != 0) == (term | trunc)).all()
+        assert (infos["outcome"][term | trunc] == OUTCOME_CODES["timeout"]).all()  # 2 s, no end
+        ends += int((term | trunc).sum())
+    assert ends == 2
+
+
+def whole_episode(env, seed: int) -> list:
+    """Every observation, reward, flag and info of one episode, with seeded random actions."""
+    obs, infos = env.reset(seed=seed)
+    for a in env.possible_agents:
+        env.action_space(a).seed(seed)
+    out = [obs, infos]
+    while env.agents:
+        out.extend(env.step({a: env.action_space(a).sample() for a in env.agents}))
+    return out
+
+
+def same(a, b) -> bool:
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    return np.asarray(a).dtype == np.asarray(b).dtype and np.asarray(a).tobytes() == \
+        np.asarray(b).tobytes()
+
+
+def test_the_same_seed_gives_the_same_whole_parallel_episode():
+    """Whole episodes to their end (pettingzoo 1.27's parallel_seed_test stops after one step)."""
+    path = ROOT / "scenarios" / "bench" / "clutter.toml"  # the world is drawn from the seed
+    a, b = (whole_episode(parallel_env(path, t_max=3.0), 7) for _ in range(2))
+    c = whole_episode(parallel_env(path, t_max=3.0), 8)
+    assert len(a) == len(b) > 100 and all(same(x, y) for x, y in zip(a, b, strict=True))
+    assert not all(same(x, y) for x, y in zip(a, c, strict=False))
+
+
 # ------------------------------------------------------------------ seeds, autoreset
 def rollout(env, steps: int, seed: int) -> list[np.ndarray]:
     env.action_space.seed(seed)
@@ -277,14 +335,15 @@ def test_a_sub_env_that_ends_starts_its_next_episode_while_the_other_goes_on(mod
         pytest.fail("sub-env 0 did not collide")
     assert not term[1] and not trunc[1] and rew[0] < -RewardSpec().contact + 1.0
     if mode == AutoresetMode.NEXT_STEP:
-        assert info["outcome"][0] == "collision" and info["_outcome"].tolist() == [True, False]
+        assert info["outcome"][0] == OUTCOME_CODES["collision"] and info["_outcome"].tolist() == [True, False]
         assert obs[0].tobytes() == prev[0].tobytes()  # the final observation
         log = env.episode_log(0)
         assert log.meta["seed"] == 100 and summary(log)["outcome"] == "collision"
         obs, rew, term, trunc, info = env.step(collide_sub_env_0(n, k + 1))
         assert rew[0] == 0.0 and not term[0] and not trunc[0]
     else:
-        assert info["final_info"]["outcome"][0] == "collision"
+        assert info["final_info"]["outcome"][0] == OUTCOME_CODES["collision"]
+        assert info["final_info"]["seed"][0] == 100 and info["outcome"][0] == 0
         assert info["_final_obs"].tolist() == [True, False]
         assert info["final_obs"][0].tobytes() == prev[0].tobytes()
     assert info["seed"][0] == 102 and info["_seed"].tolist() == [True, False]
@@ -303,7 +362,7 @@ def test_goto_slot_through_the_env_gives_the_runs_trajectory(path):
     log, _, info = drive(env, make_controller("goto_slot"), seed=6)
     ref = d.run(env.scenario, "goto_slot", seed=6)
     assert_same_run(log, ref.log)
-    assert info["outcome"] == ref.metrics["outcome"] == summary(log)["outcome"] == "collision"
+    assert OUTCOME_NAMES[info["outcome"]] == ref.metrics["outcome"] == summary(log)["outcome"] == "collision"
 
 
 def test_goto_slot_through_the_vector_env_gives_each_seeds_runs_across_autoresets():
@@ -333,7 +392,7 @@ def test_a_stalled_run_ends_as_a_deadlock_at_the_instant_of_the_toolkits_monitor
     env = parallel_env(path, t_max=40.0)
     log, rewards, info = drive(env, GotoThenStop(60), seed=2)
     ref = d.run(env.scenario, GotoThenStop(60), seed=2)
-    assert info["outcome"] == ref.metrics["outcome"] == "deadlock"
+    assert OUTCOME_NAMES[info["outcome"]] == ref.metrics["outcome"] == "deadlock"
     assert_same_run(log, ref.log)
     assert len(rewards) == len(ref.log.t) > 100
 
@@ -345,7 +404,7 @@ def test_the_reward_is_the_toolkits_metrics_summed():
         env = parallel_env(OPEN, reward=RewardSpec(**{**w, term: 1.0}))
         log, rewards, info = drive(env, make_controller("goto_slot"), seed=1)
         returns[term] = rewards.sum()
-    assert info["outcome"] == "success"
+    assert OUTCOME_NAMES[info["outcome"]] == "success"
     dt = env.scenario.spec.dt
     np.testing.assert_allclose(returns["formation"], -dt * formation_centroid_error(log).sum())
     np.testing.assert_allclose(returns["shape"], -dt * formation_shape_error(log).sum())
@@ -354,7 +413,7 @@ def test_the_reward_is_the_toolkits_metrics_summed():
     assert returns["success"] == 1.0
     env = parallel_env(SCENARIOS[0], reward=RewardSpec(**{**w, "contact": 1.0}), t_max=60.0)
     _, rewards, info = drive(env, make_controller("goto_slot"), seed=2)
-    assert info["outcome"] == "collision" and rewards.sum() == -1.0 and rewards[-1] == -1.0
+    assert OUTCOME_NAMES[info["outcome"]] == "collision" and rewards.sum() == -1.0 and rewards[-1] == -1.0
 
 
 def test_the_arc_length_is_pure_pursuits_bit_for_bit():

@@ -12,7 +12,9 @@
 - :mod:`dfcoa_opt.envs.observation`: one robot's observation as a flat vector
   (:class:`~dfcoa_opt.envs.observation.ObservationSpec`, ``flatten``), shared by
   the environments and the ``policy:PATH`` controllers.
-- :mod:`dfcoa_opt.envs.core`: the engine both environments share (numpy only).
+- :mod:`dfcoa_opt.envs.core`: the engine both environments share (numpy only),
+  and :data:`~dfcoa_opt.envs.core.OUTCOME_CODES`, the integer code of each
+  episode outcome in the infos.
 
 Both environments need the ``envs`` extra (``pip install -e '.[envs]'``:
 pettingzoo and gymnasium); they are imported on first use, so neither
@@ -25,15 +27,17 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from dfcoa_opt.envs.core import OUTCOME_CODES, OUTCOME_NAMES
     from dfcoa_opt.envs.parallel import FormationParallelEnv, parallel_env
     from dfcoa_opt.envs.rewards import RewardSpec
     from dfcoa_opt.envs.vector import FormationVectorEnv, vector_env
 
-__all__ = ["FormationParallelEnv", "FormationVectorEnv", "RewardSpec", "parallel_env",
+__all__ = ["OUTCOME_CODES", "OUTCOME_NAMES", "FormationParallelEnv", "FormationVectorEnv", "RewardSpec", "parallel_env",
            "vector_env"]
 
 _LAZY = {"parallel_env": "parallel", "FormationParallelEnv": "parallel",
-         "vector_env": "vector", "FormationVectorEnv": "vector", "RewardSpec": "rewards"}
+         "vector_env": "vector", "FormationVectorEnv": "vector", "RewardSpec": "rewards",
+         "OUTCOME_CODES": "core", "OUTCOME_NAMES": "core"}
 
 
 def __getattr__(name: str) -> Any:

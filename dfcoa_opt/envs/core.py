@@ -41,6 +41,7 @@ from dfcoa_opt.envs.observation import ObservationSpec, flatten
 from dfcoa_opt.envs.rewards import BatchStall, PathTable, RewardSpec, end_bonus, end_of_episode
 from dfcoa_opt.envs.spaces import action_bounds, observation_bounds
 from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.outcome import OUTCOMES
 from dfcoa_opt.robots.models import CommandKind, make_model
 from dfcoa_opt.sim.batch import BatchSimulator
 from dfcoa_opt.sim.log import RunLog
@@ -49,6 +50,13 @@ from dfcoa_opt.sim.schema import MetricSpec
 from dfcoa_opt.sim.stepper import Ended, Stepper, is_batched
 
 FloatArray = NDArray[np.float64]
+
+#: An episode's outcome as the environments' infos give it, by code: ``OUTCOME_NAMES[code]``.
+#: Code 0 (``running``) while the episode goes on, then :data:`dfcoa_opt.outcome.OUTCOMES`
+#: in their order: 1 success, 2 collision, 3 deadlock, 4 timeout.
+OUTCOME_NAMES: tuple[str, ...] = ("running", *OUTCOMES)
+#: The code of each outcome name (:data:`OUTCOME_NAMES` inverted).
+OUTCOME_CODES: dict[str, int] = {name: code for code, name in enumerate(OUTCOME_NAMES)}
 
 #: What :func:`~dfcoa_opt.envs.kernels.score_runs` gets without a stall test.
 _NO_STALL = BatchStall(0, 0, 1.0, 0.0, MetricSpec())

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from pettingzoo import ParallelEnv
 
 from dfcoa_opt.control.base import Observation
-from dfcoa_opt.envs.core import TeamBatch
+from dfcoa_opt.envs.core import OUTCOME_CODES, TeamBatch
 from dfcoa_opt.envs.observation import ObservationSpec
 from dfcoa_opt.envs.rewards import RewardSpec
 from dfcoa_opt.errors import DfcoaError
@@ -90,7 +90,9 @@ class FormationParallelEnv(ParallelEnv[str, FloatArray, FloatArray]):
             options: Ignored.
 
         Returns:
-            Every agent's observation ``(D,)`` and info (``seed``, ``t`` s).
+            Every agent's observation ``(D,)`` and info: ``seed``, ``t`` (0.0 s)
+            and ``outcome`` (0, :data:`~dfcoa_opt.envs.core.OUTCOME_CODES`):
+            the keys of every step's infos.
         """
         if seed is not None:
             self._next_seed = int(seed)
@@ -99,7 +101,7 @@ class FormationParallelEnv(ParallelEnv[str, FloatArray, FloatArray]):
         self.core.start([self.episode_seed])
         self._obs = self.core.observe()[1][0]
         self.agents = list(self.possible_agents)
-        info = {"seed": self.episode_seed, "t": 0.0}
+        info = self._info(0.0, 0)
         return ({a: self._obs[i] for i, a in enumerate(self.agents)},
                 {a: dict(info) for a in self.agents})
 
@@ -113,8 +115,10 @@ class FormationParallelEnv(ParallelEnv[str, FloatArray, FloatArray]):
 
         Returns:
             Observations, rewards (the team's, for every agent), terminations,
-            truncations and infos (``t`` s of the scored instant; at the end,
-            ``outcome``). After the last step ``agents`` is empty.
+            truncations and infos: ``seed``, ``t`` (s, the scored instant) and
+            ``outcome``, the episode's outcome code
+            (:data:`~dfcoa_opt.envs.core.OUTCOME_CODES`; 0 until the last step).
+            After the last step ``agents`` is empty.
 
         Raises:
             DfcoaError: No episode is running (call :meth:`reset`).
@@ -131,9 +135,8 @@ class FormationParallelEnv(ParallelEnv[str, FloatArray, FloatArray]):
         t = self.core.time(0)
         res = self.core.step(act[None])
         agents = self.agents
-        info: dict[str, Any] = {"t": t}
+        info = self._info(t, OUTCOME_CODES[res.outcomes.get(0, "running")])
         if 0 in res.outcomes:
-            info["outcome"] = res.outcomes[0]
             obs = self._obs.copy()  # the last instant's: the episode ended there
             self.agents = []
         else:
@@ -142,6 +145,10 @@ class FormationParallelEnv(ParallelEnv[str, FloatArray, FloatArray]):
         return ({a: obs[i] for i, a in enumerate(agents)}, dict.fromkeys(agents, reward),
                 dict.fromkeys(agents, term), dict.fromkeys(agents, trunc),
                 {a: dict(info) for a in agents})
+
+    def _info(self, t: float, outcome: int) -> dict[str, Any]:
+        """One agent's info: the same keys, all numbers, at the reset and at every step."""
+        return {"seed": self.episode_seed, "t": t, "outcome": outcome}
 
     def state(self) -> FloatArray:
         """The global state: every robot's observation, robot after robot, ``(N * D,)``."""

@@ -28,7 +28,7 @@ from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
 from dfcoa_opt.control.base import Observation
-from dfcoa_opt.envs.core import StepResult, TeamBatch
+from dfcoa_opt.envs.core import OUTCOME_CODES, TeamBatch
 from dfcoa_opt.envs.observation import ObservationSpec
 from dfcoa_opt.envs.rewards import RewardSpec
 from dfcoa_opt.errors import DfcoaError
@@ -94,11 +94,23 @@ class FormationVectorEnv(VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         """``(E,)`` the seed of each sub-environment's current episode: ``s + i + j E``."""
         return self._base + np.arange(self.num_envs) + self._episode * self.num_envs
 
-    def _seed_info(self, envs: NDArray[np.intp]) -> dict[str, Any]:
-        seeds = np.zeros(self.num_envs, dtype=np.int64)
-        mask = np.zeros(self.num_envs, dtype=bool)
-        seeds[envs], mask[envs] = self.episode_seeds()[envs], True
-        return {"seed": seeds, "_seed": mask}
+    def _infos(self, t: FloatArray, ended: dict[int, str],
+               started: NDArray[np.intp]) -> dict[str, Any]:
+        """The infos of a reset or a step: the same keys, all numbers, every time.
+
+        Every key has a value for every sub-environment; its ``_key`` mask
+        says where the event happened: ``_seed`` an episode started,
+        ``_outcome`` an episode ended (``outcome`` is 0 elsewhere), ``_t``
+        everywhere.
+        """
+        outcome = np.zeros(self.num_envs, dtype=np.int64)
+        ends = np.zeros(self.num_envs, dtype=bool)
+        for e, name in ended.items():
+            outcome[e], ends[e] = OUTCOME_CODES[name], True
+        starts = np.zeros(self.num_envs, dtype=bool)
+        starts[started] = True
+        return {"seed": self.episode_seeds(), "_seed": starts, "t": t,
+                "_t": np.ones(self.num_envs, dtype=bool), "outcome": outcome, "_outcome": ends}
 
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None,
@@ -114,7 +126,8 @@ class FormationVectorEnv(VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
                 ``autoreset_mode``).
 
         Returns:
-            Observations ``(E, N, D)`` and infos (``seed``: each episode's seed).
+            Observations ``(E, N, D)`` and infos: ``seed`` (each episode's
+            seed), ``t`` (0.0 s) and ``outcome`` (0), the keys of every step.
         """
         super().reset(seed=seed)
         if options and "reset_mask" in options:
@@ -132,7 +145,8 @@ class FormationVectorEnv(VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
                              "restart one run alone; use parallel_env or localization 'truth'")
         self._autoreset[:] = False
         self._observe()
-        return self._obs.copy(), self._seed_info(np.arange(self.num_envs))
+        return self._obs.copy(), self._infos(np.zeros(self.num_envs), {},
+                                             np.arange(self.num_envs))
 
     def step(self, actions: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_],
                                           NDArray[np.bool_], dict[str, Any]]:
@@ -143,9 +157,13 @@ class FormationVectorEnv(VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
 
         Returns:
             Observations ``(E, N, D)``, rewards ``(E,)``, terminations ``(E,)``,
-            truncations ``(E,)`` and infos: ``outcome`` (``_outcome`` the mask)
-            for the episodes that ended, ``seed`` (``_seed``) for those that
-            started; with ``SAME_STEP`` also ``final_obs`` and ``final_info``.
+            truncations ``(E,)`` and infos, numbers for every sub-environment:
+            ``outcome`` (the code of :data:`~dfcoa_opt.envs.core.OUTCOME_CODES`,
+            0 while running; ``_outcome`` marks the episodes that ended), ``seed``
+            (each current episode's; ``_seed`` marks those that started) and
+            ``t`` (s, the instant scored; 0 for a new episode); with
+            ``SAME_STEP`` also ``final_obs`` and ``final_info`` (the ended
+            episodes' infos).
 
         Raises:
             ValueError: A wrong shape, NaN or inf.
@@ -154,37 +172,30 @@ class FormationVectorEnv(VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         want = (self.num_envs, self.core.n, 2)
         if act.shape != want:
             raise ValueError(f"actions have shape {act.shape}, expected {want}")
+        t = self.core.stepper.k * self.core.dt
         res = self.core.step(act)
-        infos: dict[str, Any] = {}
-        if res.outcomes:
-            infos.update(self._outcome_info(res))
+        final: dict[str, Any] = {}
         if self.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP:
             start = np.flatnonzero(self._autoreset)  # ended at the last step: start now
             self._autoreset = res.terminated | res.truncated
         else:
             start = np.flatnonzero(res.terminated | res.truncated)
             if start.size:
-                final = np.full(self.num_envs, None, dtype=object)
+                obs = np.full(self.num_envs, None, dtype=object)
                 for e in start:
-                    final[e] = self._obs[e].copy()
+                    obs[e] = self._obs[e].copy()
                 mask = np.zeros(self.num_envs, dtype=bool)
                 mask[start] = True
-                infos = {"final_obs": final, "_final_obs": mask, "final_info": infos,
+                final = {"final_obs": obs, "_final_obs": mask,
+                         "final_info": self._infos(t.copy(), res.outcomes, start[:0]),
                          "_final_info": mask.copy()}
         for e in start:
             self._episode[e] += 1
             self.core.restart(int(e), int(self.episode_seeds()[e]))
-        if start.size:
-            infos.update(self._seed_info(start))
+        t[start] = 0.0
+        infos = self._infos(t, {} if final else res.outcomes, start)
         self._observe()
-        return self._obs.copy(), res.reward, res.terminated, res.truncated, infos
-
-    def _outcome_info(self, res: StepResult) -> dict[str, Any]:
-        outcome = np.full(self.num_envs, None, dtype=object)
-        mask = np.zeros(self.num_envs, dtype=bool)
-        for e, name in res.outcomes.items():
-            outcome[e], mask[e] = name, True
-        return {"outcome": outcome, "_outcome": mask}
+        return self._obs.copy(), res.reward, res.terminated, res.truncated, {**infos, **final}
 
     def _observe(self) -> None:
         """Sense the running sub-environments; the others keep their last observation."""
