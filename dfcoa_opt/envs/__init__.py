@@ -32,8 +32,8 @@ if TYPE_CHECKING:
     from dfcoa_opt.envs.rewards import RewardSpec
     from dfcoa_opt.envs.vector import FormationVectorEnv, vector_env
 
-__all__ = ["OUTCOME_CODES", "OUTCOME_NAMES", "FormationParallelEnv", "FormationVectorEnv", "RewardSpec", "parallel_env",
-           "vector_env"]
+__all__ = ["OUTCOME_CODES", "OUTCOME_NAMES", "FormationParallelEnv", "FormationVectorEnv",
+           "RewardSpec", "parallel_env", "vector_env"]
 
 _LAZY = {"parallel_env": "parallel", "FormationParallelEnv": "parallel",
          "vector_env": "vector", "FormationVectorEnv": "vector", "RewardSpec": "rewards",
