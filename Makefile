@@ -11,7 +11,7 @@ JOBS   ?= 2
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,dask]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,dask,rl]'
 	touch $(STAMP)
 
 test: $(STAMP)
@@ -35,7 +35,7 @@ tune: $(STAMP)
 
 # `make bench` also installs the benchmark-only peer (ir-sim) once.
 $(VENV)/.bench-installed: $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[dev,dask,bench]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,dask,rl,bench]'
 	touch $(VENV)/.bench-installed
 
 # BENCH_FIGURES=0 leaves out row (f), a whole `dfcoa figures` in a fresh clone (about 20 min

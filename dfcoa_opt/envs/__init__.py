@@ -6,6 +6,9 @@
   whose E sub-environments are the E slots of one batched
   :class:`~dfcoa_opt.sim.stepper.Stepper`, each a team with an ``(N, D)``
   observation and an ``(N, 2)`` action, reset in its slot when its run ends.
+- :func:`sb3_vec_env` (:mod:`dfcoa_opt.envs.sb3`): a Stable-Baselines3
+  ``VecEnv`` of every robot of E teams over one ``vector_env`` (parameter
+  sharing); it needs the ``rl`` extra.
 - :class:`RewardSpec` (:mod:`dfcoa_opt.envs.rewards`): the reward's weights;
   the reward comes from the toolkit's metrics (paper 000 eq 6-7, progress
   along the leader's path) and outcomes (collision, success, deadlock).
@@ -30,13 +33,15 @@ if TYPE_CHECKING:
     from dfcoa_opt.envs.core import OUTCOME_CODES, OUTCOME_NAMES
     from dfcoa_opt.envs.parallel import FormationParallelEnv, parallel_env
     from dfcoa_opt.envs.rewards import RewardSpec
+    from dfcoa_opt.envs.sb3 import FormationSB3VecEnv, sb3_vec_env
     from dfcoa_opt.envs.vector import FormationVectorEnv, vector_env
 
-__all__ = ["OUTCOME_CODES", "OUTCOME_NAMES", "FormationParallelEnv", "FormationVectorEnv",
-           "RewardSpec", "parallel_env", "vector_env"]
+__all__ = ["OUTCOME_CODES", "OUTCOME_NAMES", "FormationParallelEnv", "FormationSB3VecEnv",
+           "FormationVectorEnv", "RewardSpec", "parallel_env", "sb3_vec_env", "vector_env"]
 
 _LAZY = {"parallel_env": "parallel", "FormationParallelEnv": "parallel",
          "vector_env": "vector", "FormationVectorEnv": "vector", "RewardSpec": "rewards",
+         "sb3_vec_env": "sb3", "FormationSB3VecEnv": "sb3",
          "OUTCOME_CODES": "core", "OUTCOME_NAMES": "core"}
 
 
