@@ -32,7 +32,8 @@ FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```[ \t]*$", re.S | re.M)
 FRAGMENT = re.compile(r"^<!--\s*fragment:(.*?)-->\s*$")
 #: A name in a block -> the modules of the optional extra it needs.
 EXTRAS = {"parallel_env": ("pettingzoo", "gymnasium"), "vector_env": ("gymnasium",),
-          "gymnasium": ("gymnasium",)}
+          "gymnasium": ("gymnasium",), "sb3_vec_env": ("stable_baselines3",),
+          "torchrl_env": ("torchrl",), "torchrl": ("torchrl",)}
 
 
 def _blocks() -> list:
@@ -81,7 +82,7 @@ def test_the_example_runs(code: str, output: str | None, fragment: str | None,
         if re.search(rf"\b{name}\b", code):
             for module in modules:
                 if importlib.util.find_spec(module) is None:
-                    pytest.skip(f"needs {module} (pip install -e '.[envs]')")
+                    pytest.skip(f"needs {module} (pip install -e '.[envs,rl]')")
     for name in LINKED:
         (tmp_path / name).symlink_to(ROOT / name, target_is_directory=True)
     (tmp_path / "example.py").write_text(code, encoding="utf-8")

@@ -9,6 +9,9 @@
 - :func:`sb3_vec_env` (:mod:`dfcoa_opt.envs.sb3`): a Stable-Baselines3
   ``VecEnv`` of every robot of E teams over one ``vector_env`` (parameter
   sharing); it needs the ``rl`` extra.
+- :func:`torchrl_env` (:mod:`dfcoa_opt.envs.torchrl`): a torchrl ``EnvBase``
+  over one ``vector_env``, batch ``[E]``, the robots as the group ``"robot"``
+  ``[E, N]``; it needs the ``rl`` extra.
 - :class:`RewardSpec` (:mod:`dfcoa_opt.envs.rewards`): the reward's weights;
   the reward comes from the toolkit's metrics (paper 000 eq 6-7, progress
   along the leader's path) and outcomes (collision, success, deadlock).
@@ -34,14 +37,17 @@ if TYPE_CHECKING:
     from dfcoa_opt.envs.parallel import FormationParallelEnv, parallel_env
     from dfcoa_opt.envs.rewards import RewardSpec
     from dfcoa_opt.envs.sb3 import FormationSB3VecEnv, sb3_vec_env
+    from dfcoa_opt.envs.torchrl import FormationTorchEnv, torchrl_env
     from dfcoa_opt.envs.vector import FormationVectorEnv, vector_env
 
 __all__ = ["OUTCOME_CODES", "OUTCOME_NAMES", "FormationParallelEnv", "FormationSB3VecEnv",
-           "FormationVectorEnv", "RewardSpec", "parallel_env", "sb3_vec_env", "vector_env"]
+           "FormationTorchEnv", "FormationVectorEnv", "RewardSpec", "parallel_env",
+           "sb3_vec_env", "torchrl_env", "vector_env"]
 
 _LAZY = {"parallel_env": "parallel", "FormationParallelEnv": "parallel",
          "vector_env": "vector", "FormationVectorEnv": "vector", "RewardSpec": "rewards",
          "sb3_vec_env": "sb3", "FormationSB3VecEnv": "sb3",
+         "torchrl_env": "torchrl", "FormationTorchEnv": "torchrl",
          "OUTCOME_CODES": "core", "OUTCOME_NAMES": "core"}
 
 

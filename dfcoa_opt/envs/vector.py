@@ -89,6 +89,14 @@ class FormationVectorEnv(VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         self._autoreset = np.zeros(self.num_envs, dtype=bool)
         self._obs = np.zeros((self.num_envs, core.n, core.size))
 
+    @property
+    def autoreset_mode(self) -> AutoresetMode:
+        """``metadata["autoreset_mode"]``, an attribute as on gymnasium's own vector envs.
+
+        torchrl's ``GymWrapper`` reads it (and takes ``SAME_STEP`` only).
+        """
+        return self.metadata["autoreset_mode"]
+
     # ------------------------------------------------------------------ seeds
     def episode_seeds(self) -> NDArray[np.int64]:
         """``(E,)`` the seed of each sub-environment's current episode: ``s + i + j E``."""
