@@ -41,20 +41,31 @@ SHIPPED = Path(__file__).resolve().parent / "learned.json"
 SHIPPED_DIGEST = "2ee25b1eca127db2f12a362583e033f7e9742ca0f2e331664ddc643eb2c9be19"
 
 
-def shipped_policy() -> LoadedPolicy:
-    """The shipped policy, loaded and checked (kept while the files are unchanged).
+def shipped_policy(path: Path | None = None, expected: str | None = None,
+                   name: str = "learned") -> LoadedPolicy:
+    """A shipped policy file, loaded and checked (kept while the files are unchanged).
+
+    Args:
+        path: The shipped JSON spec, its ``controller.py`` beside it (None:
+            :data:`SHIPPED`).
+        expected: The SHA-256 that ``controller.py`` records for it (None:
+            :data:`SHIPPED_DIGEST`).
+        name: The controller id, for the message.
 
     Raises:
         ScenarioError: A file that does not fit, or shipped files whose digest
-            is not :data:`SHIPPED_DIGEST` (retrained without updating it).
+            is not ``expected`` (retrained without updating it).
     """
-    digest = policy_digest(SHIPPED)
-    if digest != SHIPPED_DIGEST:
-        raise ScenarioError(str(SHIPPED), "", f"SHA-256 {digest[:16]}... is not the one "
-                            f"comparisons/learned/controller.py expects "
-                            f"({SHIPPED_DIGEST[:16]}...): after retraining, set SHIPPED_DIGEST "
-                            "to the new digest, so that stored results of 'learned' are rerun")
-    return file_policy_class(PREFIX + str(SHIPPED)).policy
+    path = SHIPPED if path is None else path
+    expected = SHIPPED_DIGEST if expected is None else expected
+    digest = policy_digest(path)
+    if digest != expected:
+        owner = f"comparisons/{path.parent.name}/controller.py"
+        raise ScenarioError(str(path), "", f"SHA-256 {digest[:16]}... is not the one {owner} "
+                            f"expects ({expected[:16]}...): after retraining, set "
+                            f"SHIPPED_DIGEST to the new digest, so that stored results of "
+                            f"'{name}' are rerun")
+    return file_policy_class(PREFIX + str(path)).policy
 
 
 @register("learned")

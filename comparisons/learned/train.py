@@ -199,7 +199,9 @@ def _train(seed: int, budget: Budget, quiet: bool
 
 
 def save(out: Path, spec: dict[str, Any], arrays: dict[str, np.ndarray]) -> tuple[Path, Path]:
-    """Write ``learned.json`` and ``learned.npz`` in ``out``, byte-reproducibly.
+    """Write the spec and its weights (``learned.npz``) in ``out``, byte-reproducibly.
+
+    The JSON is named after the weights (``spec["weights"]`` with ``.json``).
 
     ``np.savez`` stamps every member with the current time; writing the members
     through :mod:`zipfile` with a fixed date keeps the bytes a function of the arrays.
@@ -214,7 +216,7 @@ def save(out: Path, spec: dict[str, Any], arrays: dict[str, np.ndarray]) -> tupl
             np.lib.format.write_array(buf, np.ascontiguousarray(arr), allow_pickle=False)
             info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
             zf.writestr(info, buf.getvalue())
-    path = out / "learned.json"
+    path = npz.with_suffix(".json")
     path.write_text(json.dumps(spec, indent=2) + "\n", encoding="utf-8")
     return path, npz
 

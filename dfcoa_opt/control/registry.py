@@ -46,7 +46,8 @@ POLICY_PREFIX, POLICY_MODULE = "policy:", "dfcoa_opt.control.policy"
 BUILTIN_MODULES = ("dfcoa_opt.control.goto_slot", "dfcoa_opt.control.dfcoa",
                    "comparisons.orca.filter", "comparisons.consensus", "comparisons.lf_vo",
                    "comparisons.virtual_spring", "comparisons.cbf", "comparisons.nmpc",
-                   "comparisons.reshape", "comparisons.learned", POLICY_MODULE)
+                   "comparisons.reshape", "comparisons.learned", "comparisons.learned_ppo",
+                   POLICY_MODULE)
 
 _REGISTRY: dict[str, type] = {}
 _FILTERS: dict[str, type] = {}
