@@ -77,3 +77,17 @@ def test_a_short_training_is_reproducible_and_exports_sb3s_deterministic_action(
     sc = d.load(EXAMPLE, t_max=2.0, controllers__learned_ppo__policy=str(files[0]))
     runs = [d.run(sc, cid, seed=0) for cid in ("learned_ppo", f"policy:{files[0]}")]
     assert runs[0].log.digest() == runs[1].log.digest()
+
+
+def test_it_reaches_the_goal_from_every_noisy_start_not_already_in_contact():
+    """The target: example_obstacles from the training's noisy starts, seeds 0-19.
+
+    Three of those starts (seeds 2, 8, 10) put robots in contact at t = 0, so no
+    controller can succeed there; every other seed must end in success.
+    """
+    sc = d.load(EXAMPLE, team__start_noise=0.3, team__heading_noise=0.6)
+    runs = d.run_batch(sc, "learned_ppo", range(20))
+    failed = {s: r.metrics for s, r in enumerate(runs) if r.metrics["outcome"] != "success"}
+    assert sorted(failed) == [2, 8, 10]
+    assert all(m["outcome"] == "collision" and m["first_contact_time"] == 0.0
+               for m in failed.values())
