@@ -36,7 +36,8 @@ def test_learned_ppo_runs_example_obstacles_and_a_batch_is_its_runs_alone():
 
 def test_gains_scale_the_networks_command():
     base = controller.LearnedPPO()
-    fast = controller.LearnedPPO(controller.LearnedPPO.Params(gain_v=2.0, gain_w=0.5))
+    fast = controller.LearnedPPO(controller.LearnedPPO.Params(gain_forward=2.0,
+                                                              gain_lateral=0.5))
     x = np.random.default_rng(0).normal(size=(7, base.spec.size))
     np.testing.assert_array_equal(fast.forward(x), base.forward(x) * [2.0, 0.5])
 

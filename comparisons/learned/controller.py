@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -68,8 +69,41 @@ def shipped_policy(path: Path | None = None, expected: str | None = None,
     return file_policy_class(PREFIX + str(path)).policy
 
 
+class ShippedPolicyController(PolicyController):
+    """A shipped policy file (or another, ``Params.policy``) with two gains on its output.
+
+    The base of ``learned`` and ``learned_ppo``: their networks give a body-frame
+    velocity, whose two columns ``Params.gain_forward`` and ``Params.gain_lateral``
+    scale (the tunable parameters). Subclasses declare ``Params`` and :meth:`shipped`.
+    """
+
+    def __init__(self, params: Any = None) -> None:
+        super().__init__(params)
+        pol = (self.shipped() if not self.p.policy
+               else file_policy_class(PREFIX + self.p.policy).policy)
+        self.policy = pol
+        self.command = pol.spec.command
+        self.frame = pol.spec.frame or "body"
+        self.spec = pol.spec.observation
+        self.uses_scan = self.spec.beams > 0
+
+    def shipped(self) -> LoadedPolicy:
+        """The controller's own shipped policy, checked against its recorded digest."""
+        raise NotImplementedError
+
+    def forward(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Actions ``(R, 2)`` (m/s, :attr:`frame`) for observation vectors ``(R, D)``.
+
+        The network's rows, times ``(gain_forward, gain_lateral)`` when those are not 1.
+        """
+        y = self.policy.forward(x)
+        if self.p.gain_forward != 1.0 or self.p.gain_lateral != 1.0:
+            y = y * np.array([self.p.gain_forward, self.p.gain_lateral])
+        return y
+
+
 @register("learned")
-class Learned(PolicyController):
+class Learned(ShippedPolicyController):
     """The shipped (or another) policy file's network as a registered controller."""
 
     @dataclass(frozen=True)
@@ -86,22 +120,6 @@ class Learned(PolicyController):
                                              "y); 1: the network's own command.", ge=0.0,
                                     tune=(0.5, 2.0), scale="log")
 
-    def __init__(self, params: Params | None = None) -> None:
-        super().__init__(params)
-        pol = (shipped_policy() if not self.p.policy
-               else file_policy_class(PREFIX + self.p.policy).policy)
-        self.policy = pol
-        self.command = pol.spec.command
-        self.frame = pol.spec.frame or "body"
-        self.spec = pol.spec.observation
-        self.uses_scan = self.spec.beams > 0
-
-    def forward(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Actions ``(R, 2)`` (m/s, :attr:`frame`) for observation vectors ``(R, D)``.
-
-        The network's rows, times ``(gain_forward, gain_lateral)`` when those are not 1.
-        """
-        y = self.policy.forward(x)
-        if self.p.gain_forward != 1.0 or self.p.gain_lateral != 1.0:
-            y = y * np.array([self.p.gain_forward, self.p.gain_lateral])
-        return y
+    def shipped(self) -> LoadedPolicy:
+        """``learned.json``, checked against :data:`SHIPPED_DIGEST`."""
+        return shipped_policy()

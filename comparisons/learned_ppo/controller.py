@@ -3,11 +3,12 @@
 The network reads each robot's observation vector
 (:func:`dfcoa_opt.envs.observation.flatten`: slot, heading, velocities, 40
 LiDAR beams, 4 neighbours, 2 moving obstacles, in the robot's frame) and gives
-the unicycle command ``(v m/s, omega rad/s)``, clipped to the box it was
-trained in. It runs the shipped policy file ``learned_ppo.json`` (+
-``learned_ppo.npz``) through the machinery of ``policy:PATH``
-(:mod:`dfcoa_opt.control.policy`): no torch at run time, the same checks, the
-same compiled kernel, batched runs equal single runs bit for bit.
+a body-frame velocity command (m/s, at most 0.5 per axis), converted for
+unicycles by the simulator's near-identity map, as in the training. It runs
+the shipped policy file ``learned_ppo.json`` (+ ``learned_ppo.npz``) through
+the machinery of ``policy:PATH`` (:mod:`dfcoa_opt.control.policy`): no torch
+at run time, the same checks, the same compiled kernel, batched runs equal
+single runs bit for bit.
 
 ``python -m comparisons.learned_ppo.train --seed 0`` retrains it;
 ``docs/methods/learned.md`` has the training, its curve and its results.
@@ -18,11 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-from numpy.typing import NDArray
-
-from comparisons.learned.controller import shipped_policy
-from dfcoa_opt.control.policy import PREFIX, PolicyController, file_policy_class
+from comparisons.learned.controller import ShippedPolicyController, shipped_policy
+from dfcoa_opt.control.policy import LoadedPolicy
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.params import param
 
@@ -35,7 +33,7 @@ SHIPPED_DIGEST = "6674f0d2df7038d23ecef7ea3c69c761c388aa0b162f8f862b9671613610aa
 
 
 @register("learned_ppo")
-class LearnedPPO(PolicyController):
+class LearnedPPO(ShippedPolicyController):
     """The shipped (or another) PPO policy file's network as a registered controller."""
 
     @dataclass(frozen=True)
@@ -45,29 +43,13 @@ class LearnedPPO(PolicyController):
         policy: str = param("", doc="Another policy file (JSON spec) to run instead of the "
                                     "shipped comparisons/learned_ppo/learned_ppo.json; "
                                     "relative to the working folder. Empty: the shipped one.")
-        gain_v: float = param(1.0, doc="Factor on the network's forward speed v; 1: the "
-                                       "network's own command.", ge=0.0, tune=(0.5, 2.0),
-                              scale="log")
-        gain_w: float = param(1.0, doc="Factor on the network's turn rate omega; 1: the "
-                                       "network's own command.", ge=0.0, tune=(0.5, 2.0),
-                              scale="log")
+        gain_forward: float = param(1.0, doc="Factor on the network's forward velocity (body "
+                                             "x); 1: the network's own command.", ge=0.0,
+                                    tune=(0.5, 2.0), scale="log")
+        gain_lateral: float = param(1.0, doc="Factor on the network's lateral velocity (body "
+                                             "y); 1: the network's own command.", ge=0.0,
+                                    tune=(0.5, 2.0), scale="log")
 
-    def __init__(self, params: Params | None = None) -> None:
-        super().__init__(params)
-        pol = (shipped_policy(SHIPPED, SHIPPED_DIGEST, "learned_ppo") if not self.p.policy
-               else file_policy_class(PREFIX + self.p.policy).policy)
-        self.policy = pol
-        self.command = pol.spec.command
-        self.frame = pol.spec.frame or "body"
-        self.spec = pol.spec.observation
-        self.uses_scan = self.spec.beams > 0
-
-    def forward(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Actions ``(R, 2)`` (the file's command kind) for observation vectors ``(R, D)``.
-
-        The network's rows, times ``(gain_v, gain_w)`` when those are not 1.
-        """
-        y = self.policy.forward(x)
-        if self.p.gain_v != 1.0 or self.p.gain_w != 1.0:
-            y = y * np.array([self.p.gain_v, self.p.gain_w])
-        return y
+    def shipped(self) -> LoadedPolicy:
+        """``learned_ppo.json``, checked against :data:`SHIPPED_DIGEST`."""
+        return shipped_policy(SHIPPED, SHIPPED_DIGEST, "learned_ppo")
