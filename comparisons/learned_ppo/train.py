@@ -73,8 +73,6 @@ class Stage:
     teams: int = 16
 
 
-HELDOUT = tuple((f"scenarios/heldout/{name}.toml", {})
-                for name in ("crowd", "cellular", "corridors", "rooms"))
 #: The shipped curriculum: hold the slots in the open, then the target and the
 #: ``learned`` baseline's training scenarios.
 CURRICULUM: tuple[Stage, ...] = (

@@ -78,13 +78,13 @@ class FormationSB3VecEnv(VecEnv):
                 next episode), so a run without a seed is still reproducible.
 
         Returns:
-            Each SB3 environment's first episode seed (a team's robots share it).
+            Each SB3 environment's episode seed (a team's robots share it): the
+            next reset's with a seed, else the current episodes'.
         """
         if seed is None:
-            base = int(self.venv.episode_seeds()[0])
-        else:
-            base = self._pending = int(seed)
-        return [base + k // self.robots for k in range(self.num_envs)]
+            return np.repeat(self.venv.episode_seeds(), self.robots).tolist()
+        self._pending = int(seed)
+        return [self._pending + k // self.robots for k in range(self.num_envs)]
 
     def episode_seeds(self) -> NDArray[np.int64]:
         """``(E,)`` the seed of each team's current episode (``s + i + j E``)."""
