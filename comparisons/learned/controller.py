@@ -69,6 +69,12 @@ def shipped_policy(path: Path | None = None, expected: str | None = None,
     return file_policy_class(PREFIX + str(path)).policy
 
 
+def body_gain(what: str) -> Any:
+    """The ``param`` of a tunable gain on one column of a body-frame velocity network."""
+    return param(1.0, doc=f"Factor on the network's {what}; 1: the network's own command.",
+                 ge=0.0, tune=(0.5, 2.0), scale="log")
+
+
 class ShippedPolicyController(PolicyController):
     """A shipped policy file (or another, ``Params.policy``) with two gains on its output.
 
@@ -113,12 +119,8 @@ class Learned(ShippedPolicyController):
         policy: str = param("", doc="Another policy file (JSON spec) to run instead of the "
                                     "shipped comparisons/learned/learned.json; relative to "
                                     "the working folder. Empty: the shipped one.")
-        gain_forward: float = param(1.0, doc="Factor on the network's forward velocity (body "
-                                             "x); 1: the network's own command.", ge=0.0,
-                                    tune=(0.5, 2.0), scale="log")
-        gain_lateral: float = param(1.0, doc="Factor on the network's lateral velocity (body "
-                                             "y); 1: the network's own command.", ge=0.0,
-                                    tune=(0.5, 2.0), scale="log")
+        gain_forward: float = body_gain("forward velocity (body x)")
+        gain_lateral: float = body_gain("lateral velocity (body y)")
 
     def shipped(self) -> LoadedPolicy:
         """``learned.json``, checked against :data:`SHIPPED_DIGEST`."""

@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from comparisons.learned.controller import ShippedPolicyController, shipped_policy
+from comparisons.learned.controller import ShippedPolicyController, body_gain, shipped_policy
 from dfcoa_opt.control.policy import LoadedPolicy
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.params import param
@@ -43,12 +43,8 @@ class LearnedPPO(ShippedPolicyController):
         policy: str = param("", doc="Another policy file (JSON spec) to run instead of the "
                                     "shipped comparisons/learned_ppo/learned_ppo.json; "
                                     "relative to the working folder. Empty: the shipped one.")
-        gain_forward: float = param(1.0, doc="Factor on the network's forward velocity (body "
-                                             "x); 1: the network's own command.", ge=0.0,
-                                    tune=(0.5, 2.0), scale="log")
-        gain_lateral: float = param(1.0, doc="Factor on the network's lateral velocity (body "
-                                             "y); 1: the network's own command.", ge=0.0,
-                                    tune=(0.5, 2.0), scale="log")
+        gain_forward: float = body_gain("forward velocity (body x)")
+        gain_lateral: float = body_gain("lateral velocity (body y)")
 
     def shipped(self) -> LoadedPolicy:
         """``learned_ppo.json``, checked against :data:`SHIPPED_DIGEST`."""
