@@ -14,6 +14,7 @@ import argparse
 import contextlib
 import json
 import os
+import re
 import signal
 import sys
 from collections.abc import Sequence
@@ -44,6 +45,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--json", action="store_true", help="print one JSON object to stdout")
     r.add_argument("--plot", action="store_true", help="write a PNG of map and trajectories")
     r.add_argument("--animate", metavar="FILE.gif", help="write a GIF animation")
+    _set_arg(r)
 
     ls = sub.add_parser("list", help="list controllers, scenarios or figure recipes")
     ls.add_argument("what", choices=("controllers", "scenarios", "recipes"))
@@ -106,25 +108,52 @@ def _executor_args(p: argparse.ArgumentParser) -> None:
                    "with N workers")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="progress bar (default: when stdout is a terminal)")
+    _set_arg(p)
+
+
+def _set_arg(p: argparse.ArgumentParser) -> None:
+    """The ``--set KEY=VALUE`` option (run, bench, tune, figures), read by :func:`_overrides`."""
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="dotted scenario key set in every run, VALUE in TOML syntax "
-                        "(e.g. --set t_max=5.0); repeatable")
+                   help="dotted scenario key set in every run before validation, VALUE in "
+                        "TOML syntax; a bare word is a string (e.g. --set t_max=5.0 "
+                        "--set formation.shape=line); repeatable")
+
+
+_BARE_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*")
+
+
+def parse_set_value(value: str):
+    """The VALUE of ``--set KEY=VALUE``: a TOML value, else a bare word as a string.
+
+    TOML first, so ``5``, ``5.0``, ``true``, ``inf``, ``[1, 2]`` and ``"a b"``
+    keep their meaning; a bare word (``line``, ``turtlebot3_burger``) is that
+    string.
+
+    Raises:
+        ValueError: Neither a TOML value nor a bare word.
+    """
+    import tomllib
+
+    try:
+        return tomllib.loads(f"v = {value}")["v"]
+    except tomllib.TOMLDecodeError:
+        if _BARE_WORD.fullmatch(value.strip()):
+            return value.strip()
+        raise ValueError(value) from None
 
 
 def _overrides(items: Sequence[str]) -> dict | None:
-    """``--set KEY=VALUE`` options as a dict (VALUE parsed as TOML)."""
-    import tomllib
-
+    """``--set KEY=VALUE`` options as a dict (VALUE read by :func:`parse_set_value`)."""
     out = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise DfcoaError(f"--set: '{item}' is not KEY=VALUE")
         try:
-            out[key.strip()] = tomllib.loads(f"v = {value}")["v"]
-        except tomllib.TOMLDecodeError:
-            raise DfcoaError(f"--set: {key.strip()}: '{value}' is not a TOML value (strings "
-                             "need quotes)") from None
+            out[key.strip()] = parse_set_value(value)
+        except ValueError:
+            raise DfcoaError(f"--set: {key.strip()}: '{value}' is not a TOML value or a bare "
+                             "word (quote other strings)") from None
     return out or None
 
 
@@ -226,7 +255,7 @@ def _cmd_run(a: argparse.Namespace) -> int:
     from dfcoa_opt.sim.simulator import ControllerError, batch_controllers
 
     seeds = seed_list(a.seeds) if a.seeds is not None else [a.seed]
-    scenario = load_scenario(a.scenario, seeds[0])
+    scenario = load_scenario(a.scenario, seeds[0], _overrides(a.set))
     if a.animate and not a.animate.lower().endswith(".gif"):
         raise DfcoaError(f"--animate: '{a.animate}' must end in .gif")
     if a.animate and len(seeds) > 1:

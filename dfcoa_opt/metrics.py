@@ -7,7 +7,8 @@ have one value per logged step ``t[k]``; summaries average over all logged steps
 :func:`summary` collects the JSON keys; every definition and choice is written
 down in ``docs/metrics.md``. The collision risk of eq 11 is in
 :mod:`dfcoa_opt.metrics_risk` (re-exported here), the per-robot metrics of the
-companion papers' tables in :mod:`dfcoa_opt.metrics_robots`, and the unit of
+companion papers' tables in :mod:`dfcoa_opt.metrics_robots`, the deployability
+report in :mod:`dfcoa_opt.metrics_deploy`, and the unit of
 every key in :mod:`dfcoa_opt.metrics_units` (:data:`UNITS`, re-exported).
 """
 
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dfcoa_opt.metrics_deploy import deployability
 from dfcoa_opt.metrics_risk import (
     CHUNK_ELEMS,
     RISK_DISTANCE_FLOOR,
@@ -332,5 +334,6 @@ def summary(log: RunLog, spec: Settings = None) -> dict[str, Any]:
         "lf_error_mean": _mean(leader_follower_position_error(log)),
         "loc_rmse": rms(localization_error(log)),
         "steps": int(log.n_steps),
+        **deployability(log),
         **{f"ctl_{k}": int(v) for k, v in (log.meta.get("controller_counters") or {}).items()},
     }

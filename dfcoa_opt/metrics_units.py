@@ -37,6 +37,10 @@ UNITS: dict[str, str] = {
     "filter_interventions": "1", "filter_fallbacks": "1", "filter_solver_failures": "1",
     "filter_time_median": "s", "mse_mean": "m^2", "lf_error_mean": "m", "loc_rmse": "m",
     "steps": "1",
+    # deployability (dfcoa_opt.metrics_deploy)
+    "wheel_speed_peak": "rad/s", "wheel_speed_ratio": "1", "wheel_accel_peak": "m/s^2",
+    "saturated_pct": "%", "body_gap_min": "m", "robotarium_arena": "1",
+    "robotarium_collision": "1", "robotarium_speed": "1", "robotarium_ok": "1",
     # the world's difficulty along the leader's path (dfcoa_opt.metrics_world)
     "world_clearance": "m", "world_visibility": "m", "world_dispersion": "1",
     "world_characteristic_dimension": "m", "world_tortuosity": "1",

@@ -339,6 +339,9 @@ def test_summary_keys_types_and_json():
     assert set(REQUIRED) <= set(s)
     assert set(m.PAPER_000_TABLE5) <= set(s)
     for k, v in s.items():
+        if k.startswith("robotarium_"):  # the Robotarium's checks: only for a gritsbot
+            assert v is None, k
+            continue
         assert type(v) in ((str,) if k == "outcome" else (float, int, bool)), (k, type(v))
     assert s["outcome"] in OUTCOMES
     assert s["steps"] == 4 and isinstance(s["steps"], int)

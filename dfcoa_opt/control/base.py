@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.robots.models import CommandKind
+from dfcoa_opt.sim.schema import RobotSpec
 from dfcoa_opt.world.lidar import LaserScan
 
 if TYPE_CHECKING:
@@ -87,6 +88,44 @@ class MovingObstacles:
 
 
 @dataclass(frozen=True)
+class Limits:
+    """The robot's limits a controller may plan with (``[robots]``, docs/robots.md).
+
+    Every robot of a team has the same. The simulator enforces them whether a
+    controller reads them or not; each method note says whether it does.
+
+    Attributes:
+        v_min: Smallest forward speed, m/s.
+        v_max: Largest forward speed (speed norm of the integrators), m/s.
+        w_max: Largest turn rate, rad/s.
+        wheel_radius: Wheel radius, m.
+        track_width: Track width, m.
+        wheel_speed_max: Largest wheel speed, rad/s (inf: none).
+        wheel_accel_max: Largest acceleration of a wheel's rim, m/s^2 (inf: none).
+        motor_time_constant: First-order lag of each wheel's speed, s (0: none).
+        dynamics: ``"kinematic"`` or ``"actuated"``.
+    """
+
+    v_min: float
+    v_max: float
+    w_max: float
+    wheel_radius: float
+    track_width: float
+    wheel_speed_max: float
+    wheel_accel_max: float
+    motor_time_constant: float
+    dynamics: str
+
+    @classmethod
+    def of(cls, spec: RobotSpec) -> Limits:
+        """The limits of a ``[robots]`` table (a kinematic robot's acceleration is unbounded)."""
+        actuated = spec.dynamics == "actuated"
+        return cls(spec.v_lower, spec.v_max, spec.w_max, spec.wheel_radius, spec.track_width,
+                   spec.wheel_speed_max, spec.wheel_accel_max if actuated else float("inf"),
+                   spec.motor_time_constant if actuated else 0.0, spec.dynamics)
+
+
+@dataclass(frozen=True)
 class Observation:
     """What every robot knows at one step (row i = robot i).
 
@@ -122,6 +161,8 @@ class Observation:
             central planner there) knows it: like ``leader``; None when the
             broadcast is neither late nor lost (``leader`` is then the same).
         slot_now: ``(N, 2)`` the slots of ``leader_now``, m; None with it.
+        limits: The robots' :class:`Limits` (None where no simulator made the
+            observation, e.g. in a hand-built test observation).
 
     The simulator shares some of these arrays between steps and runs
     (``robot_ids``, ``leader``, ``slot``, and in a batch ``env`` and
@@ -148,6 +189,7 @@ class Observation:
     team_age: FloatArray | None = None
     leader_now: FloatArray | None = None
     slot_now: FloatArray | None = None
+    limits: Limits | None = None
 
     @property
     def n(self) -> int:
@@ -172,7 +214,7 @@ class Observation:
                            None if self.team is None else self.team[rows],
                            None if self.team_age is None else self.team_age[rows],
                            self.leader_now,
-                           None if self.slot_now is None else self.slot_now[rows])
+                           None if self.slot_now is None else self.slot_now[rows], self.limits)
 
 
 

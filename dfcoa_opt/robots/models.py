@@ -8,6 +8,8 @@ State of every model: ``pose (N, 3)`` = (x, y, theta) in m, m, rad and
   paper 000 eq 1-2; v, omega and wheel speeds saturate (the wheel limit scales
   both wheels by one factor, which keeps the path curvature). Integrated
   exactly along the arc for a constant (v, omega) over the step.
+* :class:`ActuatedUnicycle` -- the same with wheel acceleration limits and
+  motor lag (``robots.dynamics = "actuated"``, :mod:`dfcoa_opt.robots.actuated`).
 * :class:`SingleIntegrator` -- command (vx, vy[, omega]).
 * :class:`DoubleIntegrator` -- command (ax, ay[, omega]); paper 001 eq 1 and
   paper 004 eq 3: ``p+ = p + T v``, ``v+ = v + T u`` (explicit Euler).
@@ -26,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.geometry import wrap_angle
+from dfcoa_opt.robots.actuated import actuated_step
 from dfcoa_opt.robots.unicycle_kernel import unicycle_step
 from dfcoa_opt.sim.schema import RobotSpec
 
@@ -45,11 +48,28 @@ class RobotState:
         pose: ``(N, 3)`` x, y in m and heading in rad.
         velocity: ``(N, 2)`` world-frame velocity in m/s.
         twist: ``(N, 2)`` applied forward speed (m/s) and turn rate (rad/s).
+        wheels: ``(N, 2)`` wheel speeds (right, left) in rad/s of actuated robots
+            (None: kinematic models, and actuated robots at rest).
     """
 
     pose: FloatArray
     velocity: FloatArray
     twist: FloatArray
+    wheels: FloatArray | None = None
+
+    def rows(self, keep: NDArray[np.bool_] | slice) -> RobotState:
+        """The state of the rows ``keep`` selects."""
+        return RobotState(self.pose[keep], self.velocity[keep], self.twist[keep],
+                          None if self.wheels is None else self.wheels[keep])
+
+    def insert(self, at: int, pose: FloatArray) -> RobotState:
+        """The state with robots at rest at ``pose (n, 3)`` inserted before row ``at``."""
+        n = len(pose)
+        return RobotState(np.insert(self.pose, at, pose, axis=0),
+                          np.insert(self.velocity, at, np.zeros((n, 2)), axis=0),
+                          np.insert(self.twist, at, np.zeros((n, 2)), axis=0),
+                          None if self.wheels is None else
+                          np.insert(self.wheels, at, np.zeros((n, 2)), axis=0))
 
     @classmethod
     def at_rest(cls, pose: FloatArray) -> RobotState:
@@ -181,6 +201,45 @@ class Unicycle:
         return RobotState(np.stack((nx, ny, th_new), axis=1), vel, u)
 
 
+class ActuatedUnicycle(Unicycle):
+    """Differential drive with wheel acceleration limits and motor lag (``dynamics = 'actuated'``).
+
+    The model of :mod:`dfcoa_opt.robots.actuated`: the same saturation as
+    :class:`Unicycle`, then each wheel follows its set point with a bounded
+    rate and a first-order lag, integrated over ``spec.substeps`` arcs.
+    """
+
+    def step(self, state: RobotState, command: FloatArray, dt: float,
+             disturbance: FloatArray | None = None, force: FloatArray | None = None,
+             wheel_noise: FloatArray | None = None) -> RobotState:
+        """Advance ``dt`` seconds (:func:`~dfcoa_opt.robots.actuated.actuated_step`).
+
+        Args:
+            state: Current state (``wheels`` None: at rest).
+            command: ``(N, 2)`` (v, omega); saturated here.
+            dt: Step in s.
+            disturbance: ``(N, 2)`` world-frame velocity added to the motion, m/s.
+            force: Unused: the loader rejects forces on unicycles.
+            wheel_noise: ``(N, 2)`` noise on the wheel set points, rad/s.
+
+        Returns:
+            The new state, with the wheel speeds at the end of the step.
+        """
+        s = self.spec
+        n = len(state.pose)
+        wheels = np.zeros((n, 2)) if state.wheels is None else \
+            np.ascontiguousarray(state.wheels, dtype=float)
+        pose, vel, u, wh = actuated_step(
+            np.ascontiguousarray(state.pose, dtype=float), wheels,
+            np.ascontiguousarray(command, dtype=float), float(dt), float(s.v_lower),
+            float(s.v_max), float(s.w_max), float(s.wheel_speed_max), float(s.wheel_radius),
+            float(s.track_width), float(s.wheel_accel_max / s.wheel_radius),
+            float(s.motor_time_constant), int(s.substeps),
+            _NO_DISTURBANCE if wheel_noise is None else np.ascontiguousarray(wheel_noise, float),
+            _NO_DISTURBANCE if disturbance is None else np.ascontiguousarray(disturbance, float))
+        return RobotState(pose, vel, u, wh)
+
+
 class _Holonomic:
     """Shared heading handling of the integrator models."""
 
@@ -261,11 +320,13 @@ class DoubleIntegrator(_Holonomic):
         return RobotState(np.column_stack((pos, th)), vel, twist)
 
 
-RobotModel = Unicycle | SingleIntegrator | DoubleIntegrator
+RobotModel = Unicycle | ActuatedUnicycle | SingleIntegrator | DoubleIntegrator
 
 
 def make_model(spec: RobotSpec) -> RobotModel:
-    """The model named by ``spec.model``."""
+    """The model named by ``spec.model`` (and ``spec.dynamics`` for unicycles)."""
+    if spec.model == "unicycle" and spec.dynamics == "actuated":
+        return ActuatedUnicycle(spec)
     return {"unicycle": Unicycle, "single_integrator": SingleIntegrator,
             "double_integrator": DoubleIntegrator}[spec.model](spec)
 

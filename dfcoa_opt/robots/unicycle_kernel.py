@@ -31,6 +31,27 @@ def arc(x: float, y: float, th: float, v: float, w: float,
     return x + chord * math.cos(th_mid), y + chord * math.sin(th_mid), wrap1(th + dth)
 
 
+@numba.njit(cache=True, inline="always")
+def saturate1(v: float, w: float, v_lower: float, v_max: float, w_max: float, wheel_max: float,
+              wheel_r: float, track: float) -> tuple[float, float]:  # pragma: no cover - numba
+    """One command's admissible ``(v, omega)`` (m/s, rad/s): paper 000 eq 1-2 limits.
+
+    Clip v to ``[v_lower, v_max]`` and |omega| to ``w_max``; then, when a wheel
+    would exceed ``wheel_max`` (rad/s; inf: no wheel limit), scale both wheels by
+    one factor, which keeps the curvature omega / v (as the Robotarium does).
+    """
+    v = min(max(v, v_lower), v_max)
+    w = min(max(w, -w_max), w_max)
+    if math.isfinite(wheel_max):
+        pr = (v + 0.5 * track * w) / wheel_r
+        pl = (v - 0.5 * track * w) / wheel_r
+        peak = max(abs(pr), abs(pl))
+        scale = wheel_max / max(peak, 1e-300) if peak > wheel_max else 1.0
+        pr, pl = pr * scale, pl * scale
+        v, w = 0.5 * wheel_r * (pr + pl), wheel_r / track * (pr - pl)
+    return v, w
+
+
 @numba.njit(cache=True)
 def unicycle_arc(pose, v, w, dt):  # pragma: no cover - numba
     """:func:`~dfcoa_opt.robots.models.integrate_unicycle` of one ``(3,)`` pose (m, m, rad)."""
@@ -62,17 +83,9 @@ def unicycle_step(pose, command, dt, v_lower, v_max, w_max, wheel_max, wheel_r, 
     out = np.empty((n, 3))
     vel = np.empty((n, 2))
     u = np.empty((n, 2))
-    wheels = math.isfinite(wheel_max)
     for i in range(n):
-        v = min(max(command[i, 0], v_lower), v_max)
-        w = min(max(command[i, 1], -w_max), w_max)
-        if wheels:
-            pr = (v + 0.5 * track * w) / wheel_r
-            pl = (v - 0.5 * track * w) / wheel_r
-            peak = max(abs(pr), abs(pl))
-            scale = wheel_max / max(peak, 1e-300) if peak > wheel_max else 1.0
-            pr, pl = pr * scale, pl * scale
-            v, w = 0.5 * wheel_r * (pr + pl), wheel_r / track * (pr - pl)
+        v, w = saturate1(command[i, 0], command[i, 1], v_lower, v_max, w_max, wheel_max,
+                         wheel_r, track)
         x, y, th = arc(pose[i, 0], pose[i, 1], pose[i, 2], v, w, dt)
         vx, vy = v * math.cos(th), v * math.sin(th)
         if disturbance.shape[0]:

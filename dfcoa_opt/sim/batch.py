@@ -25,6 +25,7 @@ object per run, called with the single run's :class:`Observation`.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterator, Sequence
 from typing import Any
 
@@ -32,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt import __version__, dispatch
-from dfcoa_opt.control.base import Controller
+from dfcoa_opt.control.base import Controller, Limits
 from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.robots.models import make_model
 from dfcoa_opt.sim.log import BatchLog, RunLog
@@ -87,6 +88,7 @@ class BatchSimulator:
         spec = self.scenarios[0].spec
         self.spec = spec
         self.model = make_model(spec.robots)
+        self.limits = Limits.of(spec.robots)  # what every observation carries
         self.n = spec.team.n
         self.radius = spec.robots.radius
         r_obs = spec.sensors.obstacle_range
@@ -262,6 +264,7 @@ class BatchSimulator:
             "wall_time": float(stepper.wall[e]), "version": __version__,
             "leader_path": sc.leader_path.tolist(), "goal": list(spec.leader.goal),
             "settle_tolerance": spec.leader.settle_tolerance,
+            "robots": dataclasses.asdict(spec.robots),
             "controller_counters": {str(k): int(v) for k, v in (counters or {}).items()},
         }
         return out

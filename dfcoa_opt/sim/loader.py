@@ -161,7 +161,7 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
     """
     if isinstance(data.get("localization"), str):  # shorthand: localization = "mcl"
         data = {**data, "localization": {"mode": data["localization"]}}
-    spec = build(ScenarioSpec, data, source)
+    spec = build(ScenarioSpec, with_profile(data, source), source)
     offsets = formation_offsets(spec.formation, spec.team.n)
     check_extents(spec, offsets, source)
     check_names(spec, source)
@@ -191,6 +191,44 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
     return Scenario(spec=spec, source=source, world=world, offsets=offsets, initial_pose=pose,
                     leader_heading=float(heading), leader_path=np.asarray(path, dtype=float),
                     data=copy.deepcopy(dict(data)), base_dir=Path(base_dir))
+
+
+#: Profile keys that only an actuated robot has (a kinematic one ignores them).
+ACTUATED_KEYS = ("wheel_accel_max", "motor_time_constant")
+
+
+def with_profile(data: Mapping[str, Any], source: str) -> Mapping[str, Any]:
+    """``data`` with its robot profile's values under the keys it does not set itself.
+
+    ``robots.profile`` names one of ``dfcoa_opt.robots.profiles.PROFILES``
+    (docs/robots.md). Its ``[robots]`` values fill the keys the scenario leaves
+    out (its acceleration limit and motor time constant only with
+    ``dynamics = "actuated"``), and its LiDAR values those of
+    ``[sensors.lidar]``. ``data`` itself is not changed.
+
+    Raises:
+        ScenarioError: An unknown profile, naming the known ones.
+    """
+    robots = data.get("robots")
+    if not isinstance(robots, dict) or robots.get("profile") is None:
+        return data
+    from dfcoa_opt.robots.profiles import PROFILES  # data, read only with a profile
+
+    name = robots["profile"]
+    if not isinstance(name, str) or name not in PROFILES:
+        raise ScenarioError(source, "robots.profile",
+                            f"unknown profile {name!r}; known profiles: "
+                            f"{', '.join(sorted(PROFILES))}")
+    profile = PROFILES[name]
+    actuated = robots.get("dynamics") == "actuated"
+    out = dict(data)
+    out["robots"] = {**{k: v for k, v in profile["robots"].items()
+                        if actuated or k not in ACTUATED_KEYS}, **robots}
+    sensors = data.get("sensors", {})
+    lidar = sensors.get("lidar", {}) if isinstance(sensors, dict) else None
+    if profile.get("lidar") and isinstance(lidar, dict):
+        out["sensors"] = {**sensors, "lidar": {**profile["lidar"], **lidar}}
+    return out
 
 
 def _shape(spec: ObstacleSpec, source: str, key: str) -> Shape:

@@ -62,7 +62,8 @@ class Observing:
             s["moving"], self.leaders, self.goal, rows[4],
             np.ascontiguousarray(s["heard_slots"]).reshape(a * n, 2), env=rows[3],
             leader_age=self.leader_ages if self.comms is not None else 0.0,
-            team=s["team"][0], team_age=s["team"][1], **self._now(slice(None)))
+            team=s["team"][0], team_age=s["team"][1], limits=self.sim.limits,
+            **self._now(slice(None)))
 
     def run_observation(self, j: int) -> Observation:
         """The observation of the ``j``-th active run alone (today's single-run Observation)."""
@@ -80,7 +81,7 @@ class Observing:
                            leader_age=float(self.leader_ages[e]),
                            team=None if s["team"][0] is None else s["team"][0][rows],
                            team_age=None if s["team"][1] is None else s["team"][1][rows],
-                           **self._now(j))
+                           limits=self.sim.limits, **self._now(j))
 
     def _now(self, j: int | slice) -> dict[str, Any]:
         """``leader_now`` and ``slot_now`` of the ``j``-th active run (a slice: all), or none."""

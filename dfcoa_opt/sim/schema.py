@@ -14,6 +14,7 @@ from typing import Any, Literal
 
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.params import param
+from dfcoa_opt.sim.schema_robots import RobotSpec  # noqa: F401 - re-exported
 from dfcoa_opt.sim.schema_world import (  # noqa: F401 - re-exported: the schema is one module
     ClutterSpec,
     DynamicObstacleSpec,
@@ -25,45 +26,6 @@ from dfcoa_opt.sim.schema_world import (  # noqa: F401 - re-exported: the schema
 )
 
 Pose = tuple[float, float, float]
-
-@dataclass(frozen=True)
-class RobotSpec:
-    """Robot model and its limits (all robots of a team are identical)."""
-
-    model: Literal["unicycle", "single_integrator", "double_integrator"] = param(
-        "unicycle", doc="Kinematic model.")
-    radius: float = param(0.2, doc="Body radius (collision disc).", unit="m", gt=0.0)
-    v_max: float = param(0.5, doc="Largest forward speed (speed norm for integrators).",
-                         unit="m/s", gt=0.0)
-    v_min: float | None = param(None, doc="Smallest forward speed of a unicycle; default -v_max.",
-                                unit="m/s")
-    w_max: float = param(1.5, doc="Largest turn rate.", unit="rad/s", gt=0.0)
-    a_max: float = param(1.0, doc="Largest acceleration norm (double integrator).",
-                         unit="m/s^2", gt=0.0)
-    wheel_radius: float = param(0.05, doc="Wheel radius r of paper 000 eq 1-2.", unit="m", gt=0.0)
-    track_width: float = param(0.3, doc="Track width d of paper 000 eq 1-2.", unit="m", gt=0.0)
-    wheel_speed_max: float = param(math.inf, doc="Largest wheel speed (inf = no limit).",
-                                   unit="rad/s", gt=0.0, finite=False)
-    nid_distance: float = param(0.1, doc="Offset of the near-identity point used to run "
-                                         "velocity commands on unicycles.", unit="m", gt=0.0)
-    mass: float = param(1.0, doc="Mass, turns force disturbances into acceleration.",
-                        unit="kg", gt=0.0)
-    command_noise_std: float = param(0.0, doc="Standard deviation of Gaussian noise added to "
-                                              "each component of the applied command, in its "
-                                              "unit (v m/s and omega rad/s; vx, vy m/s; ax, ay "
-                                              "m/s^2), drawn every step from the run's "
-                                              "generator.", ge=0.0)
-
-    @property
-    def v_lower(self) -> float:
-        """Effective smallest forward speed in m/s."""
-        return -self.v_max if self.v_min is None else self.v_min
-
-    def check(self, src: str, key: str) -> None:
-        """v_min <= v_max."""
-        if self.v_min is not None and self.v_min > self.v_max:
-            raise ScenarioError(src, f"{key}.v_min", f"must be <= v_max ({self.v_max})")
-
 
 @dataclass(frozen=True)
 class TeamSpec:
@@ -178,6 +140,9 @@ class LidarSpec:
                              gt=0.0)
     noise_std: float = param(0.0, doc="Gaussian range noise standard deviation.", unit="m",
                              ge=0.0)
+    rate: float = param(math.inf, doc="Scans per second; between two scans a robot keeps its "
+                                      "last one (inf = a scan every step).", unit="Hz",
+                        gt=0.0, finite=False)
 
     def check(self, src: str, key: str) -> None:
         """range_min < range_max: otherwise no return could ever be finite."""

@@ -123,6 +123,7 @@ class Stepper(Observing, RunLookups):
         self._s: dict[str, Any] = {}  # what sense() saw, for apply()
         self._owners = np.concatenate((np.arange(n), np.full(self.m, -1)))  # a run's LiDAR discs
         self._rows: tuple[Any, ...] = (None,)  # per-row constants of the last active set
+        self._last_scan: FloatArray | None = None  # each slot's robots' last scans (lidar.rate)
 
     def start_clock(self) -> None:
         """Start counting the runs' wall times (after the controllers' resets)."""
@@ -177,10 +178,7 @@ class Stepper(Observing, RunLookups):
             self.log.clear(slot)
         j = int(np.searchsorted(self.active, slot))
         at = j * n
-        st = self.state
-        self.state = RobotState(np.insert(st.pose, at, start, axis=0),
-                                np.insert(st.velocity, at, np.zeros((n, 2)), axis=0),
-                                np.insert(st.twist, at, np.zeros((n, 2)), axis=0))
+        self.state = self.state.insert(at, start)
         self.prev_static = np.insert(self.prev_static, at, np.zeros(n, dtype=bool))
         self.prev_dyn = np.insert(self.prev_dyn, at, np.zeros((n, self.m), dtype=bool), axis=0)
         self.prev_ptr = np.insert(self.prev_ptr, j + 1, self.prev_ptr[j])
@@ -217,6 +215,9 @@ class Stepper(Observing, RunLookups):
             scan_all = scans[0] if a == 1 else LaserScan(
                 scans[0].angle_min, scans[0].angle_increment, scans[0].range_min,
                 scans[0].range_max, np.concatenate([s.ranges for s in scans]))
+        if scan_all is not None and math.isfinite(self.spec.sensors.lidar.rate):
+            scan_all = self._held(scan_all, active, kk)
+            scans = [None] * a
         est = self._estimate(scans, scan_all, active)
         comms = self.comms
         if comms is not None:
@@ -257,6 +258,25 @@ class Stepper(Observing, RunLookups):
                        row_index=row_index, nb=(nb_index, nb_pos, nb_vel, nb_heading, nb_dist,
                                                 nb_age), moving=moving, heard=heard,
                        heard_slots=heard_slots, team=team)
+
+    def _held(self, scan: LaserScan, active: NDArray[np.intp], kk: NDArray[np.int64]
+              ) -> LaserScan:
+        """The scans the robots have with ``sensors.lidar.rate``: new ones only when due.
+
+        Run ``e`` takes a new scan at step ``k`` when ``floor(k dt rate)`` grew
+        since step ``k - 1`` (and at ``k = 0``); otherwise each robot keeps its
+        last scan. The LiDAR is cast every step (its noise drawn every step),
+        so the runs' draws do not depend on the rate.
+        """
+        n, rate = self.n, self.spec.sensors.lidar.rate
+        ranges = scan.ranges.reshape(len(active), n, -1)
+        if self._last_scan is None:
+            self._last_scan = np.zeros((len(self.k), n, ranges.shape[2]))
+        ticks = np.floor(kk * self.dt * rate + 1e-9)
+        due = (kk == 0) | (ticks > np.floor((kk - 1) * self.dt * rate + 1e-9))
+        self._last_scan[active[due]] = ranges[due]
+        return LaserScan(scan.angle_min, scan.angle_increment, scan.range_min, scan.range_max,
+                         self._last_scan[active].reshape(len(active) * n, -1))
 
     def _row_constants(self) -> tuple[Any, ...]:
         """Per-row constants of the active set, made again when it changes.
@@ -324,8 +344,11 @@ class Stepper(Observing, RunLookups):
                          spec.robots.nid_distance)
         if self.comms is not None:
             native = self.comms.command(native, active)
-        new_state = sim.model.step(st, native, dt, self._disturbance("velocity", kk),
-                                   self._disturbance("force", kk))
+        args = (st, native, dt, self._disturbance("velocity", kk), self._disturbance("force", kk))
+        std = spec.robots.wheel_noise_std
+        new_state = sim.model.step(*args) if not std else sim.model.step(  # type: ignore[call-arg]
+            *args, wheel_noise=np.concatenate([self.rngs[e].normal(0.0, std, (n, 2))
+                                               for e in active]))
         # -- contacts at t_k
         clearance = self._clearance(pos, active)
         static_hit = clearance < sim.radius
@@ -373,8 +396,7 @@ class Stepper(Observing, RunLookups):
                    for e, k, r in zip(active[ended], kk[ended], reached[ended], strict=True)]
             keep = ~ended
             rows = np.repeat(keep, n)
-            new_state = RobotState(new_state.pose[rows], new_state.velocity[rows],
-                                   new_state.twist[rows])
+            new_state = new_state.rows(rows)
             static_hit, dyn_hit = static_hit[rows], dyn_hit[rows]
             keys = prox.contact_keys[np.repeat(keep, pairs)]
             ptr = np.zeros(int(keep.sum()) + 1, dtype=np.int64)
