@@ -17,8 +17,10 @@ import numpy as np
 from benchmarks.bench_lidar import make_grid, numpy_sampling_scan
 from benchmarks.timing import blocks, interleave, print_rows, row, time_calls
 from dfcoa_opt.control.registry import make_controller
+from dfcoa_opt.robots.models import ActuatedUnicycle, RobotState, Unicycle
 from dfcoa_opt.sim import neighbours
 from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.sim.schema import RobotSpec
 from dfcoa_opt.sim.simulator import Simulator
 from dfcoa_opt.world.lidar import LaserScan
 
@@ -117,6 +119,32 @@ def irsim_step_us(steps: int = 200) -> list[np.ndarray] | None:
     return out
 
 
+def model_rows() -> list[dict]:
+    """The actuated model's step per robot against the kinematic unicycle's (same process).
+
+    Both step the same poses and commands (random, some beyond the wheel limit);
+    the actuated model with a motor lag, an acceleration limit and its default
+    4 substeps. Times are per robot-step (the call's time over N).
+    """
+    rng = np.random.default_rng(1)
+    base = dict(wheel_radius=0.033, track_width=0.16, wheel_speed_max=6.4)
+    kin = Unicycle(RobotSpec(**base))
+    act = ActuatedUnicycle(RobotSpec(**base, dynamics="actuated", wheel_accel_max=2.5,
+                                     motor_time_constant=0.05))
+    rows = []
+    for n in (4, 1024):
+        pose = rng.uniform(-5, 5, (n, 3))
+        cmd = rng.uniform(-1, 1, (n, 2))
+        st = RobotState(pose, np.zeros((n, 2)), np.zeros((n, 2)),
+                        rng.uniform(-6, 6, (n, 2)))
+        t = interleave({"act": (lambda k, s=st, c=cmd: act.step(s, c, 0.1), 400),
+                        "kin": (lambda k, s=st, c=cmd: kin.step(s, c, 0.1), 400)})
+        per = {k: [a / n for a in v] for k, v in t.items()}
+        rows.append(row(f"robot model step per robot, N={n}, actuated (lag, accel limit, "
+                        "4 substeps)", per["act"], "kinematic unicycle step", per["kin"]))
+    return rows
+
+
 def run() -> list[dict]:
     """Time the simulator step and the neighbour query; one dict per row."""
     sc = _scenario()
@@ -141,6 +169,7 @@ def run() -> list[dict]:
     if peer is not None:
         rows.append(row("simulator step, 4 unicycles with 120-beam LiDAR, 350x350 grid", ours,
                         "ir-sim headless step, 4 diff robots, 120-beam lidar2d, 6 discs", peer))
+    rows += model_rows()
     rng = np.random.default_rng(0)
     for n in (16, 32, 48, 64, 128, 256):
         pts = rng.uniform(0, np.sqrt(n) * 2.0, (n, 2))

@@ -15,7 +15,8 @@ from dfcoa_opt.outcome import outcome_text
 
 #: The metrics ``dfcoa run`` prints (every one is in the ``.json`` and with ``--json``).
 RUN_METRICS = ("fce_rms", "time_to_goal", "min_inter_robot_distance", "min_obstacle_clearance",
-               "path_length_mean", "collisions")
+               "path_length_mean", "collisions", "wheel_speed_peak", "wheel_speed_ratio",
+               "saturated_pct", "robotarium_ok")
 
 _ROLE = re.compile(r":[a-z]+(?::[a-z]+)?:`(~?)([^`]+)`")  # :func:`~a.b.c`, :py:class:`X`
 _CODE = re.compile(r"``([^`]*)``|`([^`]*)`")  # ``code`` (reST), `code` (Markdown)
@@ -42,7 +43,8 @@ def run_summary(title: str, summary: Mapping[str, Any], simulated: float, wall: 
     lines = [f"{title}: {outcome} ({reached}); {simulated:.1f} s simulated "
              f"({wall:.2f} s wall)"]
     if detail:
-        lines += [f"  {k:26s} {with_unit(summary[k], k)}" for k in RUN_METRICS]
+        lines += [f"  {k:26s} {with_unit(summary[k], k)}" for k in RUN_METRICS
+                  if summary.get(k, 0) is not None]  # (the Robotarium's: a gritsbot's only)
         lines.append(f"  ({len(summary)} metrics with their units in the .json; "
                      "definitions: docs/metrics.md)")
     width = max((len(k) for k in files), default=0) + 1

@@ -17,8 +17,9 @@ and docs/robots.md says how to read them.
 - With ``robots.profile = "gritsbot"``, the Robotarium's checks
   (:data:`~dfcoa_opt.robots.profiles.ROBOTARIUM`): ``robotarium_arena`` (every
   robot centre fits in the arena's width and height, wherever the run is
-  placed in it), ``robotarium_collision`` (no two centres closer than the
-  collision diameter), ``robotarium_speed`` (no wheel asked beyond the
+  placed in it), ``robotarium_collision`` (no two collision discs, centred
+  ``collision_offset`` ahead of each robot as the Robotarium places them,
+  closer than the collision diameter), ``robotarium_speed`` (no wheel asked beyond the
   Robotarium's wheel limit) and ``robotarium_ok`` (all three). ``None`` with
   any other robot.
 
@@ -32,6 +33,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.distance import pdist
 
 from dfcoa_opt.control.adapters import convert
 from dfcoa_opt.sim.log import RunLog
@@ -108,6 +110,22 @@ def body_gap_min(log: RunLog) -> float:
     return gap - 2.0 * float(log.meta["robot_radius"])
 
 
+def robotarium_gap(log: RunLog) -> float:
+    """Smallest distance between two robots' Robotarium collision centres over the run, m.
+
+    The Robotarium puts each robot's collision disc ``collision_offset`` ahead of
+    its pose, along its heading (:data:`~dfcoa_opt.robots.profiles.ROBOTARIUM`).
+    """
+    from dfcoa_opt.robots.profiles import ROBOTARIUM
+
+    if log.n_robots < 2:
+        return math.inf
+    off = float(ROBOTARIUM["collision_offset"])  # type: ignore[arg-type]
+    th = log.pose[..., 2]
+    centre = log.pose[..., :2] + off * np.stack((np.cos(th), np.sin(th)), axis=-1)
+    return float(min(pdist(c).min() for c in centre))
+
+
 def robotarium_checks(log: RunLog, wheels: FloatArray | None) -> dict[str, bool | None]:
     """The Robotarium's checks of a gritsbot run (module docstring); None for other robots."""
     keys = ("robotarium_arena", "robotarium_collision", "robotarium_speed", "robotarium_ok")
@@ -120,8 +138,7 @@ def robotarium_checks(log: RunLog, wheels: FloatArray | None) -> dict[str, bool 
     xy = log.pose[..., :2].reshape(-1, 2)
     span = xy.max(axis=0) - xy.min(axis=0)
     arena = bool(span[0] <= width and span[1] <= height)
-    closest = float(np.min(log.min_inter_robot))
-    collision = bool(closest >= float(ROBOTARIUM["collision_diameter"]))  # type: ignore[arg-type]
+    collision = robotarium_gap(log) >= float(ROBOTARIUM["collision_diameter"])  # type: ignore[arg-type]
     limit = float(ROBOTARIUM["max_wheel_velocity"])  # type: ignore[arg-type]
     speed = bool(wheels is None or np.max(np.abs(wheels)) <= limit + LIMIT_TOL)
     return dict(zip(keys, (arena, collision, speed, arena and collision and speed), strict=True))

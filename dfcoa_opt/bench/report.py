@@ -32,6 +32,7 @@ from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench import failures, ladders, paired, plots, stats, tables, trajectories
 from dfcoa_opt.bench.sweep import safe_name
 from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.metrics_deploy import DEPLOY_KEYS
 from dfcoa_opt.outcome import OUTCOMES
 
 #: Metrics tabulated and box-plotted by default (keys of ``dfcoa_opt.metrics.summary``).
@@ -39,6 +40,13 @@ DEFAULT_METRICS: tuple[str, ...] = (
     "time_to_goal", "fce_rms", "fse_rms", "stability_pct", "vce_rms", "risk_raw_mean",
     "risk_raw_max", "min_inter_robot_distance", "min_obstacle_clearance", "path_length_mean",
 )
+
+#: Below each scenario's deployability table (docs/robots.md says how to read it).
+DEPLOY_LEGEND = ("What the commands asked of the robot (docs/robots.md): the peak wheel speed "
+                 "(and its ratio to the wheel limit), the peak rim acceleration between two "
+                 "steps, the share of robot-steps the robot could not follow as asked, the "
+                 "smallest gap between two bodies, and with the gritsbot profile the share of "
+                 "runs that pass the Robotarium's checks.")
 
 DEFAULT_BY: tuple[str, ...] = ("scenario", "variant")
 #: Grouping of a ladder sweep: one group per rung too.
@@ -306,7 +314,7 @@ def make_report(results_dir: str | Path, out_dir: str | Path | None = None,
     baseline = str(manifest.get("baseline") or "") if baseline is None else baseline
     plain = [r for r in rows if r.get("ladder_value") is None]
     laddered = [r for r in rows if r.get("ladder_value") is not None]
-    groups = aggregate(plain, metrics)
+    groups = aggregate(plain, [*metrics, *DEPLOY_KEYS])
     comparisons = paired.compare(rows, baseline) if baseline else []
     md = [f"# Benchmark report: {manifest.get('name', results_dir.name)}", "",
           environment_header(results_dir).rstrip("\n"), "", LEGEND, ""]
@@ -322,7 +330,7 @@ def make_report(results_dir: str | Path, out_dir: str | Path | None = None,
         md += [f"![trajectories {scen}]({p.name})\n" for p in trajs.get(scen, [])]
     if notes:
         md += ["Notes:", *[f"- {n}" for n in notes], ""]
-    lgroups = aggregate(laddered, metrics, LADDER_BY) if laddered else []
+    lgroups = aggregate(laddered, [*metrics, *DEPLOY_KEYS], LADDER_BY) if laddered else []
     md += ladders.sections(lgroups, manifest, out_dir, written)
     boxes = [plots.metric_boxplots(plain, m, out_dir / f"box_{safe_name(m)}.png")
              for m in metrics] if plain else []
@@ -334,10 +342,11 @@ def make_report(results_dir: str | Path, out_dir: str | Path | None = None,
         md += ["## What each variant sets", "", *overrides, ""]
     md_path, csv_path = out_dir / "report.md", out_dir / "report.csv"
     atomic_write(md_path, "\n".join(md).rstrip("\n") + "\n")
-    atomic_write(csv_path, tables.csv_table(groups, metrics))
+    atomic_write(csv_path, tables.csv_table(groups, [*metrics, *DEPLOY_KEYS]))
     extra = []
     if lgroups:
-        extra.append(atomic_write(out_dir / "ladders.csv", tables.csv_table(lgroups, metrics)))
+        extra.append(atomic_write(out_dir / "ladders.csv",
+                                  tables.csv_table(lgroups, [*metrics, *DEPLOY_KEYS])))
     if comparisons:
         extra.append(atomic_write(out_dir / "paired.csv", tables.paired_csv(comparisons)))
     return [md_path, csv_path, *extra, *boxes, *[p for s in sorted(trajs) for p in trajs[s]],
@@ -354,6 +363,9 @@ def _scenario_section(scen: str, groups: Sequence[Mapping[str, Any]],
         md += ["### Ranking", "", tables.ranking_table(groups, comparisons, baseline),
                f"### Paired differences against `{baseline}`", "",
                tables.paired_table(comparisons, paired.PAIRED_METRICS, baseline)]
+    deploy = tables.deploy_table(groups, DEPLOY_KEYS, hide=("scenario",))
+    if deploy:
+        md += ["### Deployability", "", DEPLOY_LEGEND, "", deploy]
     lines, shots = failures.explain(groups, rows, results_dir, out_dir)
     written += shots
     if lines:

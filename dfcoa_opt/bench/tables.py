@@ -123,6 +123,26 @@ def markdown_table(groups: Sequence[Mapping[str, Any]], metrics: Sequence[str],
     return "\n".join(lines) + "\n"
 
 
+def deploy_table(groups: Sequence[Mapping[str, Any]], metrics: Sequence[str],
+                 hide: Iterable[str] = ()) -> str:
+    """Markdown table of the deployability keys (``mean ± 95 % CI`` over the ok runs).
+
+    A key no run has (the Robotarium's checks of robots other than the gritsbot,
+    the wheels of holonomic robots) is left out; with none left the text is empty.
+    """
+    shown = [m for m in metrics if any(g["stats"][m]["n"] for g in groups)]
+    if not shown:
+        return ""
+    ids = id_columns(groups, hide)
+    head = [*ids, "runs", *(plots.metric_header(m) for m in shown)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for g in groups:
+        cells = [md_escape(g[b]) for b in ids] + [str(g["runs"])]
+        cells += [metric_cell(g["stats"][m], int(g["ok"])) for m in shown]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def _csv_num(value: Any) -> str:
     """A number as CSV text: shortest round-trip float, empty for NaN/inf and None."""
     if value is None:

@@ -5,7 +5,7 @@
 1. The command ``(v, omega)`` becomes wheel-speed set points by the inverse of
    paper 000 eq 2, after the limits of :func:`~dfcoa_opt.robots.unicycle_kernel.saturate1`
    (v and omega clipped, then both wheels scaled by one factor to the wheel
-   limit, which keeps the curvature, as the Robotarium does).
+   limit, which keeps the curvature).
 2. Optional Gaussian noise on each set point (``robots.wheel_noise_std``), then
    each set point is clipped to the wheel limit.
 3. Each wheel's speed ``phi`` follows its set point ``s`` by
@@ -45,8 +45,8 @@ FloatArray = NDArray[np.float64]
 
 
 @numba.njit(cache=True, inline="always")
-def wheel_advance(phi: float, s: float, alpha: float, tau: float,
-                  h: float) -> tuple[float, float]:  # pragma: no cover - numba
+def wheel_advance(phi: float, s: float, alpha: float, tau: float, h: float,
+                  decay_h: float) -> tuple[float, float]:  # pragma: no cover - numba
     """One wheel's speed after ``h`` s and its mean over them (module docstring, step 3).
 
     Args:
@@ -55,6 +55,7 @@ def wheel_advance(phi: float, s: float, alpha: float, tau: float,
         alpha: Largest wheel acceleration, rad/s^2 (inf: none).
         tau: Motor time constant, s (0: none).
         h: Duration, s.
+        decay_h: ``1 - exp(-h / tau)`` (0 when ``tau`` is 0), computed once per step.
 
     Returns:
         ``(speed after h, mean speed over h)``, rad/s.
@@ -72,7 +73,7 @@ def wheel_advance(phi: float, s: float, alpha: float, tau: float,
     rest = h - t1
     e1 = s - ramp_end
     if tau > 0.0:
-        decay = -math.expm1(-rest / tau)  # 1 - exp(-rest / tau)
+        decay = decay_h if t1 == 0.0 else -math.expm1(-rest / tau)  # 1 - exp(-rest / tau)
         end = s - e1 * (1.0 - decay)
         integral += s * rest - e1 * tau * decay
     else:
@@ -113,6 +114,7 @@ def actuated_step(pose, wheels, command, dt, v_lower, v_max, w_max, wheel_max, w
     u = np.empty((n, 2))
     wh = np.empty((n, 2))
     h = dt / substeps
+    decay_h = -math.expm1(-h / tau) if tau > 0.0 else 0.0
     for i in range(n):
         v, w = saturate1(command[i, 0], command[i, 1], v_lower, v_max, w_max, wheel_max,
                          wheel_r, track)
@@ -126,8 +128,8 @@ def actuated_step(pose, wheels, command, dt, v_lower, v_max, w_max, wheel_max, w
         sum_v = 0.0
         sum_w = 0.0
         for _ in range(substeps):
-            pr, mr = wheel_advance(pr, sr, alpha, tau, h)
-            pl, ml = wheel_advance(pl, sl, alpha, tau, h)
+            pr, mr = wheel_advance(pr, sr, alpha, tau, h, decay_h)
+            pl, ml = wheel_advance(pl, sl, alpha, tau, h, decay_h)
             vm, wm = 0.5 * wheel_r * (mr + ml), wheel_r / track * (mr - ml)
             x, y, th = arc(x, y, th, vm, wm, h)
             sum_v += vm

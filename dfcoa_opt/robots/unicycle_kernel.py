@@ -38,7 +38,7 @@ def saturate1(v: float, w: float, v_lower: float, v_max: float, w_max: float, wh
 
     Clip v to ``[v_lower, v_max]`` and |omega| to ``w_max``; then, when a wheel
     would exceed ``wheel_max`` (rad/s; inf: no wheel limit), scale both wheels by
-    one factor, which keeps the curvature omega / v (as the Robotarium does).
+    one factor, which keeps the curvature omega / v (docs/robots.md).
     """
     v = min(max(v, v_lower), v_max)
     w = min(max(w, -w_max), w_max)
