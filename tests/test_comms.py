@@ -10,6 +10,7 @@ import pytest
 
 import dfcoa_opt as d
 from dfcoa_opt.control.base import BatchedController, as_batch
+from dfcoa_opt.sim.loader import scenario_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Digests of 3 controllers x the 7 common scenarios (seed 0, t_max 15 s), computed by the
@@ -20,6 +21,15 @@ DEFAULTS = {"comms.latency": 0.0, "comms.dropout": 0.0, "comms.leader_latency": 
             "comms.leader_dropout": 0.0, "sensors.pose_noise_std": 0.0,
             "sensors.heading_noise_std": 0.0, "robots.command_noise_std": 0.0}
 CROSSING = ROOT / "scenarios" / "bench" / "crossing.toml"
+#: Digests of runs with latency 0 but messages on (dropout, the leader's latency and dropout,
+#: noise), a short radio range and few neighbours, computed by the code that gated messages
+#: by the distance at reception (commit b8503f6): at latency 0 the gate at sending is the same.
+LATENCY0 = Path(__file__).parent / "data" / "digests" / "comms_latency0.json"
+LATENCY0_KEYS = {"comms.dropout": 0.3, "comms.leader_latency": 0.2, "comms.leader_dropout": 0.2,
+                 "sensors.pose_noise_std": 0.03, "robots.command_noise_std": 0.02}
+LATENCY0_RUNS = {"crossing.toml": {"t_max": 10.0, "sensors.comm_radius": 2.5,
+                                   "sensors.max_neighbors": 1},
+                 "large_20.toml": {"t_max": 6.0}}
 
 
 def test_every_key_at_its_default_keeps_the_digests_of_the_code_before_them():
@@ -31,6 +41,16 @@ def test_every_key_at_its_default_keeps_the_digests_of_the_code_before_them():
                                             "controllers.virtual_spring.offset_frame": "leader",
                                             **DEFAULTS})
         assert d.run(sc, ctrl, seed=0).log.digest() == digest, key
+
+
+def test_at_latency_0_the_gate_at_sending_keeps_the_digests_of_the_gate_at_reception():
+    golden = json.loads(LATENCY0.read_text())
+    assert len(golden) == 6
+    for key, digest in golden.items():
+        path, ctrl = key.split("|")
+        sc = d.load(ROOT / path, overrides={**LATENCY0_KEYS,
+                                            **LATENCY0_RUNS[Path(path).name]})
+        assert d.run(sc, ctrl, seed=1).log.digest() == digest, key
 
 
 class Recorder(BatchedController):
@@ -138,6 +158,108 @@ def test_with_every_key_on_a_batch_is_its_runs_alone_and_a_seed_fixes_them(ctrl)
                                      "comms.leader_latency": 0.1, "comms.leader_dropout": 0.2,
                                      "sensors.pose_noise_std": 0.03,
                                      "robots.command_noise_std": 0.02})
+    batch = [r.log.digest() for r in d.run_batch(sc, ctrl, [0, 1, 2])]
+    assert batch == [d.run(sc, ctrl, seed=s).log.digest() for s in (0, 1, 2)]
+    assert len(set(batch)) == 3
+
+
+class Drive(BatchedController):
+    """Fixed world velocities, one per robot; records each step's neighbour table."""
+
+    name = "comms_drive"
+    command = "velocity"
+    uses_scan = False
+
+    def __init__(self, velocity) -> None:
+        self.velocity = np.asarray(velocity, dtype=float)
+        self.seen: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]] = []
+
+    def reset_batch(self, scenarios, rngs) -> None:
+        self.seen.clear()
+
+    def act(self, obs):
+        obs = as_batch(obs)
+        nb = obs.neighbours
+        self.seen.append((nb.index.copy(), nb.position.copy(),
+                          None if nb.age is None else nb.age.copy()))
+        return np.tile(self.velocity, (len(obs.pose) // len(self.velocity), 1))
+
+
+RADIUS = 3.05  # m: the radio range of the driven runs (no distance there is within 1 mm of it)
+
+
+def _driven(latency: float = 0.5):
+    """Robot 0 still at (5, 5); robot 1 from 2 m away drives off, robot 2 from 5 m comes in.
+
+    Returns:
+        The log, what each step's table held, and each step's send-time step.
+    """
+    data = {
+        "name": "driven", "dt": 0.1, "t_max": 3.5, "seed": 0,
+        "world": {"size": [20.0, 20.0], "resolution": 10},
+        "robots": {"model": "single_integrator", "radius": 0.2, "v_max": 1.0, "w_max": 2.0},
+        "team": {"n": 3, "placement": "explicit", "start_noise": 0.0, "heading_noise": 0.0,
+                 "poses": [[5.0, 5.0, 0.0], [7.0, 5.0, 0.0], [5.0, 10.0, 0.0]]},
+        "formation": {"shape": "offsets", "offsets": [[0.0, 0.0], [2.0, 0.0], [0.0, 5.0]]},
+        "leader": {"start": [5.0, 5.0], "goal": [5.5, 5.0], "speed": 0.02, "goal_radius": 0.1},
+        "sensors": {"lidar": {"enabled": False}, "comm_radius": RADIUS},
+        "comms": {"latency": latency},
+    }
+    ctrl = Drive([[0.0, 0.0], [1.0, 0.0], [0.0, -1.0]])
+    log = d.run(scenario_from_dict(data, "<driven>"), ctrl, seed=0).log
+    lag = int(round(latency / 0.1))
+    return log, ctrl.seen, [max(k - lag, 0) for k in range(len(ctrl.seen))]
+
+
+def _in_range(log, step: int, i: int, j: int) -> bool:
+    return bool(np.hypot(*(log.pose[step, i, :2] - log.pose[step, j, :2])) <= RADIUS)
+
+
+def test_the_table_holds_the_senders_in_range_when_they_sent():
+    log, seen, src = _driven()
+    assert len(seen) == 36
+    for k, (index, position, age) in enumerate(seen):
+        for i in range(3):
+            senders = sorted(index[i][index[i] >= 0].tolist())
+            assert senders == [j for j in range(3) if j != i and _in_range(log, src[k], i, j)], k
+            row = index[i] >= 0
+            np.testing.assert_array_equal(position[i, row], log.pose[src[k], index[i, row], :2])
+            np.testing.assert_allclose(age[i, row], (k - src[k]) * 0.1)
+
+
+def test_a_message_sent_in_range_is_received_after_the_sender_left_the_range():
+    log, seen, src = _driven()
+    left = [k for k in range(len(seen)) if not _in_range(log, k, 0, 1)]
+    assert left[0] == 11  # robot 1 is 2 + 0.1 k m from robot 0
+    late = [k for k in left if 1 in seen[k][0][0]]
+    assert late == [11, 12, 13, 14, 15]  # sent at steps 6 .. 10, in range
+    assert _in_range(log, src[15], 0, 1) and not _in_range(log, src[16], 0, 1)
+
+
+def test_a_message_sent_out_of_range_is_not_received_after_the_sender_came_in():
+    log, seen, src = _driven()
+    came = [k for k in range(len(seen)) if _in_range(log, k, 0, 2)]
+    assert came[0] == 20  # robot 2 is 5 - 0.1 k m from robot 0
+    unheard = [k for k in came if 2 not in seen[k][0][0]]
+    assert unheard == [20, 21, 22, 23, 24]  # sent at steps 15 .. 19, out of range
+    assert 2 in seen[25][0][0] and 0 in seen[25][0][2]
+
+
+def test_without_latency_the_table_is_the_one_in_range_now():
+    log, seen, _ = _driven(latency=0.0)  # no late message: no Comms
+    for k, (index, _, _) in enumerate(seen):
+        assert (1 in index[0]) == _in_range(log, k, 0, 1)
+        assert (2 in index[0]) == _in_range(log, k, 0, 2)
+
+
+@pytest.mark.parametrize("ctrl", ["consensus_ivo", "lf_vo"])
+def test_with_a_latency_and_a_short_range_a_batch_is_its_runs_alone(ctrl):
+    """Moving robots 2 m apart, at the range's edge: the send step's table gates (it changes
+    these runs), run by run."""
+    sc = d.load(CROSSING, overrides={"t_max": 6.0, "comms.latency": 0.3, "comms.dropout": 0.2,
+                                     "comms.leader_latency": 0.1,
+                                     "sensors.pose_noise_std": 0.03,
+                                     "sensors.comm_radius": 2.0, "sensors.max_neighbors": 2})
     batch = [r.log.digest() for r in d.run_batch(sc, ctrl, [0, 1, 2])]
     assert batch == [d.run(sc, ctrl, seed=s).log.digest() for s in (0, 1, 2)]
     assert len(set(batch)) == 3

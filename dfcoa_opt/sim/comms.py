@@ -9,6 +9,13 @@ What the keys do (docs/comms.md):
   receiver keeps the last one it got, with its age. The team's planner at the
   virtual leader (a central planner such as ``reshape``'s) is one more
   receiver of every robot's message (``Observation.team``).
+- Range is decided when a message is sent: a receiver's neighbour table holds
+  the senders of the proximity table (``sensors.comm_radius``, the
+  ``sensors.max_neighbors`` nearest, true positions) of the step whose
+  messages arrive now, ``latency`` ago (a radio reaches whoever is in range
+  when it transmits), nearest received position first. A lost message of such
+  a sender leaves its entry with the last message received. With latency 0
+  that step is the current one, the rule of a table gated at reception.
 - ``comms.leader_latency`` / ``comms.leader_dropout``: the same for the virtual
   leader's broadcast (its state, hence every slot). A lost broadcast is lost
   for the whole team (``Observation.leader`` is one state per run).
@@ -19,11 +26,15 @@ What the keys do (docs/comms.md):
   applied command.
 
 At t = 0 every robot knows every other's start (and the leader's): messages
-are late and lost from then on. Every draw comes from the run's own generator,
-run by run in a fixed order each step (pose noise, then the (N + 1, N) message
-draws, the planner's row last, then the leader's, in ``sense``; command noise
-in ``apply``), so a batch gives its runs' bits and a seed fixes them. With every key at its
-default the simulator makes no :class:`Comms` and draws nothing.
+are late and lost from then on (until ``latency`` has passed, the messages
+that arrive are the starts, so the step-0 table gates them). Every draw comes
+from the run's own generator, run by run in a fixed order each step (pose
+noise, then the (N + 1, N) message draws, the planner's row last, then the
+leader's, in ``sense``; command noise in ``apply``), so a batch gives its
+runs' bits and a seed fixes them; the range gate draws nothing. State is kept
+per slot and overwritten from a run's step 0 on, so a run restarted in a slot
+holds nothing of the one before. With every key at its default the simulator
+makes no :class:`Comms` and draws nothing.
 """
 
 from __future__ import annotations
@@ -104,6 +115,9 @@ class Comms:
             # [receiver, sender]: last message received; receiver N is the planner at the leader
             self.got = np.zeros((slots, n + 1, n, 5))
             self.stamp = np.zeros((slots, n + 1, n), dtype=np.int64)  # its content's step
+            # [step % (lag + 1), receiver]: the senders in range when the messages were sent
+            k = max(min(int(spec.sensors.max_neighbors), n - 1), 0)
+            self.reach = np.full((slots, self.lag + 1, n, k), -1, dtype=np.intp)
         self.leader_stamp = np.zeros(slots, dtype=np.int64)
 
     def believed(self, pose: FloatArray, active: IntArray) -> FloatArray:
@@ -125,14 +139,19 @@ class Comms:
             active: ``(A,)`` their slots.
             pose: ``(A*N, 3)`` believed poses (what robots send, and where receivers are).
             velocity: ``(A*N, 2)`` velocities they send, m/s.
-            index: ``(A*N, K)`` neighbours in radio range (robot indices within the
-                run, -1 padded), from the true positions.
+            index: ``(A*N, K)`` neighbours in radio range at this step (robot indices
+                within the run, -1 padded), from the true positions. It gates the
+                messages sent now; the table given is that of the step whose messages
+                arrive now.
         """
         a, n, lag = len(active), self.n, self.lag
         sent = np.concatenate((pose, velocity), axis=1).reshape(a, n, 5)
         self.history[active, kk % (lag + 1)] = sent
+        self.reach[active, kk % (lag + 1)] = index.reshape(a, n, -1)
         src = np.maximum(kk - lag, 0)
         content = self.history[active, src % (lag + 1)]  # (A, N, 5): what arrives now
+        # the senders in range when that was sent (at lag 0: this step's table)
+        index = self.reach[active, src % (lag + 1)].reshape(a * n, -1)
         if self.drop:
             lost = np.stack([self.rngs[e].random((n + 1, n)) < self.drop for e in active])
             lost[kk == 0] = False  # every start is known
