@@ -44,7 +44,7 @@ def run_summary(title: str, summary: Mapping[str, Any], simulated: float, wall: 
              f"({wall:.2f} s wall)"]
     if detail:
         lines += [f"  {k:26s} {with_unit(summary[k], k)}" for k in RUN_METRICS
-                  if summary.get(k, 0) is not None]  # (the Robotarium's: a gritsbot's only)
+                  if summary.get(k) is not None]  # (the Robotarium's: a gritsbot's only)
         lines.append(f"  ({len(summary)} metrics with their units in the .json; "
                      "definitions: docs/metrics.md)")
     width = max((len(k) for k in files), default=0) + 1
