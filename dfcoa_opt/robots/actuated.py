@@ -39,7 +39,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.robots.unicycle_kernel import arc, saturate1
+from dfcoa_opt.robots.unicycle_kernel import arc, saturate1, store_row
 
 FloatArray = NDArray[np.float64]
 
@@ -83,8 +83,11 @@ def wheel_advance(phi: float, s: float, alpha: float, tau: float, h: float,
 
 
 @numba.njit(cache=True)
-def actuated_step(pose, wheels, command, dt, v_lower, v_max, w_max, wheel_max, wheel_r, track,
-                  alpha, tau, substeps, noise, disturbance):  # pragma: no cover - numba
+def actuated_step(pose: FloatArray, wheels: FloatArray, command: FloatArray, dt: float,
+                  v_lower: float, v_max: float, w_max: float, wheel_max: float, wheel_r: float,
+                  track: float, alpha: float, tau: float, substeps: int, noise: FloatArray,
+                  disturbance: FloatArray
+                  ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:  # pragma: no cover
     """Advance N actuated unicycles by ``dt`` (module docstring).
 
     Args:
@@ -134,14 +137,7 @@ def actuated_step(pose, wheels, command, dt, v_lower, v_max, w_max, wheel_max, w
             x, y, th = arc(x, y, th, vm, wm, h)
             sum_v += vm
             sum_w += wm
-        v_end = 0.5 * wheel_r * (pr + pl)
-        vx, vy = v_end * math.cos(th), v_end * math.sin(th)
-        if disturbance.shape[0]:
-            x = x + disturbance[i, 0] * dt
-            y = y + disturbance[i, 1] * dt
-            vx, vy = vx + disturbance[i, 0], vy + disturbance[i, 1]
-        out[i, 0], out[i, 1], out[i, 2] = x, y, th
-        vel[i, 0], vel[i, 1] = vx, vy
-        u[i, 0], u[i, 1] = sum_v / substeps, sum_w / substeps
+        store_row(out, vel, u, i, x, y, th, 0.5 * wheel_r * (pr + pl), sum_v / substeps,
+                  sum_w / substeps, disturbance, dt)
         wh[i, 0], wh[i, 1] = pr, pl
     return out, vel, u, wh

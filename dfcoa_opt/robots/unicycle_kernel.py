@@ -52,6 +52,25 @@ def saturate1(v: float, w: float, v_lower: float, v_max: float, w_max: float, wh
     return v, w
 
 
+@numba.njit(cache=True, inline="always")
+def store_row(out, vel, u, i, x, y, th, speed, v, w, disturbance,
+              dt):  # pragma: no cover - numba
+    """Row ``i`` of a step's outputs, the disturbance (world velocity, m/s) added.
+
+    ``out[i]`` the pose (m, m, rad) moved by ``disturbance[i] dt``; ``vel[i]`` the world
+    velocity of ``speed`` (m/s) along the heading ``th``, plus the disturbance; ``u[i]``
+    the applied twist ``(v, w)`` (m/s, rad/s).
+    """
+    vx, vy = speed * math.cos(th), speed * math.sin(th)
+    if disturbance.shape[0]:
+        x = x + disturbance[i, 0] * dt
+        y = y + disturbance[i, 1] * dt
+        vx, vy = vx + disturbance[i, 0], vy + disturbance[i, 1]
+    out[i, 0], out[i, 1], out[i, 2] = x, y, th
+    vel[i, 0], vel[i, 1] = vx, vy
+    u[i, 0], u[i, 1] = v, w
+
+
 @numba.njit(cache=True)
 def unicycle_arc(pose, v, w, dt):  # pragma: no cover - numba
     """:func:`~dfcoa_opt.robots.models.integrate_unicycle` of one ``(3,)`` pose (m, m, rad)."""
@@ -87,12 +106,5 @@ def unicycle_step(pose, command, dt, v_lower, v_max, w_max, wheel_max, wheel_r, 
         v, w = saturate1(command[i, 0], command[i, 1], v_lower, v_max, w_max, wheel_max,
                          wheel_r, track)
         x, y, th = arc(pose[i, 0], pose[i, 1], pose[i, 2], v, w, dt)
-        vx, vy = v * math.cos(th), v * math.sin(th)
-        if disturbance.shape[0]:
-            x = x + disturbance[i, 0] * dt
-            y = y + disturbance[i, 1] * dt
-            vx, vy = vx + disturbance[i, 0], vy + disturbance[i, 1]
-        out[i, 0], out[i, 1], out[i, 2] = x, y, th
-        vel[i, 0], vel[i, 1] = vx, vy
-        u[i, 0], u[i, 1] = v, w
+        store_row(out, vel, u, i, x, y, th, v, v, w, disturbance, dt)
     return out, vel, u
