@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -131,3 +132,26 @@ def test_worker_processes_shrink_a_store_to_the_same_bytes(tmp_path: Path) -> No
     assert [(b / "logs" / n).read_bytes() for n in names] == [
         (s.root / "logs" / n).read_bytes() for n in names]
     assert (b / "logs_read.json").read_bytes() == (s.root / "logs_read.json").read_bytes()
+
+
+def test_a_compact_log_of_format_1_still_reads(tmp_path: Path) -> None:
+    """Format /1 kept meta as a numpy string; /2 as UTF-8 bytes (a quarter of the size)."""
+    import zipfile
+
+    import dfcoa_opt
+
+    full = dfcoa_opt.run(dfcoa_opt.load(CROSSING, overrides={"t_max": 2.0}), "goto_slot").log
+    new = tmp_path / "new.npz"
+    new.write_bytes(compact_bytes(full))
+    with np.load(new, allow_pickle=False) as z:
+        members = {k: z[k] for k in z.files}
+    assert members["meta"].dtype == np.uint8
+    members["meta"] = np.array(members["meta"].tobytes().decode())
+    members["format"] = np.array("dfcoa-compact-log/1")
+    old = tmp_path / "old.npz"
+    with zipfile.ZipFile(old, "w") as zf:
+        for name, arr in members.items():
+            with zf.open(f"{name}.npy", "w") as f:
+                np.lib.format.write_array(f, arr, allow_pickle=False)
+    text = json.dumps(full.meta, default=str)  # (NaN != NaN: compared as JSON)
+    assert json.dumps(load_compact(old).meta) == json.dumps(load_compact(new).meta) == text

@@ -25,7 +25,6 @@ object per run, called with the single run's :class:`Observation`.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Iterator, Sequence
 from typing import Any
 
@@ -49,6 +48,12 @@ class ControllerError(DfcoaError):
 
 
 __all__ = ["BatchSimulator", "ControllerError", "is_batched"]
+
+
+#: The ``[robots]`` keys a log's meta keeps (``meta["robots"]``): what the deployability
+#: report (:mod:`dfcoa_opt.metrics_deploy`) reads.
+DEPLOY_ROBOT_KEYS = ("model", "profile", "dynamics", "v_max", "v_min", "w_max", "wheel_radius",
+                     "track_width", "wheel_speed_max", "nid_distance")
 
 
 class BatchSimulator:
@@ -264,7 +269,7 @@ class BatchSimulator:
             "wall_time": float(stepper.wall[e]), "version": __version__,
             "leader_path": sc.leader_path.tolist(), "goal": list(spec.leader.goal),
             "settle_tolerance": spec.leader.settle_tolerance,
-            "robots": dataclasses.asdict(spec.robots),
+            "robots": {k: getattr(spec.robots, k) for k in DEPLOY_ROBOT_KEYS},
             "controller_counters": {str(k): int(v) for k, v in (counters or {}).items()},
         }
         return out

@@ -34,7 +34,7 @@ UNCHANGED_TOL = 1e-9
 #: Log fields that are measured wall-clock times (not part of a run's result).
 TIMING_FIELDS = ("filter_time",)
 #: The ``format`` member of a compact log (:mod:`dfcoa_opt.bench.logs`): trajectories only.
-COMPACT_FORMAT = "dfcoa-compact-log/1"
+COMPACT_FORMAT = "dfcoa-compact-log/2"  # /2: meta as UTF-8 bytes (/1: a numpy string)
 #: The member of a pruned log (:mod:`dfcoa_opt.bench.logs`) naming the fields it keeps.
 PRUNED_MEMBER = "pruned"
 
