@@ -38,7 +38,7 @@ $(VENV)/.bench-installed: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[dev,dask,rl,bench]'
 	touch $(VENV)/.bench-installed
 
-# BENCH_FIGURES=0 leaves out row (f), a whole `dfcoa figures` in a fresh clone (about 20 min
+# BENCH_FIGURES=0 leaves out row (f), a whole `dfcoa figures` in a fresh clone (about 23 min
 # on a 2-core Intel Xeon, docs/performance.md), and the numba compilation row.
 BENCH_FIGURES ?= 1
 
