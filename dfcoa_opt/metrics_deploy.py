@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from scipy.spatial.distance import pdist
 
 from dfcoa_opt.control.adapters import convert
+from dfcoa_opt.robots.models import wheel_speeds
 from dfcoa_opt.sim.log import RunLog
 
 FloatArray = NDArray[np.float64]
@@ -69,20 +70,25 @@ def commanded_twist(log: RunLog) -> FloatArray | None:
     return np.asarray(flat, dtype=float)[:, :2].reshape(t_steps, n, 2)
 
 
-def commanded_wheel_speeds(log: RunLog) -> FloatArray | None:
-    """``(T, N, 2)`` the (right, left) wheel speeds asked, rad/s (paper 000 eq 2 inverted)."""
-    twist = commanded_twist(log)
+def commanded_wheel_speeds(log: RunLog, twist: FloatArray | None = None) -> FloatArray | None:
+    """``(T, N, 2)`` the (right, left) wheel speeds asked, rad/s (paper 000 eq 2 inverted).
+
+    ``twist``: :func:`commanded_twist` of the log, when already computed.
+    """
+    twist = commanded_twist(log) if twist is None else twist
     if twist is None:
         return None
     robots = _robots(log)
     r, d = float(robots["wheel_radius"]), float(robots["track_width"])  # type: ignore[index]
-    v, w = twist[..., 0], twist[..., 1]
-    return np.stack(((v + 0.5 * d * w) / r, (v - 0.5 * d * w) / r), axis=-1)
+    return np.stack(wheel_speeds(twist[..., 0], twist[..., 1], r, d), axis=-1)
 
 
-def saturated(log: RunLog) -> NDArray[np.bool_] | None:
-    """``(T, N)`` whether the robot could not follow the command as asked (v, omega, a wheel)."""
-    twist = commanded_twist(log)
+def saturated(log: RunLog, twist: FloatArray | None = None) -> NDArray[np.bool_] | None:
+    """``(T, N)`` whether the robot could not follow the command as asked (v, omega, a wheel).
+
+    ``twist``: :func:`commanded_twist` of the log, when already computed.
+    """
+    twist = commanded_twist(log) if twist is None else twist
     if twist is None:
         return None
     robots = _robots(log)
@@ -96,8 +102,9 @@ def saturated(log: RunLog) -> NDArray[np.bool_] | None:
     wheel_max = float(robots["wheel_speed_max"])
     if math.isfinite(wheel_max):
         vc, wc = np.clip(v, v_min, v_max), np.clip(w, -w_max, w_max)
-        r, d = float(robots["wheel_radius"]), float(robots["track_width"])
-        peak = np.maximum(np.abs(vc + 0.5 * d * wc), np.abs(vc - 0.5 * d * wc)) / r
+        right, left = wheel_speeds(vc, wc, float(robots["wheel_radius"]),
+                                   float(robots["track_width"]))
+        peak = np.maximum(np.abs(right), np.abs(left))
         out |= peak > wheel_max + tol
     return out
 
@@ -146,7 +153,8 @@ def robotarium_checks(log: RunLog, wheels: FloatArray | None) -> dict[str, bool 
 
 def deployability(log: RunLog) -> dict[str, Any]:
     """The deployability keys of a run (:data:`DEPLOY_KEYS`, module docstring)."""
-    wheels = commanded_wheel_speeds(log)
+    twist = commanded_twist(log)
+    wheels = commanded_wheel_speeds(log, twist)
     out: dict[str, Any] = {"wheel_speed_peak": math.nan, "wheel_speed_ratio": math.nan,
                            "wheel_accel_peak": math.nan, "saturated_pct": math.nan}
     if wheels is not None and log.n_steps:
@@ -156,7 +164,7 @@ def deployability(log: RunLog) -> dict[str, Any]:
         limit = float(robots["wheel_speed_max"])
         rim = wheels * float(robots["wheel_radius"])
         change = np.diff(rim, axis=0, prepend=np.zeros((1, *rim.shape[1:])))
-        sat = saturated(log)
+        sat = saturated(log, twist)
         assert sat is not None
         out.update(wheel_speed_peak=peak,
                    wheel_speed_ratio=peak / limit if math.isfinite(limit) else math.nan,
