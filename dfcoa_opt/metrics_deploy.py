@@ -10,6 +10,7 @@ and docs/robots.md says how to read them.
   000 eq 2. ``wheel_speed_peak`` is the largest of them, ``wheel_speed_ratio``
   its ratio to the robot's wheel limit, ``wheel_accel_peak`` the largest change
   of a wheel's rim speed between two steps over ``dt`` (from rest at t = 0),
+  ``wheel_accel_ratio`` its ratio to the acceleration limit (:func:`accel_limit_of`),
   and ``saturated_pct`` the share of robot-steps whose command the robot could
   not follow as asked (v, omega or a wheel beyond its limit).
 - ``body_gap_min``: the smallest distance between two robot bodies (centre
@@ -45,7 +46,8 @@ FloatArray = NDArray[np.float64]
 LIMIT_TOL = 1e-9
 
 #: The keys of :func:`deployability`, in report order.
-DEPLOY_KEYS = ("wheel_speed_peak", "wheel_speed_ratio", "wheel_accel_peak", "saturated_pct",
+DEPLOY_KEYS = ("wheel_speed_peak", "wheel_speed_ratio", "wheel_accel_peak", "wheel_accel_ratio",
+               "saturated_pct",
                "body_gap_min", "robotarium_arena", "robotarium_collision", "robotarium_speed",
                "robotarium_ok")
 
@@ -109,6 +111,20 @@ def saturated(log: RunLog, twist: FloatArray | None = None) -> NDArray[np.bool_]
     return out
 
 
+def accel_limit_of(robots: dict[str, Any]) -> float:
+    """The wheel acceleration limit a run is judged against, m/s^2 (inf: none).
+
+    The robot's own (``dynamics = "actuated"``), else its profile's: a kinematic
+    run with a profile is judged against the robot it stands for.
+    """
+    own = float(robots.get("wheel_accel_max", math.inf))
+    if math.isfinite(own) or robots.get("profile") is None:
+        return own
+    from dfcoa_opt.robots.profiles import PROFILES
+
+    return float(PROFILES[str(robots["profile"])]["robots"]["wheel_accel_max"])
+
+
 def body_gap_min(log: RunLog) -> float:
     """Smallest distance between two robot bodies over the run, m (NaN with one robot)."""
     gap = float(np.min(log.min_inter_robot)) if log.n_steps else math.inf
@@ -156,7 +172,8 @@ def deployability(log: RunLog) -> dict[str, Any]:
     twist = commanded_twist(log)
     wheels = commanded_wheel_speeds(log, twist)
     out: dict[str, Any] = {"wheel_speed_peak": math.nan, "wheel_speed_ratio": math.nan,
-                           "wheel_accel_peak": math.nan, "saturated_pct": math.nan}
+                           "wheel_accel_peak": math.nan, "wheel_accel_ratio": math.nan,
+                           "saturated_pct": math.nan}
     if wheels is not None and log.n_steps:
         robots = _robots(log)
         assert robots is not None
@@ -166,9 +183,13 @@ def deployability(log: RunLog) -> dict[str, Any]:
         change = np.diff(rim, axis=0, prepend=np.zeros((1, *rim.shape[1:])))
         sat = saturated(log, twist)
         assert sat is not None
+        accel = float(np.max(np.abs(change))) / float(log.meta["dt"])
+        accel_limit = accel_limit_of(robots)
         out.update(wheel_speed_peak=peak,
                    wheel_speed_ratio=peak / limit if math.isfinite(limit) else math.nan,
-                   wheel_accel_peak=float(np.max(np.abs(change))) / float(log.meta["dt"]),
+                   wheel_accel_peak=accel,
+                   wheel_accel_ratio=accel / accel_limit if math.isfinite(accel_limit)
+                   else math.nan,
                    saturated_pct=100.0 * float(np.mean(sat)))
     out["body_gap_min"] = body_gap_min(log)
     out.update(robotarium_checks(log, wheels))

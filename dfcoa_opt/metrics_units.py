@@ -39,6 +39,7 @@ UNITS: dict[str, str] = {
     "steps": "1",
     # deployability (dfcoa_opt.metrics_deploy)
     "wheel_speed_peak": "rad/s", "wheel_speed_ratio": "1", "wheel_accel_peak": "m/s^2",
+    "wheel_accel_ratio": "1",
     "saturated_pct": "%", "body_gap_min": "m", "robotarium_arena": "1",
     "robotarium_collision": "1", "robotarium_speed": "1", "robotarium_ok": "1",
     # the world's difficulty along the leader's path (dfcoa_opt.metrics_world)

@@ -102,3 +102,12 @@ def test_every_key_in_a_run_summary():
     m = d.run(sc, "goto_slot", seed=0).metrics
     assert set(DEPLOY_KEYS) <= set(m)
     assert m["wheel_speed_peak"] > 0 and m["body_gap_min"] > 0
+
+
+def test_the_acceleration_is_judged_against_the_robot_or_its_profile():
+    cmd = [[[0.2, 0.0]], [[0.5, 0.0]]]  # rim from 0.2 to 0.5 m/s in 0.1 s: 3 m/s^2
+    assert math.isnan(deployability(log_with(cmd))["wheel_accel_ratio"])
+    own = deployability(log_with(cmd, spec=robots(dynamics="actuated", wheel_accel_max=2.0)))
+    assert own["wheel_accel_ratio"] == pytest.approx(1.5)
+    spec = robots(profile="turtlebot3_burger")  # kinematic: the profile's 2.5 m/s^2
+    assert deployability(log_with(cmd, spec=spec))["wheel_accel_ratio"] == pytest.approx(1.2)

@@ -43,10 +43,10 @@ DEFAULT_METRICS: tuple[str, ...] = (
 
 #: Below each scenario's deployability table (docs/robots.md says how to read it).
 DEPLOY_LEGEND = ("What the commands asked of the robot (docs/robots.md): the peak wheel speed "
-                 "(and its ratio to the wheel limit), the peak rim acceleration between two "
-                 "steps, the share of robot-steps the robot could not follow as asked, the "
-                 "smallest gap between two bodies, and with the gritsbot profile the share of "
-                 "runs that pass the Robotarium's checks.")
+                 "and the peak rim acceleration between two steps (each also as a ratio to "
+                 "the robot's limit), the share of robot-steps the robot could not follow as "
+                 "asked, the smallest gap between two bodies, and with the gritsbot profile "
+                 "the share of runs that pass the Robotarium's checks.")
 
 DEFAULT_BY: tuple[str, ...] = ("scenario", "variant")
 #: Grouping of a ladder sweep: one group per rung too.

@@ -53,7 +53,7 @@ __all__ = ["BatchSimulator", "ControllerError", "is_batched"]
 #: The ``[robots]`` keys a log's meta keeps (``meta["robots"]``): what the deployability
 #: report (:mod:`dfcoa_opt.metrics_deploy`) reads.
 DEPLOY_ROBOT_KEYS = ("model", "profile", "dynamics", "v_max", "v_min", "w_max", "wheel_radius",
-                     "track_width", "wheel_speed_max", "nid_distance")
+                     "track_width", "wheel_speed_max", "wheel_accel_max", "nid_distance")
 
 
 class BatchSimulator:
