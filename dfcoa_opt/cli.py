@@ -45,6 +45,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--json", action="store_true", help="print one JSON object to stdout")
     r.add_argument("--plot", action="store_true", help="write a PNG of map and trajectories")
     r.add_argument("--animate", metavar="FILE.gif", help="write a GIF animation")
+    r.add_argument("--mcap", metavar="FILE.mcap", help="write the run as a rosbag2 MCAP file "
+                   "for Foxglove / RViz 2 (needs the 'ros' extra; docs/ros.md)")
     _set_arg(r)
 
     ls = sub.add_parser("list", help="list controllers, scenarios or figure recipes")
@@ -260,7 +262,12 @@ def _cmd_run(a: argparse.Namespace) -> int:
         raise DfcoaError(f"--animate: '{a.animate}' must end in .gif")
     if a.animate and len(seeds) > 1:
         raise DfcoaError("--animate: one GIF needs one run; use --seed")
-    sim = BatchSimulator(scenario, batch_controllers(a.controller, scenario, len(seeds)), seeds)
+    if a.mcap and not a.mcap.lower().endswith(".mcap"):
+        raise DfcoaError(f"--mcap: '{a.mcap}' must end in .mcap")
+    if a.mcap and len(seeds) > 1:
+        raise DfcoaError("--mcap: one file holds one run; use --seed")
+    sim = BatchSimulator(scenario, batch_controllers(a.controller, scenario, len(seeds)), seeds,
+                         record_scans=bool(a.mcap))
     try:
         logs = sim.run_all()
     except ControllerError as exc:
@@ -284,12 +291,15 @@ def _cmd_run(a: argparse.Namespace) -> int:
             if a.animate:
                 animation.animate_run(log, sc.world.grid, a.animate, goal=goal, start=start,
                                       shapes=sc.world.shapes, metrics=sc.spec.metrics)
+        if a.mcap:
+            log.to_mcap(a.mcap, sc.world)
         if a.json:
             print(json.dumps(result))  # one object per line (JSON Lines) with --seeds
             continue
         files = {"log": f"{stem}.npz", "metrics": f"{stem}.json"}
         files.update({"plot": f"{stem}.png"} if a.plot else {})
         files.update({"animation": a.animate} if a.animate else {})
+        files.update({"mcap": a.mcap} if a.mcap else {})
         print(run_summary(f"{sc.name} / {a.controller} / seed {seed}", summary,
                           float(log.t[-1]), float(log.meta["wall_time"]), files,
                           detail=len(seeds) == 1))

@@ -30,6 +30,7 @@ from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.sim.log import (
     COMPACT_FORMAT,
+    OPTIONAL_FIELDS,
     PRUNED_MEMBER,
     RunLog,
     is_compact,
@@ -43,8 +44,8 @@ POSITION_STEP, ANGLE_STEP = 1e-3, 1e-3
 
 #: Open :func:`tracing` blocks: run key -> the log fields read.
 _TRACE: list[dict[str, set[str]]] = []
-#: The fields of a log (``meta`` included).
-FIELDS = frozenset(f.name for f in fields(RunLog))
+#: The fields of a log (``meta`` included; not the optional ones, which a log may lack).
+FIELDS = frozenset(f.name for f in fields(RunLog)) - set(OPTIONAL_FIELDS)
 
 
 class LogCompacted(DfcoaError):

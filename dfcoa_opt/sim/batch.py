@@ -65,13 +65,18 @@ class BatchSimulator:
             controller object per seed (a single object when there is one seed).
         seeds: The runs' seeds (None: the scenario's). Each run is the run of
             :class:`~dfcoa_opt.sim.simulator.Simulator` with that seed.
+        record_scans: Keep the LiDAR scans the robots had in each log
+            (:attr:`RunLog.scan <dfcoa_opt.sim.log.RunLog>`), when the LiDAR runs
+            (the controller or the estimator reads it). The run is the same
+            either way; the log grows by ``T x N x beams`` floats.
 
     Raises:
         DfcoaError: No seeds, or not one unbatched controller per seed.
     """
 
     def __init__(self, scenario: Scenario, controller: Controller | Sequence[Controller],
-                 seeds: Sequence[int | None]) -> None:
+                 seeds: Sequence[int | None], record_scans: bool = False) -> None:
+        self.record_scans = record_scans
         self.seeds = [scenario.spec.seed if s is None else int(s) for s in seeds]
         if not self.seeds:
             raise DfcoaError("a batch needs at least one seed")
@@ -259,6 +264,7 @@ class BatchSimulator:
         sc, spec = self.scenarios[e], self.spec
         assert stepper.log is not None
         out = stepper.log.run(e, end.steps, sc.offsets, sc.world.dynamic.radii)
+        scan = stepper.scans.recorded(e, end.steps)
         counters = (controller.run_counters(e) if self.batched and
                     hasattr(controller, "run_counters") else getattr(controller, "counters", None))
         out.meta = {
@@ -272,4 +278,6 @@ class BatchSimulator:
             "robots": {k: getattr(spec.robots, k) for k in DEPLOY_ROBOT_KEYS},
             "controller_counters": {str(k): int(v) for k, v in (counters or {}).items()},
         }
+        if scan is not None:
+            out.scan, out.meta["scan"] = scan
         return out

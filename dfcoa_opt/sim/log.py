@@ -33,6 +33,8 @@ UNCHANGED_TOL = 1e-9
 
 #: Log fields that are measured wall-clock times (not part of a run's result).
 TIMING_FIELDS = ("filter_time",)
+#: Log fields that are None unless a run asks for them (not in a log without them).
+OPTIONAL_FIELDS = ("scan",)
 #: The ``format`` member of a compact log (:mod:`dfcoa_opt.bench.logs`): trajectories only.
 COMPACT_FORMAT = "dfcoa-compact-log/2"  # /2: meta as UTF-8 bytes (/1: a numpy string)
 #: The member of a pruned log (:mod:`dfcoa_opt.bench.logs`) naming the fields it keeps.
@@ -101,6 +103,10 @@ class RunLog:
             controllers report it as ``last_steering``).
         meta: JSON-serialisable run facts: scenario, controller, seed, dt, n,
             robot_radius, reached_goal, time_to_goal, steps, ...
+        scan: ``(T, N, B)`` the LiDAR ranges each robot had at t[k], m (``+inf`` no
+            return, ``-inf`` too close); only when the run was asked to record them
+            (``BatchSimulator(record_scans=True)``, ``dfcoa run --mcap``) and the
+            LiDAR ran; None otherwise. ``meta["scan"]`` then holds the beam layout.
     """
 
     t: FloatArray
@@ -125,6 +131,7 @@ class RunLog:
     filter_time: FloatArray
     steering: FloatArray
     meta: dict[str, Any] = field(default_factory=dict)
+    scan: FloatArray | None = None
 
     @classmethod
     def allocate(cls, steps: int, n: int, m: int, k: int = 2) -> RunLog:
@@ -190,8 +197,27 @@ class RunLog:
         return out
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """All array fields by name."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "meta"}
+        """All array fields by name (an :data:`OPTIONAL_FIELDS` one only when present)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "meta"}
+        return {k: v for k, v in out.items() if v is not None or k not in OPTIONAL_FIELDS}
+
+    def to_mcap(self, path: str | Path, world: Any = None) -> Path:
+        """Write the run as a rosbag2 MCAP file that Foxglove and RViz 2 open (docs/ros.md).
+
+        Needs the ``ros`` extra (``rosbags``).
+
+        Args:
+            path: The ``.mcap`` file to write (replaced atomically).
+            world: The run's :class:`~dfcoa_opt.sim.scenario.World`
+                (``Scenario.world``): gives ``/map`` and the static obstacles;
+                without it the file has neither.
+
+        Returns:
+            ``path``.
+        """
+        from dfcoa_opt.sim.mcap import write_mcap
+
+        return write_mcap(self, path, world)
 
     def digest(self) -> str:
         """SHA-256 over every array's bytes but the timings: equal digests = bit-identical runs.

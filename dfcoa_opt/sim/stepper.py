@@ -37,6 +37,7 @@ from dfcoa_opt.sim.log import BatchLog
 from dfcoa_opt.sim.lookups import RunLookups
 from dfcoa_opt.sim.neighbours import batch_proximity, gather, new_contacts
 from dfcoa_opt.sim.observe import Observing
+from dfcoa_opt.sim.scans import ScanBook
 from dfcoa_opt.world.lidar import LaserScan
 
 if TYPE_CHECKING:
@@ -123,7 +124,8 @@ class Stepper(Observing, RunLookups):
         self._s: dict[str, Any] = {}  # what sense() saw, for apply()
         self._owners = np.concatenate((np.arange(n), np.full(self.m, -1)))  # a run's LiDAR discs
         self._rows: tuple[Any, ...] = (None,)  # per-row constants of the last active set
-        self._last_scan: FloatArray | None = None  # each slot's robots' last scans (lidar.rate)
+        #: the scans held between LiDAR frames and those recorded (``sim.record_scans``)
+        self.scans = ScanBook(slots, self.steps, n, self.dt, spec.sensors.lidar.rate)
 
     def start_clock(self) -> None:
         """Start counting the runs' wall times (after the controllers' resets)."""
@@ -216,7 +218,7 @@ class Stepper(Observing, RunLookups):
                 scans[0].angle_min, scans[0].angle_increment, scans[0].range_min,
                 scans[0].range_max, np.concatenate([s.ranges for s in scans]))
         if scan_all is not None and math.isfinite(self.spec.sensors.lidar.rate):
-            scan_all = self._held(scan_all, active, kk)
+            scan_all = self.scans.held(scan_all, active, kk)
             scans = [None] * a
         est = self._estimate(scans, scan_all, active)
         comms = self.comms
@@ -258,25 +260,6 @@ class Stepper(Observing, RunLookups):
                        row_index=row_index, nb=(nb_index, nb_pos, nb_vel, nb_heading, nb_dist,
                                                 nb_age), moving=moving, heard=heard,
                        heard_slots=heard_slots, team=team)
-
-    def _held(self, scan: LaserScan, active: NDArray[np.intp], kk: NDArray[np.int64]
-              ) -> LaserScan:
-        """The scans the robots have with ``sensors.lidar.rate``: new ones only when due.
-
-        Run ``e`` takes a new scan at step ``k`` when ``floor(k dt rate)`` grew
-        since step ``k - 1`` (and at ``k = 0``); otherwise each robot keeps its
-        last scan. The LiDAR is cast every step (its noise drawn every step),
-        so the runs' draws do not depend on the rate.
-        """
-        n, rate = self.n, self.spec.sensors.lidar.rate
-        ranges = scan.ranges.reshape(len(active), n, -1)
-        if self._last_scan is None:
-            self._last_scan = np.zeros((len(self.k), n, ranges.shape[2]))
-        ticks = np.floor(kk * self.dt * rate + 1e-9)
-        due = (kk == 0) | (ticks > np.floor((kk - 1) * self.dt * rate + 1e-9))
-        self._last_scan[active[due]] = ranges[due]
-        return LaserScan(scan.angle_min, scan.angle_increment, scan.range_min, scan.range_max,
-                         self._last_scan[active].reshape(len(active) * n, -1))
 
     def _row_constants(self) -> tuple[Any, ...]:
         """Per-row constants of the active set, made again when it changes.
@@ -368,6 +351,8 @@ class Stepper(Observing, RunLookups):
             collision_events=events, dyn_pos=s["dyn_pos"], command=cmd.reshape(a, n, -1))
         if extras is not None:
             extras(log, active, kk)
+        if sim.record_scans and s["scan_all"] is not None:
+            self.scans.record(s["scan_all"], active, kk)
         # -- stop conditions
         reached = np.array(s["at_goal"], dtype=bool)
         leader = spec.leader
