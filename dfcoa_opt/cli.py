@@ -62,6 +62,9 @@ def _parser() -> argparse.ArgumentParser:
     _executor_args(b)
     b.add_argument("--rerun", action="store_true", help="run again the runs that have a row")
     b.add_argument("--seeds", type=int, help="override the sweep's number of seeds")
+    b.add_argument("--mcap", action="store_true", help="also write <out>/mcap/<key>.mcap for "
+                   "every run the report's trajectory figures draw, simulated again with its "
+                   "LiDAR scans (needs the 'ros' extra; docs/ros.md)")
 
     t = sub.add_parser("tune", help="tune variants of a tuning sweep with Optuna on its "
                        "training seeds (the same budget for each); resumes")
@@ -177,6 +180,15 @@ def _cmd_bench(a: argparse.Namespace) -> int:
     out = Path(a.out) if a.out else default_folder(sweep)
     result = run_sweep(sweep, out, config, rerun=a.rerun, progress=a.progress)
     print(result.summary())
+    if a.mcap:
+        from dfcoa_opt.bench.mcap_runs import MCAP_DIR, write_run_mcaps
+        from dfcoa_opt.bench.report import load_rows
+
+        files, notes = write_run_mcaps(out, load_rows(out))
+        print(f"mcap: {len(files)} files in {out / MCAP_DIR} (the runs the report's "
+              "trajectory figures draw)")
+        for note in notes:
+            print(f"  note: {note}")
     print(f"report: dfcoa report {out}")
     return 0
 

@@ -214,3 +214,35 @@ def test_cli_writes_the_file_and_checks_the_name(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "must end in .mcap" in err and "\n" not in err
     assert main(["run", str(SCENARIO), "--seeds", "0-1", "--mcap", str(out)]) == 2
+
+
+def test_bench_writes_one_file_per_drawn_run(tmp_path, capsys):
+    from dfcoa_opt.bench.logs import read_log
+    from dfcoa_opt.bench.mcap_runs import drawn_rows
+    from dfcoa_opt.bench.report import load_rows
+
+    tiny = Path(__file__).parent / "data" / "bench" / "tiny.toml"
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'scenarios = [{str(tiny)!r}]\ncontrollers = ["goto_slot", "dfcoa"]\n'
+                     "seeds = 2\n")
+    out = tmp_path / "res"
+    assert main(["bench", str(sweep), "--out", str(out), "--executor", "serial",
+                 "--no-progress"]) == 0
+    assert not (out / "mcap").exists()  # off by default
+    assert main(["bench", str(sweep), "--out", str(out), "--executor", "serial",
+                 "--no-progress", "--mcap"]) == 0
+    assert "mcap: 2 files" in capsys.readouterr().out
+    rows = load_rows(out)
+    drawn = drawn_rows(rows)
+    assert sorted((r["controller"], r["seed"]) for r in drawn) == [("dfcoa", 0), ("goto_slot", 0)]
+    for row in drawn:
+        log = read_log(out, row)
+        with Reader(out / "mcap" / f"{row['key']}.mcap") as reader:
+            counts = {c.topic: c.msgcount for c in reader.connections}
+            tf = [m for c, _, raw in reader.messages()
+                  for m in [get_typestore(getattr(Stores, ROS_DISTRO)).deserialize_cdr(
+                      raw, c.msgtype)] if c.topic == "/tf"]
+        xy = np.array([[(tr.transform.translation.x, tr.transform.translation.y)
+                        for tr in m.transforms] for m in tf])
+        np.testing.assert_array_equal(xy, log.pose[..., :2])  # the row's run, bit for bit
+        assert ("/robot_0/scan" in counts) == (row["controller"] == "dfcoa")  # goto_slot: no LiDAR

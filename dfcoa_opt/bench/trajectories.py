@@ -206,6 +206,23 @@ def _changed(row: Row) -> bool:
         return True
 
 
+def overlay_rows(rows: Sequence[Row], seed: int | None = None
+                 ) -> dict[str, tuple[int | None, list[Row]]]:
+    """The runs :func:`overlay_figures` draws: ``{scenario: (seed, its rows)}``.
+
+    Args:
+        rows: Result rows of any scenarios (outside ladders).
+        seed: Seed to draw; default each scenario's smallest seed with a log.
+    """
+    out: dict[str, tuple[int | None, list[Row]]] = {}
+    for scen in sorted({str(r["scenario"]) for r in rows}):
+        mine = [r for r in rows if str(r["scenario"]) == scen]
+        seeds = sorted({int(r["seed"]) for r in mine if r.get("log")})
+        pick = seeds[0] if seed is None and seeds else seed
+        out[scen] = (pick, [r for r in mine if pick is not None and int(r["seed"]) == int(pick)])
+    return out
+
+
 def overlay_figures(rows: Sequence[Row], results_dir: str | Path, out_dir: str | Path,
                     seed: int | None = None) -> tuple[dict[str, list[Path]], list[str]]:
     """One trajectory figure per scenario (:func:`panels_figure`): ``traj_<scenario>_s<seed>.png``.
@@ -222,11 +239,7 @@ def overlay_figures(rows: Sequence[Row], results_dir: str | Path, out_dir: str |
     """
     written: dict[str, list[Path]] = {}
     notes: list[str] = []
-    for scen in sorted({str(r["scenario"]) for r in rows}):
-        mine = [r for r in rows if str(r["scenario"]) == scen]
-        seeds = sorted({int(r["seed"]) for r in mine if r.get("log")})
-        pick = seeds[0] if seed is None and seeds else seed
-        chosen = [r for r in mine if pick is not None and int(r["seed"]) == int(pick)]
+    for scen, (pick, chosen) in overlay_rows(rows, seed).items():
         if not any(r.get("log") for r in chosen):
             notes.append(f"{scen}: no run with a log for seed {pick}, no trajectory figure")
             continue
