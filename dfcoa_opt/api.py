@@ -91,7 +91,7 @@ def controllers() -> list[str]:
 
 
 def run(scenario: Scenario | str | Path, controller: str | Any,
-        seed: int | None = None) -> Run:
+        seed: int | None = None, record_scans: bool = False) -> Run:
     """Simulate one scenario with one controller.
 
     Args:
@@ -106,10 +106,13 @@ def run(scenario: Scenario | str | Path, controller: str | Any,
             it, with the same overrides. One ``numpy.random.Generator`` made
             from it is the run's only random source: the same seed gives the
             same run, bit for bit, from every entry point.
+        record_scans: Keep the robots' LiDAR scans in ``log.scan`` (for
+            :meth:`Run.to_mcap`); the run is the same either way.
 
     Returns:
         The :class:`Run`: ``.scenario`` (the one that ran, drawn for ``seed``),
-        ``.log`` (every array), ``.metrics``, ``.plot()``, ``.animate(path)``.
+        ``.log`` (every array), ``.metrics``, ``.plot()``, ``.animate(path)``,
+        ``.to_mcap(path)``.
 
     Raises:
         ScenarioError: A bad scenario file or controller parameter.
@@ -133,7 +136,7 @@ def run(scenario: Scenario | str | Path, controller: str | Any,
     else:
         raise DfcoaError(f"run: controller must be a registry id or an object with act(obs), "
                          f"got {type(controller).__name__}")
-    sim = Simulator(sc, ctrl, seed)
+    sim = Simulator(sc, ctrl, seed, record_scans)
     return Run(sim.scenario, sim.run())
 
 
@@ -254,6 +257,20 @@ class Run:
                               max_frames, sc.spec.leader.start, shapes=sc.world.shapes,
                               figure=out, metrics=sc.spec.metrics)
         return out[0]
+
+    def to_mcap(self, path: str | Path) -> Path:
+        """Write the run as a rosbag2 MCAP file for Foxglove and RViz 2 (docs/ros.md).
+
+        Scans are in it when the run recorded them (``run(..., record_scans=True)``).
+        Needs the ``ros`` extra.
+
+        Args:
+            path: The ``.mcap`` file (folders are created).
+
+        Returns:
+            ``path``.
+        """
+        return self.log.to_mcap(path, self.scenario.world)
 
 
 def sweep(spec: str | Path | Mapping[str, Any], out: str | Path | None = None, *,

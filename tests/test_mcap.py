@@ -246,3 +246,27 @@ def test_bench_writes_one_file_per_drawn_run(tmp_path, capsys):
                         for tr in m.transforms] for m in tf])
         np.testing.assert_array_equal(xy, log.pose[..., :2])  # the row's run, bit for bit
         assert ("/robot_0/scan" in counts) == (row["controller"] == "dfcoa")  # goto_slot: no LiDAR
+
+
+def test_foxglove_layout_names_every_topic_and_is_committed(bag):
+    import json
+
+    from dfcoa_opt.sim.mcap import foxglove_layout
+
+    committed = Path(__file__).resolve().parents[1] / "docs" / "foxglove_layout.json"
+    assert json.loads(committed.read_text()) == foxglove_layout(10)  # regenerate: docs/ros.md
+    layout = foxglove_layout(5)
+    shown = set(layout["configById"]["3D!dfcoa"]["topics"])
+    plotted = {p["value"].split(".")[0] for p in layout["configById"]["Plot!dfcoa"]["paths"]}
+    _, _, topics, _, _ = bag
+    assert set(topics) - {"/tf"} == shown | plotted
+
+
+def test_api_run_to_mcap(tmp_path):
+    import dfcoa_opt as d
+
+    r = d.run(d.load(SCENARIO, t_max=2.0), "dfcoa", seed=1, record_scans=True)
+    path = r.to_mcap(tmp_path / "sub" / "a.mcap")
+    with Reader(path) as reader:
+        got = {c.topic: c.msgcount for c in reader.connections}
+    assert got["/robot_1/scan"] == r.log.n_steps == 21 and got["/map"] == 1

@@ -273,3 +273,45 @@ def _shape_marker(msgs: _Messages, t: float, j: int, shape: Any) -> Any:
     pts = [msgs.point(x, y) for x, y in np.vstack((v, v[:1]))]
     return msgs.marker(t, "static", j, "LINE_STRIP", msgs.pose(0.0, 0.0), (0.05, 0.0, 0.0), _GREY,
                        points=pts)
+
+
+def foxglove_layout(n: int) -> dict[str, Any]:
+    """A Foxglove layout for the files of runs of up to ``n`` robots (docs/ros.md).
+
+    A 3D panel in the ``map`` frame shows the map, the robots' frames and
+    scans, the slots, the leader's path and pose, the obstacles and the
+    contacts; a plot beside it shows each robot's forward speed (``odom``).
+
+    Args:
+        n: Robots whose topics the layout names.
+
+    Returns:
+        The layout as JSON-ready data (Foxglove: Layouts -> Import from file).
+    """
+    scene = {"/map": {"visible": True, "colorMode": "map"},
+             "/leader/path": {"visible": True, "lineWidth": 0.05, "gradient": ["#2a9d8fff"] * 2},
+             "/leader/pose": {"visible": True, "type": "arrow", "arrowScale": [0.6, 0.12, 0.12],
+                              "color": "#2a9d8fff"},
+             "/formation/slots": {"visible": True, "type": "arrow",
+                                  "arrowScale": [0.3, 0.06, 0.06], "color": "#e9c46aff"},
+             "/obstacles": {"visible": True}, "/contacts": {"visible": True}}
+    scene.update({f"/robot_{i}/scan": {"visible": True, "colorMode": "flat",
+                                       "flatColor": "#d1495bff", "pointSize": 3}
+                  for i in range(n)})
+    three_d = {"cameraState": {"perspective": False, "distance": 30.0, "phi": 0.0,
+                               "thetaOffset": 90.0, "target": [0, 0, 0],
+                               "targetOffset": [0, 0, 0], "targetOrientation": [0, 0, 0, 1],
+                               "fovy": 45, "near": 0.5, "far": 5000},
+               "followMode": "follow-none", "followTf": MAP_FRAME,
+               "scene": {"transforms": {"showLabel": True, "axisScale": 0.4}},
+               "transforms": {f"frame:{robot_frame(i)}": {"visible": True} for i in range(n)},
+               "topics": scene, "layers": {}, "publish": {"type": "point"}}
+    plot = {"title": "forward speed (m/s)",
+            "paths": [{"value": f"/robot_{i}/odom.twist.twist.linear.x", "enabled": True,
+                       "timestampMethod": "headerStamp", "label": f"robot {i}"}
+                      for i in range(n)],
+            "showLegend": True, "xAxisVal": "timestamp", "isSynced": True}
+    return {"configById": {"3D!dfcoa": three_d, "Plot!dfcoa": plot},
+            "globalVariables": {}, "userNodes": {}, "playbackConfig": {"speed": 1.0},
+            "layout": {"direction": "row", "first": "3D!dfcoa", "second": "Plot!dfcoa",
+                       "splitPercentage": 72}}

@@ -48,10 +48,12 @@ class Simulator(BatchSimulator):
             (:meth:`~dfcoa_opt.sim.scenario.Scenario.for_seed`), so the run is
             that of the file loaded with ``seed``; :attr:`scenario` is the
             scenario that runs.
+        record_scans: Keep the LiDAR scans in the log (:class:`BatchSimulator`).
     """
 
-    def __init__(self, scenario: Scenario, controller: Controller, seed: int | None = None) -> None:
-        super().__init__(scenario, controller, [seed])
+    def __init__(self, scenario: Scenario, controller: Controller, seed: int | None = None,
+                 record_scans: bool = False) -> None:
+        super().__init__(scenario, controller, [seed], record_scans)
         self.seed = self.seeds[0]
         self.scenario = self.scenarios[0]
         self.controller = controller
