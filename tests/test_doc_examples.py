@@ -33,7 +33,7 @@ FRAGMENT = re.compile(r"^<!--\s*fragment:(.*?)-->\s*$")
 #: A name in a block -> the modules of the optional extra it needs.
 EXTRAS = {"parallel_env": ("pettingzoo", "gymnasium"), "vector_env": ("gymnasium",),
           "gymnasium": ("gymnasium",), "sb3_vec_env": ("stable_baselines3",),
-          "torchrl_env": ("torchrl",), "torchrl": ("torchrl",)}
+          "torchrl_env": ("torchrl",), "torchrl": ("torchrl",), "to_mcap": ("rosbags",)}
 
 
 def _blocks() -> list:

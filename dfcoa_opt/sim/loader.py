@@ -38,6 +38,7 @@ from dfcoa_opt.errors import DfcoaError, ScenarioError
 from dfcoa_opt.formation import formation_offsets, slot_positions
 from dfcoa_opt.params import build
 from dfcoa_opt.sim.checks import (
+    MAX_CELLS,
     MAX_EXTENT,
     check_cells,
     check_connected,
@@ -50,10 +51,12 @@ from dfcoa_opt.sim.checks import (
     final_leader_poses,
 )
 from dfcoa_opt.sim.scenario import Scenario, World
-from dfcoa_opt.sim.schema import ObstacleSpec, ScenarioSpec
+from dfcoa_opt.sim.schema import ObstacleSpec, ScenarioSpec, WorldSpec
+from dfcoa_opt.sim.schema_world import check_map_yaml_keys
 from dfcoa_opt.world.clutter import random_discs
 from dfcoa_opt.world.dynamic import DynamicObstacles, MovingDisc
 from dfcoa_opt.world.grid import OccupancyGrid
+from dfcoa_opt.world.map_server import file_exists, load_map_yaml
 from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle, Shape
 
 _INDEX = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)\[(\d+)\]$")
@@ -92,7 +95,7 @@ def load_scenario(path: str | Path, seed: int | None = None,
     """Load and validate a scenario file.
 
     Args:
-        path: The ``.toml`` file; relative paths inside it (``map_image``) are
+        path: The ``.toml`` file; relative paths inside it (``map_image``, ``map_yaml``) are
             resolved against its folder.
         seed: Replaces the file's ``seed`` (seeded parts such as random clutter
             follow it).
@@ -157,11 +160,12 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
     Args:
         data: Scenario contents.
         source: Name used in error messages.
-        base_dir: Folder against which ``world.map_image`` is resolved.
+        base_dir: Folder against which ``world.map_image``/``map_yaml`` are resolved.
     """
     if isinstance(data.get("localization"), str):  # shorthand: localization = "mcl"
         data = {**data, "localization": {"mode": data["localization"]}}
     spec = build(ScenarioSpec, with_profile(data, source), source)
+    check_map_yaml_keys(data.get("world"), source)
     offsets = formation_offsets(spec.formation, spec.team.n)
     check_extents(spec, offsets, source)
     check_names(spec, source)
@@ -286,38 +290,51 @@ def _plan_leader(world: World, spec: ScenarioSpec, source: str) -> np.ndarray | 
     return None if path is None or len(path) == 0 else np.asarray(path, dtype=float)
 
 
+def _map_file(ws: WorldSpec, source: str, base_dir: Path) -> OccupancyGrid | None:
+    """The grid of ``map_ascii``, ``map_image`` or ``map_yaml``; None without a map file."""
+    if ws.map_ascii is not None:
+        try:
+            return OccupancyGrid.from_ascii(ws.map_ascii, ws.resolution, ws.origin)
+        except ValueError as exc:
+            raise ScenarioError(source, "world.map_ascii", str(exc)) from None
+    if ws.map_yaml is not None:  # ROS map_server's YAML + image (dfcoa_opt.world.map_server)
+        yaml = base_dir / ws.map_yaml
+        if not file_exists(yaml):
+            raise ScenarioError(source, "world.map_yaml", f"map YAML file '{yaml}' not found")
+        return load_map_yaml(yaml, MAX_CELLS)
+    if ws.map_image is None:
+        return None
+    img = (base_dir / ws.map_image)
+    if not img.is_file():
+        raise ScenarioError(source, "world.map_image", f"image file '{img}' not found")
+    try:
+        return OccupancyGrid.from_image(img, ws.resolution, ws.image_threshold, ws.origin)
+    except (OSError, ValueError, SyntaxError) as exc:
+        raise ScenarioError(source, "world.map_image", f"cannot read image '{img}': "
+                                                       f"{exc}") from None
+
+
 def _build_world(spec: ScenarioSpec, source: str, base_dir: Path, offsets: np.ndarray
                  ) -> tuple[World, np.ndarray]:
     """The world of the file (map, shapes, clutter, a generated world) and the leader's path."""
     ws = spec.world
-    if ws.map_ascii is not None:
-        try:
-            grid = OccupancyGrid.from_ascii(ws.map_ascii, ws.resolution, ws.origin)
-        except ValueError as exc:
-            raise ScenarioError(source, "world.map_ascii", str(exc)) from None
-    elif ws.map_image is not None:
-        img = (base_dir / ws.map_image)
-        if not img.is_file():
-            raise ScenarioError(source, "world.map_image", f"image file '{img}' not found")
-        try:
-            grid = OccupancyGrid.from_image(img, ws.resolution, ws.image_threshold, ws.origin)
-        except (OSError, ValueError, SyntaxError) as exc:
-            raise ScenarioError(source, "world.map_image", f"cannot read image '{img}': "
-                                                           f"{exc}") from None
-    else:
+    raster = _map_file(ws, source, base_dir)
+    if raster is None:
         check_cells(ws.size, ws.resolution, source)  # type: ignore[arg-type]
         grid = OccupancyGrid.empty(ws.size, ws.resolution, ws.origin)  # type: ignore[arg-type]
+    else:
+        grid = raster
     x0, x1, y0, y1 = grid.extent
     if not max(abs(x0), abs(x1), abs(y0), abs(y1)) <= MAX_EXTENT:
         key = "world.origin" if max(map(abs, ws.origin)) > MAX_EXTENT else "world.resolution"
+        key = "world.map_yaml" if ws.map_yaml is not None else key  # its origin and resolution
         raise ScenarioError(source, key, f"the map spans [{x0:g}, {x1:g}] x [{y0:g}, {y1:g}] m, "
                             f"beyond the {MAX_EXTENT:g} m this toolkit accepts")
-    if ws.size is not None and (ws.map_ascii is not None or ws.map_image is not None):
+    if ws.size is not None and raster is not None:
         w, h = grid.size
         if abs(w - ws.size[0]) > grid.cell_size / 2 or abs(h - ws.size[1]) > grid.cell_size / 2:
             raise ScenarioError(source, "world.size", f"{list(ws.size)} m does not match the map, "
-                                f"which is {w:g} x {h:g} m at {ws.resolution:g} cells/m")
-    raster = grid if ws.map_ascii is not None or ws.map_image is not None else None
+                                f"which is {w:g} x {h:g} m at {grid.resolution:g} cells/m")
     shapes = tuple(_shape(o, source, f"world.obstacles[{i}]") for i, o in enumerate(ws.obstacles))
     shapes += _clutter(spec, offsets, grid.extent, source)
     discs = tuple(MovingDisc(d.radius, d.speed, d.waypoints, d.start_time, d.end)

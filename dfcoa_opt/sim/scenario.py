@@ -34,7 +34,8 @@ class World:
         grid: Occupancy grid (map plus rasterised shapes).
         shapes: Exact static shapes (polygons, rectangles, circles), in file order.
         dynamic: Moving discs.
-        raster: Grid of the map file alone (``map_ascii``/``map_image``); None without one.
+        raster: Grid of the map file alone (``map_ascii``, ``map_image`` or ``map_yaml``);
+            None without one.
         facts: The realised statistics of a generated world (``[world.generate]``,
             :class:`~dfcoa_opt.world.generate.Generated`); None otherwise.
     """
@@ -162,7 +163,7 @@ class Scenario:
         leader_path: ``(P, 2)`` the leader's planned path, m.
         data: The file's contents with the overrides applied, from which
             :meth:`for_seed` draws the world again (None: built another way).
-        base_dir: Folder against which ``world.map_image`` is resolved.
+        base_dir: Folder against which ``world.map_image`` and ``map_yaml`` are resolved.
     """
 
     spec: ScenarioSpec

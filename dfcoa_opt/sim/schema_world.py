@@ -5,6 +5,7 @@ Part of :mod:`dfcoa_opt.sim.schema` (which re-exports every class here).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -151,6 +152,11 @@ class WorldSpec:
                                             "occupied, one pixel per cell.")
     image_threshold: float = param(0.5, doc="Grey level below which an image pixel is occupied.",
                                    ge=0.0, le=1.0)
+    map_yaml: str | None = param(None, doc="ROS map_server map: its YAML file (relative to the "
+                                           "scenario file), which sets the image, resolution "
+                                           "(m/cell) and origin; a cell is free only where "
+                                           "map_server would publish 0, so unknown is occupied "
+                                           "(docs/ros.md).")
     obstacles: tuple[ObstacleSpec, ...] = param((), doc="Static geometric obstacles.")
     dynamic_obstacles: tuple[DynamicObstacleSpec, ...] = param((), doc="Moving discs.")
     clutter: ClutterSpec = field(default_factory=ClutterSpec,
@@ -162,6 +168,34 @@ class WorldSpec:
         """Exactly one source of the grid extent."""
         if self.map_ascii is not None and self.map_image is not None:
             raise ScenarioError(src, f"{key}.map_image", "give map_ascii or map_image, not both")
-        if self.map_ascii is None and self.map_image is None and self.size is None:
-            raise ScenarioError(src, f"{key}.size", "is required when there is no map_ascii "
-                                                    "or map_image")
+        if self.map_yaml is not None and (self.map_ascii is not None or self.map_image is not None):
+            other = "map_ascii" if self.map_ascii is not None else "map_image"
+            raise ScenarioError(src, f"{key}.map_yaml", f"give map_yaml or {other}, not both")
+        if (self.map_ascii is None and self.map_image is None and self.map_yaml is None
+                and self.size is None):
+            raise ScenarioError(src, f"{key}.size", "is required when there is no map_ascii, "
+                                                    "map_image or map_yaml")
+
+
+#: ``[world]`` keys that a map_server YAML replaces, and why giving them is an error.
+MAP_YAML_SETS = {"resolution": "is set by the map YAML (its resolution, in m/cell)",
+                 "origin": "is set by the map YAML (its origin)",
+                 "image_threshold": "does not apply to a map YAML (its occupied_thresh and "
+                                    "free_thresh do)"}
+
+
+def check_map_yaml_keys(world: Any, src: str) -> None:
+    """With ``world.map_yaml``, the keys its YAML sets must not be given in the scenario.
+
+    Reads the ``[world]`` table as written (not the built spec), so that a value
+    equal to its default counts as given too.
+
+    Raises:
+        ScenarioError: ``world.resolution``, ``world.origin`` or
+            ``world.image_threshold`` next to ``world.map_yaml``.
+    """
+    if not isinstance(world, Mapping) or world.get("map_yaml") is None:
+        return
+    for name, why in MAP_YAML_SETS.items():
+        if name in world:
+            raise ScenarioError(src, f"world.{name}", f"{why}: remove it, or drop world.map_yaml")
