@@ -270,3 +270,23 @@ def test_api_run_to_mcap(tmp_path):
     with Reader(path) as reader:
         got = {c.topic: c.msgcount for c in reader.connections}
     assert got["/robot_1/scan"] == r.log.n_steps == 21 and got["/map"] == 1
+
+
+def test_ros_map_example_end_to_end(tmp_path, capsys):
+    """The documented command: a map_server map in, an MCAP file out, its /map the YAML's map."""
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "out" / "run.mcap"
+    assert main(["run", str(root / "scenarios" / "ros_map.toml"), "--controller", "dfcoa",
+                 "--mcap", str(out), "--out", str(tmp_path / "out")]) == 0
+    assert "success" in capsys.readouterr().out
+    from dfcoa_opt.world.map_server import load_map_yaml
+
+    yaml_grid = load_map_yaml(root / "scenarios" / "maps" / "lab.yaml")
+    store = get_typestore(getattr(Stores, ROS_DISTRO))
+    with Reader(out) as reader:
+        (conn,) = [c for c in reader.connections if c.topic == "/map"]
+        (grid,) = [store.deserialize_cdr(raw, c.msgtype) for c, _, raw in reader.messages([conn])]
+    assert (grid.info.origin.position.x, grid.info.origin.position.y) == (-1.0, -2.0)
+    assert grid.info.resolution == pytest.approx(0.05)
+    data = np.asarray(grid.data).reshape(grid.info.height, grid.info.width)
+    np.testing.assert_array_equal(data == 100, yaml_grid.occupied)  # no shapes: the map alone
