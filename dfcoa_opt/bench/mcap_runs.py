@@ -4,8 +4,8 @@ A results folder keeps no LiDAR scans, so each drawn run is simulated again
 with :class:`~dfcoa_opt.sim.batch.BatchSimulator` ``record_scans=True`` from
 its row (scenario file, seed, overrides, controller) and written with
 :meth:`~dfcoa_opt.sim.log.RunLog.to_mcap` to ``<results>/mcap/<key>.mcap``.
-Recording scans does not change a run, so the new log's digest (scans aside)
-must be the row's; a run whose digest differs (the code or the scenario file
+Recording scans does not change a run, so the new log's digest must be the
+row's; a run whose digest differs (the code or the scenario file
 changed since it ran) is still written, and named in the returned notes.
 """
 
@@ -52,11 +52,9 @@ def write_run_mcaps(results_dir: str | Path, rows: Sequence[Mapping[str, Any]]
         ctrl = batch_controllers(str(row["controller"]), sc, 1)
         sim = BatchSimulator(sc, ctrl, [seed], record_scans=True)
         log = sim.run_all()[0]
-        scan, log.scan = log.scan, None
         if log.digest() != row.get("digest"):
             notes.append(f"{row['key']}: this run's digest differs from its row's (the code or "
                          "the scenario file changed since it ran)")
-        log.scan = scan
         out.append(log.to_mcap(Path(results_dir) / MCAP_DIR / f"{row['key']}.mcap",
                                sim.scenarios[0].world))
     return out, notes

@@ -223,11 +223,13 @@ class RunLog:
         """SHA-256 over every array's bytes but the timings: equal digests = bit-identical runs.
 
         ``filter_time`` is wall-clock time, different in every run, so it is left out
-        (:data:`TIMING_FIELDS`).
+        (:data:`TIMING_FIELDS`); so are the arrays a run records only on request
+        (:data:`OPTIONAL_FIELDS`: ``scan``), which do not change the run, so that a
+        run has one digest whether or not it recorded them.
         """
         h = hashlib.sha256()
         for name, arr in sorted(self.arrays().items()):
-            if name in TIMING_FIELDS:
+            if name in TIMING_FIELDS or name in OPTIONAL_FIELDS:
                 continue
             a = np.ascontiguousarray(arr)
             h.update(name.encode())
