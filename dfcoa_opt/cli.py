@@ -176,6 +176,10 @@ def _cmd_bench(a: argparse.Namespace) -> int:
     if a.seeds is not None and a.seeds < 1:
         raise DfcoaError(f"--seeds: must be >= 1, got {a.seeds}")
     config = _executor(a)
+    if a.mcap:
+        from dfcoa_opt.sim.mcap import require_rosbags
+
+        require_rosbags()  # before the sweep, not after it
     sweep = load_sweep(a.sweep, a.seeds, _overrides(a.set))
     out = Path(a.out) if a.out else default_folder(sweep)
     result = run_sweep(sweep, out, config, rerun=a.rerun, progress=a.progress)
@@ -278,6 +282,10 @@ def _cmd_run(a: argparse.Namespace) -> int:
         raise DfcoaError(f"--mcap: '{a.mcap}' must end in .mcap")
     if a.mcap and len(seeds) > 1:
         raise DfcoaError("--mcap: one file holds one run; use --seed")
+    if a.mcap:
+        from dfcoa_opt.sim.mcap import require_rosbags
+
+        require_rosbags()  # before the run, not after it
     sim = BatchSimulator(scenario, batch_controllers(a.controller, scenario, len(seeds)), seeds,
                          record_scans=bool(a.mcap))
     try:

@@ -201,6 +201,10 @@ def test_without_rosbags_one_clear_error(monkeypatch, tmp_path):
     with pytest.raises(DfcoaError, match=r"'ros' extra"):
         log.to_mcap(tmp_path / "x.mcap")
     assert not list(tmp_path.iterdir())
+    # the CLI says so before it simulates: no log written either
+    assert main(["run", str(SCENARIO), "--out", str(tmp_path), "--mcap",
+                 str(tmp_path / "x.mcap")]) == 2
+    assert not list(tmp_path.iterdir())
 
 
 def test_cli_writes_the_file_and_checks_the_name(tmp_path, capsys):

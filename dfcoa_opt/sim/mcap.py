@@ -62,12 +62,26 @@ def stamp_ns(t: float) -> int:
     return int(round(t * 1e9))
 
 
+def require_rosbags() -> None:
+    """Check that the ``ros`` extra is installed (before a run whose file it must write).
+
+    Raises:
+        DfcoaError: ``rosbags`` cannot be imported, with the command that installs it.
+    """
+    try:
+        import rosbags.rosbag2  # noqa: F401
+    except ImportError:
+        raise DfcoaError("writing MCAP needs the 'ros' extra: pip install "
+                         "'dfcoa-opt[ros]' (rosbags)") from None
+
+
 def write_mcap(log: RunLog, path: str | Path, world: World | None = None) -> Path:
     """Write ``log`` as a rosbag2 MCAP file (see :meth:`RunLog.to_mcap`).
 
     Raises:
         DfcoaError: ``rosbags`` is not installed, or the file cannot be written.
     """
+    require_rosbags()
     try:
         from rosbags.interfaces import (
             Qos,
@@ -79,9 +93,8 @@ def write_mcap(log: RunLog, path: str | Path, world: World | None = None) -> Pat
         )
         from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
         from rosbags.typesys import Stores, get_typestore
-    except ImportError:
-        raise DfcoaError("writing MCAP needs the 'ros' extra: pip install "
-                         "'dfcoa-opt[ros]' (rosbags)") from None
+    except ImportError:  # pragma: no cover - require_rosbags() said so
+        raise DfcoaError("rosbags is installed but incomplete") from None
     path = Path(path)
     tmp = path.parent / f".{path.name}.{os.getpid()}.bag"
     shutil.rmtree(tmp, ignore_errors=True)
