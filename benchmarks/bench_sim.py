@@ -44,7 +44,11 @@ def _scenario():
     grid = make_grid()
     ascii_map = "\n".join("".join("#" if c else "." for c in r) for r in grid.occupied[::-1])
     rows, cols = np.nonzero(~grid.inflate(1.5).occupied)
-    start = grid.cell_centers()[rows[0], cols[0]]
+    centres = grid.cell_centers()[rows, cols]
+    x0, x1, y0, y1 = grid.extent
+    inside = ((centres[:, 0] >= x0 + 1.5) & (centres[:, 0] <= x1 - 1.5)  # the formation fits
+              & (centres[:, 1] >= y0 + 1.5) & (centres[:, 1] <= y1 - 1.5))
+    start = centres[np.flatnonzero(inside)[0]]
     return scenario_from_dict({
         "t_max": 30.0, "dt": 0.1,
         "world": {"map_ascii": ascii_map, "resolution": 10.0},

@@ -1,5 +1,8 @@
 """Atomic file writes: readers see the old file or the whole new one, never a part.
 
+Also :func:`file_exists`, a file test that never raises (for names read from
+input files, which may be too long for the system).
+
 The data goes to a hidden temporary file in the same folder, is flushed to
 disk, and is renamed over the target (``os.replace`` is atomic on POSIX and
 Windows). A process killed mid-write leaves at most a ``.*.tmp`` file, which
@@ -35,3 +38,11 @@ def remove_partials(folder: str | Path) -> int:
         p.unlink(missing_ok=True)
         n += 1
     return n
+
+
+def file_exists(path: str | Path) -> bool:
+    """Whether ``path`` is a file; False for a name the system cannot look up (too long)."""
+    try:
+        return Path(path).is_file()
+    except OSError:  # e.g. a name too long
+        return False

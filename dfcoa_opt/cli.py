@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from dfcoa_opt.bench.lifecycle import Interrupted, SweepInterrupted, interruptible
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.errors import DfcoaError, RunFailed
 
 EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 1
@@ -270,7 +270,7 @@ def _cmd_run(a: argparse.Namespace) -> int:
     from dfcoa_opt.metrics_units import units
     from dfcoa_opt.sim.batch import BatchSimulator
     from dfcoa_opt.sim.loader import load_scenario
-    from dfcoa_opt.sim.simulator import ControllerError, batch_controllers
+    from dfcoa_opt.sim.simulator import batch_controllers
 
     seeds = seed_list(a.seeds) if a.seeds is not None else [a.seed]
     scenario = load_scenario(a.scenario, seeds[0], _overrides(a.set))
@@ -290,8 +290,8 @@ def _cmd_run(a: argparse.Namespace) -> int:
                          record_scans=bool(a.mcap))
     try:
         logs = sim.run_all()
-    except ControllerError as exc:
-        print(f"dfcoa: run failed: {exc}", file=sys.stderr)
+    except RunFailed as exc:  # a controller's bad command, a state beyond float range
+        print(f"dfcoa: run failed: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_RUN_FAILED
     for sc, log in zip(sim.scenarios, logs, strict=True):
         summary = metrics.summary(log, sc.spec.metrics)
@@ -366,6 +366,15 @@ def _cmd_figures(a: argparse.Namespace) -> int:
     return 0
 
 
+def one_line(text: str) -> str:
+    """``text`` on one line: line breaks and other control characters written as escapes.
+
+    A message quotes what the user gave (a controller id, a key, a file name),
+    which may hold a line break; the error is still one line.
+    """
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     args = _parser().parse_args(argv)
@@ -384,7 +393,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 load_plugins(args.plugin)
             return handlers[args.cmd](args)
     except DfcoaError as exc:
-        print(f"dfcoa: error: {exc}", file=sys.stderr)
+        print(f"dfcoa: error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except SweepInterrupted as exc:  # every finished run is saved
         print(f"dfcoa: {exc}", file=sys.stderr)

@@ -64,3 +64,11 @@ def did_you_mean(name: str, choices: Iterable[str]) -> str:
         folded.setdefault(choice.lower(), choice)  # the first of names equal but for case
     close = difflib.get_close_matches(name.lower(), list(folded), n=1, cutoff=0.6)
     return f" (did you mean '{folded[close[0]]}'?)" if close else ""
+
+
+class RunFailed(DfcoaError):
+    """A run could not go on: a controller's bad command, or a state that left float range.
+
+    ``dfcoa run`` prints it as ``run failed: ...`` (exit code 1); a sweep records
+    the run as ``failed`` with this message.
+    """

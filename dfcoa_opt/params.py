@@ -253,9 +253,17 @@ def describe(cls: type, prefix: str = "") -> list[tuple[str, str, str, str, str]
             default = repr(f.default_factory())
         else:
             default = "required"
+        doc = f.metadata.get("doc", "")
+        bounds = bounds_text(f.metadata)
         rows.append((key, _typename(tp), default, f.metadata.get("unit", ""),
-                     f.metadata.get("doc", "")))
+                     f"{doc} Range: {bounds}." if bounds else doc))
     return rows
+
+
+def bounds_text(meta: Mapping[str, Any]) -> str:
+    """A field's bounds in words, ``">= 1, <= 100000"`` (empty without bounds)."""
+    signs = (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<"))
+    return ", ".join(f"{sign} {meta[k]:g}" for k, sign in signs if meta.get(k) is not None)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -341,7 +341,7 @@ def test_image_errors_name_the_yaml_file_and_the_image_key(tmp_path):
 
 @pytest.mark.parametrize("width, height", [(11000, 10000), (20000, 20000)])
 def test_a_huge_image_is_refused_from_its_header_before_decoding(tmp_path, width, height):
-    # a header alone: the pixels are never read (1.1e8 cells: our limit; 4e8: Pillow's too)
+    # a header alone: the pixels are never read (1.1e8 cells: over our limit; 4e8: Pillow's too)
     (tmp_path / "big.pgm").write_bytes(b"P5\n%d %d\n255\n" % (width, height))
     write_yaml(tmp_path / "m.yaml", "big.pgm")
     msg = _error(lambda: scenario_from_dict(scenario({"map_yaml": "m.yaml"}), "s.toml",

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dfcoa_opt.atomic import file_exists
 from dfcoa_opt.control.policy import (
     PREFIX,
     LoadedPolicy,
@@ -121,6 +122,12 @@ class Learned(ShippedPolicyController):
                                     "the working folder. Empty: the shipped one.")
         gain_forward: float = body_gain("forward velocity (body x)")
         gain_lateral: float = body_gain("lateral velocity (body y)")
+
+        def check(self, src: str, key: str) -> None:
+            """A ``policy`` file must exist (named with the scenario file and the key)."""
+            if self.policy and not file_exists(Path(self.policy)):
+                raise ScenarioError(src, f"{key}.policy", f"policy file '{self.policy}' not "
+                                    "found (a path relative to the working folder)")
 
     def shipped(self) -> LoadedPolicy:
         """``learned.json``, checked against :data:`SHIPPED_DIGEST`."""

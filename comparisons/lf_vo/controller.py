@@ -148,9 +148,9 @@ class LeaderFollowerVO(BatchedController):
         follow: Literal["robot", "virtual"] = param(
             "robot", doc="Followers' eq 5-6 reference: the leader robot's broadcast state "
                          "('robot') or the virtual leader ('virtual', i.e. obs.slot).")
-        v_samples: int = param(11, doc="Speed samples in [0, v_max].", ge=2)
+        v_samples: int = param(11, doc="Speed samples in [0, v_max].", ge=2, le=1000)
         w_samples: int = param(21, doc="Turn-rate samples in [-w_max, w_max] (odd: includes "
-                                       "0).", ge=2)
+                                       "0).", ge=2, le=1000)
         include_preferred: bool = param(True, doc="Add the eq 4 preferred command as a sample.")
         horizon: float = param(5.0, doc="Prediction horizon of the velocity obstacle "
                                         "against static discs and humans.", unit="s", gt=0.0,
@@ -161,7 +161,8 @@ class LeaderFollowerVO(BatchedController):
         robot_horizon: float = param(2.0, doc="Prediction horizon against the other robots "
                                               "(at most horizon).", unit="s", gt=0.0,
                                      tune=(0.5, 4.0))
-        horizon_steps: int = param(50, doc="Prediction steps over the horizon.", ge=1)
+        horizon_steps: int = param(50, doc="Prediction steps over the horizon.", ge=1,
+                                   le=10_000)
         safety_margin: float = param(0.05, doc="Clearance added to robot + obstacle radii.",
                                      unit="m", ge=0.0, tune=(0.0, 0.3))
         avoid_robots: bool = param(True, doc="Treat neighbours as constant-velocity obstacles.")

@@ -121,11 +121,11 @@ class Reshape(BatchedController):
                                  tune=(1.0, 6.0))
         s_min: float = param(0.5, doc="Smallest scale of a template (raised so that the "
                                       "scaled slots keep 0.3 m between robots).", gt=0.0, le=1.0)
-        scales: int = param(4, doc="Scales tried in [s_min, 1].", ge=1)
+        scales: int = param(4, doc="Scales tried in [s_min, 1].", ge=1, le=1000)
         rotation_max: float = param(math.pi / 3, doc="Largest rotation tried either side of "
                                                      "the look-ahead direction.", unit="rad",
                                     ge=0.0)
-        rotations: int = param(5, doc="Rotations tried (odd: includes 0).", ge=1)
+        rotations: int = param(5, doc="Rotations tried (odd: includes 0).", ge=1, le=1000)
         templates: tuple[str, ...] = param(("scenario", "line", "column"),
                                            doc="Templates: 'scenario' (the file's shape), "
                                                "'line' (abreast), 'column' (single file).")

@@ -16,7 +16,7 @@ from typing import Any
 
 from dfcoa_opt.bench import plots, trajectories
 from dfcoa_opt.bench.logs import LogCompacted
-from dfcoa_opt.bench.sweep import safe_name
+from dfcoa_opt.bench.sweep import KEY_MAX, safe_name, shorten
 from dfcoa_opt.errors import DfcoaError
 
 Row = Mapping[str, Any]
@@ -82,7 +82,8 @@ def explain(groups: Sequence[Mapping[str, Any]], rows: Sequence[Row], results_di
             lines.append(f"{text}: {' '.join(str(first.get('error')).split())[:160]}")
             continue
         t = snapshot_time(first)
-        name = f"fail_{safe_name(g['scenario'])}_{safe_name(g['variant'])}_s{first['seed']}.png"
+        stem = f"fail_{safe_name(g['scenario'])}_{safe_name(g['variant'])}_s{first['seed']}"
+        name = f"{shorten(stem, KEY_MAX)}.png"
         try:
             if not first.get("log"):
                 raise DfcoaError("the run has no log")

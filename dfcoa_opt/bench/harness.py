@@ -26,6 +26,7 @@ from dfcoa_opt.bench.sweep import (
     describe_runs,
     load_sweep,
     safe_name,
+    shorten,
 )
 
 
@@ -70,7 +71,9 @@ def default_folder(sweep: Sweep, seeds: int | None = None,
                    overrides: Mapping[str, Any] | None = None) -> Path:
     """The results folder of a sweep when none is given.
 
-    A sweep file: ``results/<sweep name>`` (``dfcoa bench``). A sweep given as a
+    A sweep file: ``results/<sweep name>`` (``dfcoa bench``; a name longer than
+    :data:`~dfcoa_opt.bench.sweep.NAME_MAX` characters shortened with a hash,
+    :func:`~dfcoa_opt.bench.sweep.shorten`). A sweep given as a
     dict (the Python facade's): ``results/<name>-<8 hex digits>``, the digits
     the start of the SHA-256 over the dict's canonical JSON (``sweep.sha256``,
     as the manifest records it) with the ``seeds`` and ``overrides`` it runs
@@ -83,7 +86,7 @@ def default_folder(sweep: Sweep, seeds: int | None = None,
         overrides: Dotted scenario keys set in every run, if any.
     """
     if sweep.source != DICT_SOURCE:
-        return Path("results") / sweep.name
+        return Path("results") / shorten(sweep.name)
     content = json.dumps([sweep.sha256, seeds, dict(overrides or {})], sort_keys=True,
                          default=str)
     digest = hashlib.sha256(content.encode()).hexdigest()[:8]
@@ -100,6 +103,12 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
     With ``max_seeds`` in the sweep, cells whose success rate is not yet precise
     enough get more seeds after each round (:mod:`dfcoa_opt.bench.precision`),
     and the manifest lists them.
+
+    The whole sweep is validated first (:func:`~dfcoa_opt.bench.sweep.load_sweep`),
+    and ``manifest.json``, ``sweep.toml`` and ``results.csv`` are written only
+    once a run has finished (or none is left to run), and list finished rows
+    only: a sweep that fails before that leaves an existing results folder as it
+    was.
 
     Args:
         sweep: Sweep file (or an already loaded :class:`Sweep`).
@@ -118,14 +127,24 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
         Counts and the store; ``results.csv`` is rewritten at the end.
 
     Raises:
-        ScenarioError: Bad sweep file (before any run starts).
+        ScenarioError: Bad sweep file (before any run starts; nothing is written).
         SweepInterrupted: SIGINT or SIGTERM arrived; every finished run is saved.
     """
     sw = sweep if isinstance(sweep, Sweep) else load_sweep(sweep, seeds, overrides)
     store = ResultsStore(out)
-    store.write_manifest(sw)
     others = [] if rerun else [ResultsStore(p) for p in reuse if Path(p).is_dir()]
     reused = [0]
+    recorded: list[Sweep | None] = [None]  # the sweep the manifest records; None: untouched
+
+    def record() -> None:
+        """Write the manifest (and the sweep file's copy) of ``sw`` once a run of it is stored.
+
+        Until then the folder's manifest, sweep file and ``results.csv`` stay as they
+        were: a sweep that stops before its first run finishes changes none of them.
+        """
+        if recorded[0] is not sw:
+            store.write_manifest(sw)
+            recorded[0] = sw
 
     def pending(runs: Sequence[RunSpec]) -> list[RunSpec]:
         todo = store.pending(runs, rerun)
@@ -134,6 +153,8 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
         return left
 
     todo = pending(sw.runs)
+    if reused[0]:  # rows taken from other stores are finished runs
+        record()
     ran = failed = 0
     bar = _progress(len(todo), sw.name, progress)
     try:
@@ -142,6 +163,7 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
                 with contextlib.closing(run_all(todo, config or ExecutorConfig())) as outcomes:
                     for outcome in outcomes:
                         store.write(outcome)
+                        record()
                         ran += 1
                         failed += outcome.row["status"] != "ok"
                         bar.update()
@@ -150,17 +172,19 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
                 grown, todo = _grow(sw, store, pending)
                 if grown is not sw:
                     sw = grown
-                    store.write_manifest(sw)
+                    record()
                     bar.total += len(todo)
                     bar.refresh()
                 if not todo:
                     break
+            record()  # also when every run was done already
     except Interrupted as exc:
         saved = sum(store.read_row(r.key) is not None for r in sw.runs)
         raise SweepInterrupted(saved, len(sw.runs), store.root, exc.signum) from None
     finally:
         bar.close()
-        store.write_csv()
+        if recorded[0] is not None:  # the rows of the recorded sweep, finished ones only
+            store.write_csv()
     return SweepResult(store, sw, ran, failed, len(sw.runs) - ran, reused[0])
 
 

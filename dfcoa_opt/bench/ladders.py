@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from dfcoa_opt.bench import failures, plots, tables
-from dfcoa_opt.bench.sweep import safe_name
+from dfcoa_opt.bench.sweep import KEY_MAX, safe_name, shorten
 
 
 def sections(groups: Sequence[Mapping[str, Any]], manifest: Mapping[str, Any],
@@ -37,7 +37,7 @@ def sections(groups: Sequence[Mapping[str, Any]], manifest: Mapping[str, Any],
                 lo, hi = g["success_ci"]
                 series.setdefault(str(g["variant"]), []).append(
                     (float(g["ladder_value"]), g["success_rate"], lo, hi, int(g["runs"])))
-            name = f"ladder_{safe_name(label)}_{safe_name(scen)}.png"
+            name = f"{shorten(f'ladder_{safe_name(label)}_{safe_name(scen)}', KEY_MAX)}.png"
             written.append(plots.ladder_figure(series, label, out_dir / name,
                                                f"{scen}: success rate against {label}",
                                                log_x=log_x.get(label, False)))

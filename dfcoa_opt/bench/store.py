@@ -378,17 +378,20 @@ class ResultsStore:
         row = dict(outcome.row)
         row["code"] = run_fingerprint(row["controller"])
         row["scenario_sha256"] = file_sha256(row["scenario_file"])
+        # a row that is not strict JSON raises here, before its log is written
+        text = json.dumps(row, indent=1, sort_keys=True, allow_nan=False) + "\n"
         if outcome.npz is not None:
             atomic_write(self.root / row["log"], outcome.npz)
-        return atomic_write(self.row_path(row["key"]),
-                            json.dumps(row, indent=1, sort_keys=True, allow_nan=False) + "\n")
+        return atomic_write(self.row_path(row["key"]), text)
 
     def write_manifest(self, sweep: Sweep) -> None:
         """Record the sweep (file copy, hash, run keys).
 
         ``code`` maps each controller id of the sweep to its :func:`run_fingerprint`.
+        The manifest is made (strict JSON: no NaN or inf) before either file is
+        written, so a manifest that cannot be written leaves both as they were.
+        :func:`~dfcoa_opt.bench.harness.run_sweep` calls it once a run has finished.
         """
-        atomic_write(self.root / "sweep.toml", sweep.text)
         code = {c: run_fingerprint(c) for c in sorted({r.controller for r in sweep.runs})}
         manifest = {
             "name": sweep.name, "sweep_file": display_path(sweep.source),
@@ -396,7 +399,9 @@ class ResultsStore:
             "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "keys": [r.key for r in sweep.runs], **sweep.describe(),
         }
-        atomic_write(self.root / "manifest.json", json.dumps(manifest, indent=1) + "\n")
+        text = json.dumps(manifest, indent=1, allow_nan=False) + "\n"
+        atomic_write(self.root / "sweep.toml", sweep.text)
+        atomic_write(self.root / "manifest.json", text)
 
     def manifest(self) -> dict[str, Any]:
         """The manifest (empty dict if there is none)."""

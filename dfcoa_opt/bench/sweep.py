@@ -26,7 +26,14 @@ scenario's ``seed``, so seeded parts of the scenario (random clutter, start
 noise) change with it.
 
 Every run gets a readable key ``<scenario>__<variant>[__<ladder>_<value>]__s<seed>``
-that names its result files.
+that names its result files. A name longer than :data:`NAME_MAX` characters, and a
+key that could exceed :data:`KEY_MAX`, is cut short and ends in ``-`` and 8 hex
+digits of the SHA-256 of the whole name (:func:`shorten`), so the same name always
+gives the same file name and two names give two; shorter names are kept as they are.
+
+A sweep has at most :data:`MAX_RUNS` runs, counting every seed ``max_seeds`` may
+add, and at most :data:`MAX_SEEDS` seeds per cell; a larger one is refused before
+any run is built.
 """
 
 from __future__ import annotations
@@ -36,6 +43,7 @@ import glob
 import hashlib
 import itertools
 import json
+import math
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -45,6 +53,7 @@ from typing import Any, Literal
 from dfcoa_opt.bench.variants import (
     Ladder,
     Variant,
+    check_value,
     ladder_variants,
     named_variants,
     parse_ladders,
@@ -59,11 +68,40 @@ from dfcoa_opt.sim.scenario import Scenario
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.+-]+")
 #: The source of a sweep given as a dict (:func:`sweep_from_dict`), as its errors name it.
 DICT_SOURCE = "<dict>"
+#: Longest name :func:`safe_name` returns (scenario, variant, ladder label: parts of file names).
+NAME_MAX = 120
+#: Longest run key, and longest file stem joined from several names; with the hidden
+#: temporary name of an atomic write it stays well below the 255 bytes of a file name.
+KEY_MAX = 200
+_HEAD_MAX = KEY_MAX - len("__s") - 20  # a run key before its seed (20 digits hold any seed)
+#: Most runs a sweep may have, every seed ``max_seeds`` may add counted.
+MAX_RUNS = 1_000_000
+#: Most seeds per (scenario, variant, rung): ``seeds``, ``max_seeds``, ``[variant_seeds]``.
+MAX_SEEDS = 100_000
+
+
+def shorten(text: str, limit: int = NAME_MAX, full: str | None = None) -> str:
+    """``text`` itself if it has at most ``limit`` characters, else a stable shorter form.
+
+    The shorter form is the start of ``text``, ``-`` and the first 8 hex digits of
+    the SHA-256 of ``full`` (default: ``text``), ``limit`` characters in all: the
+    same input always gives the same name, and two inputs two names.
+    """
+    if len(text) <= limit:
+        return text
+    whole = text if full is None else full
+    digest = hashlib.sha256(whole.encode("utf-8", "surrogatepass")).hexdigest()[:8]
+    return f"{text[:limit - 9]}-{digest}"
 
 
 def safe_name(name: Any) -> str:
-    """A file-name-safe form of a name: runs of other characters become ``_``."""
-    return _UNSAFE.sub("_", str(name)).strip("_") or "_"
+    """A file-name-safe form of a name: runs of other characters become ``_``.
+
+    At most :data:`NAME_MAX` characters: a longer one is cut short with a hash
+    of the whole name (:func:`shorten`); a shorter one is unchanged.
+    """
+    full = str(name)
+    return shorten(_UNSAFE.sub("_", full).strip("_") or "_", NAME_MAX, full)
 
 
 @dataclass(frozen=True)
@@ -81,11 +119,11 @@ class SweepSpec:
                                              "file) or module names imported before the "
                                              "controllers are resolved (docs/controllers.md).")
     seeds: int = param(20, doc="Seeds per (scenario, variant, ladder rung); with max_seeds, "
-                               "the first seeds of each.", ge=1)
+                               "the first seeds of each.", ge=1, le=MAX_SEEDS)
     max_seeds: int = param(0, doc="With > 0: add seeds to each (scenario, variant, rung) until "
                                   "its success rate's Wilson 95 % interval is within "
                                   "+-max_half_width, at most this many seeds "
-                                  "(dfcoa_opt.bench.precision).", ge=0)
+                                  "(dfcoa_opt.bench.precision).", ge=0, le=MAX_SEEDS)
     max_half_width: float = param(0.15, doc="Target half-width of the success rate's interval "
                                             "with max_seeds (fraction).", gt=0.0, le=0.5)
     decide_at: float = param(0.0, doc="With max_seeds and > 0: a cell whose interval lies wholly "
@@ -107,7 +145,8 @@ class SweepSpec:
     variant_seeds: dict[str, int] = param(default_factory=dict, doc="Variant name or glob -> its "
                                                                     "number of seeds instead of "
                                                                     "seeds (the first pattern "
-                                                                    "that matches).", ge=1)
+                                                                    "that matches).", ge=1,
+                                    le=MAX_SEEDS)
     tune: Any = param(None, doc="[tune]: the budget of dfcoa tune (dfcoa_opt.bench.tune."
                                 "TuneSpec); dfcoa bench ignores it.")
     split: Literal["", "train", "validation", "test"] = param(
@@ -155,10 +194,16 @@ class RunSpec:
 
     @property
     def key(self) -> str:
-        """File-name-safe unique id of the run (readable: no hash)."""
+        """File-name-safe unique id of the run (readable; a hash only in a name too long).
+
+        At most :data:`KEY_MAX` characters: each name is :func:`safe_name`, and the
+        part before ``__s<seed>`` is shortened when longer than the room a 20-digit
+        seed leaves (so every seed of a cell shares it).
+        """
         rung = ("" if self.ladder_value is None
                 else f"__{safe_name(self.ladder)}_{self.ladder_value:g}")
-        return f"{safe_name(self.scenario)}__{safe_name(self.variant_name)}{rung}__s{self.seed}"
+        head = f"{safe_name(self.scenario)}__{safe_name(self.variant_name)}{rung}"
+        return f"{shorten(head, _HEAD_MAX)}__s{self.seed}"
 
 
 @dataclass(frozen=True)
@@ -226,23 +271,63 @@ def load_run_scenario(run: RunSpec) -> Scenario:
     return load_scenario(run.scenario_file, run.seed, run.overrides_dict)
 
 
-def _grid(spec: SweepSpec, src: str) -> tuple[list[dict[str, Any]], list[str]]:
-    """Grid points (with the older ``[[variants]]`` override sets) and the keys that vary."""
+@dataclass(frozen=True)
+class _Grid:
+    """The grid of a sweep: its points, the keys that vary, and what the run count needs.
+
+    Attributes:
+        points: Every combination (with the older ``[[variants]]`` override sets).
+        varying: The keys that take several values.
+        sizes: Grid key -> its number of values.
+        sets: The ``[[variants]]`` override sets (``[{}]`` without them).
+    """
+
+    points: list[dict[str, Any]]
+    varying: list[str]
+    sizes: dict[str, int]
+    sets: list[dict[str, Any]]
+
+    def configurations(self, controller: str) -> int:
+        """How many distinct override sets the grid gives runs of ``controller`` (at most)."""
+        sets = {canonical({k: x for k, x in s.items() if reaches(k, controller)})
+                for s in self.sets}
+        return len(sets) * math.prod(n for k, n in self.sizes.items() if reaches(k, controller))
+
+
+def _grid(spec: SweepSpec, src: str) -> _Grid:
+    """Grid points (with the older ``[[variants]]`` override sets) and the keys that vary.
+
+    Raises:
+        ScenarioError: A grid key without values, a value a row cannot hold (NaN,
+            inf, a date), or more than :data:`MAX_RUNS` combinations (refused before
+            they are built).
+    """
     grid = _flatten(spec.grid)
     for k, v in grid.items():
         if not isinstance(v, list) or not v:
             raise ScenarioError(src, f"grid.{k}", "must be a non-empty array of values")
+        for i, x in enumerate(v):
+            check_value(x, src, f"grid.{k}[{i}]")
     sets: list[dict[str, Any]] = [{}]
     if isinstance(spec.variants, list):
         if not all(isinstance(v, Mapping) for v in spec.variants):
             raise ScenarioError(src, "variants", "[[variants]] must be tables of dotted keys")
         sets = [_flatten(v) for v in spec.variants] or [{}]
+        for i, one in enumerate(sets):
+            for k, x in one.items():
+                check_value(x, src, f"variants[{i}].{k}")
+    combos = len(sets) * math.prod(len(v) for v in grid.values())
+    if combos > MAX_RUNS:
+        raise ScenarioError(src, "grid", f"has {combos:,} combinations of values, more than "
+                                         f"the {MAX_RUNS:,} runs a sweep may have; use fewer "
+                                         "values, or split the sweep")
     points = [dict(zip(grid, combo, strict=True)) for combo in itertools.product(*grid.values())]
     varying = [k for k, v in grid.items() if len(v) > 1]
     for k in dict.fromkeys(k for s in sets for k in s):
         if len({json.dumps(s.get(k), sort_keys=True) for s in sets}) > 1 and k not in varying:
             varying.append(k)
-    return [{**v, **p} for v in sets for p in points], varying
+    return _Grid([{**v, **p} for v in sets for p in points], varying,
+                 {k: len(v) for k, v in grid.items()}, sets)
 
 
 def _variants(spec: SweepSpec, src: str, base: Path) -> list[Variant]:
@@ -369,6 +454,11 @@ def expand_sweep(data: dict[str, Any], src: str, base: Path, text: str,
     if spec.max_seeds and spec.max_seeds < spec.seeds:
         raise ScenarioError(src, "max_seeds", f"must be 0 or >= seeds ({spec.seeds}), got "
                                               f"{spec.max_seeds}")
+    if seeds is not None and not 1 <= seeds <= MAX_SEEDS:
+        raise ScenarioError(src, "seeds", f"the seed count given instead ({seeds}) must be "
+                                          f"between 1 and {MAX_SEEDS:,}")
+    for k, x in (overrides or {}).items():
+        check_value(x, "--set", k)
     from dfcoa_opt.control.plugins import is_file_spec, load_plugins
 
     load_plugins([str(base / p) if is_file_spec(p) else p for p in spec.plugins],
@@ -376,7 +466,8 @@ def expand_sweep(data: dict[str, Any], src: str, base: Path, text: str,
     variants = _variants(spec, src, base)
     seeds_of = _variant_seeds(spec, variants, src)
     ladders = parse_ladders(spec.ladder, _flatten, src)
-    points, varying = _grid(spec, src)
+    grid = _grid(spec, src)
+    points, varying = grid.points, grid.varying
     groups: list[tuple[list[Path], Ladder | None]] = []
     own = [lad for lad in ladders if lad.scenarios]
     if spec.scenarios:
@@ -389,8 +480,19 @@ def expand_sweep(data: dict[str, Any], src: str, base: Path, text: str,
         raise ScenarioError(src, "scenarios", "lists no scenario")
     n_seeds = spec.seeds if seeds is None else seeds
     climbers = ladder_variants(ladders, variants, src)
+    grows = spec.max_seeds if seeds is None else 0  # the seeds max_seeds may add count too
+    total = sum(len(files) * (len(lad.rungs) if lad else 1) * grid.configurations(v.controller)
+                * max(grows, n_seeds if seeds is not None else seeds_of.get(v.name, n_seeds))
+                for files, lad in groups for v in climbers.get(lad, variants))
+    if total > MAX_RUNS:
+        counted = "max_seeds" if grows else "seeds"
+        raise ScenarioError(src, "", f"the sweep has {total:,} runs (scenarios x variants x grid "
+                                     f"points x ladder rungs x {counted}), more than the "
+                                     f"{MAX_RUNS:,} a sweep may have; use fewer, or split the "
+                                     "sweep")
     names: dict[str, Path] = {}
     probed: dict[tuple[str, str], Scenario] = {}
+    cells: dict[RunSpec, int] = {}  # each (scenario, variant, rung): its seeds built
     runs: list[RunSpec] = []
     for files, lad in groups:
         for f, rung, point, v in itertools.product(files, lad.rungs if lad else (None,), points,
@@ -411,15 +513,22 @@ def expand_sweep(data: dict[str, Any], src: str, base: Path, text: str,
             name = v.name + suffix({k: x for k, x in point.items() if reaches(k, v.controller)},
                                    varying)
             count = n_seeds if seeds is not None else seeds_of.get(v.name, n_seeds)
-            runs += [RunSpec(str(f), scen, v.controller, seed, canonical(ov), name,
-                             lad.label if lad else "", rung.value if rung else None)
-                     for seed in range(spec.first_seed, spec.first_seed + count)]
-    unique = list(dict.fromkeys(runs))  # controller-specific keys can make duplicates
-    _check_unique(unique, src)
+            first = RunSpec(str(f), scen, v.controller, spec.first_seed, canonical(ov), name,
+                            lad.label if lad else "", rung.value if rung else None)
+            done = cells.setdefault(first, 0)  # controller-specific keys make duplicates:
+            if done >= count:                   # each run is built once, where it first comes
+                continue
+            cells[first] = count
+            if not done:
+                _check_row(first, src)
+            runs += [RunSpec(first.scenario_file, scen, v.controller, seed, first.overrides,
+                             name, first.ladder, first.ladder_value)
+                     for seed in range(spec.first_seed + done, spec.first_seed + count)]
+    _check_unique(list(cells), src)  # every cell has the first seed: one run of each will do
     sweep = Sweep(spec, src, hashlib.sha256(text.encode()).hexdigest(), text,
-                  tuple(unique), tuple(variants),
+                  tuple(runs), tuple(variants),
                   tuple(ladders), spec.max_seeds if seeds is None else 0)
-    names_run = list(dict.fromkeys(r.variant_name for r in unique))
+    names_run = list(dict.fromkeys(r.variant_name for r in runs))
     if spec.baseline and spec.baseline not in names_run:
         raise ScenarioError(src, "baseline", f"'{spec.baseline}' is not a variant of this sweep"
                             + did_you_mean(spec.baseline, names_run)
@@ -463,6 +572,26 @@ def _probe(file: Path, overrides: Mapping[str, Any], seed: int, src: str,
             hint = f" (with overrides {json.dumps(dict(overrides))})" if overrides else ""
             raise ScenarioError(src, "scenarios", f"{exc}{hint}") from None
     return probed[(str(file), probe.overrides)]
+
+
+def _check_row(run: RunSpec, src: str) -> None:
+    """A run's row can be written: its identity is JSON without NaN or inf.
+
+    The values are checked where the sweep file sets them; this is the last
+    check, once per (scenario, variant, rung), before anything is written.
+
+    Raises:
+        ScenarioError: Naming the run's key.
+    """
+    identity = {"key": run.key, "scenario": run.scenario, "scenario_file": run.scenario_file,
+                "controller": run.controller, "seed": run.seed,
+                "overrides": run.overrides_dict, "variant": run.variant_name,
+                "ladder": run.ladder, "ladder_value": run.ladder_value}
+    try:
+        json.dumps(identity, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError(src, "", f"run {run.key}: its result row cannot be written as "
+                                     f"JSON ({exc})") from None
 
 
 def _check_unique(runs: Sequence[RunSpec], src: str) -> None:

@@ -37,6 +37,7 @@ value (the x axis of the ladder's figure) and the overrides that make it::
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -97,6 +98,36 @@ def _items(mapping: Mapping[str, Any]) -> tuple[tuple[str, Any], ...]:
     return tuple(sorted((str(k), freeze(v)) for k, v in mapping.items()))
 
 
+def json_problem(value: Any) -> str | None:
+    """Why a value cannot go in a result row (JSON); None if it can.
+
+    A row records its run's overrides and rung, and JSON holds no NaN, no
+    infinity and no TOML date or time.
+    """
+    if isinstance(value, float) and not math.isfinite(value):
+        return (f"must be finite, got {value}: a result row is JSON, which holds no NaN or "
+                "inf (for no limit, use a large number such as 1e9)")
+    if isinstance(value, (list, tuple)):
+        return next((p for p in map(json_problem, value) if p), None)
+    if isinstance(value, Mapping):
+        return next((p for p in map(json_problem, value.values()) if p), None)
+    if value is None or isinstance(value, (str, int, float)):
+        return None
+    return (f"must be a number, string, boolean, array or table, got {type(value).__name__} "
+            f"{value!r}: a result row is JSON")
+
+
+def check_value(value: Any, src: str, key: str) -> None:
+    """Refuse an override a result row cannot hold (:func:`json_problem`).
+
+    Raises:
+        ScenarioError: One line naming ``src`` and ``key``.
+    """
+    problem = json_problem(value)
+    if problem:
+        raise ScenarioError(src, key, problem)
+
+
 def _check_name(name: str, src: str, key: str) -> None:
     if not name or not set(name) <= _NAME_CHARS:
         raise ScenarioError(src, key, f"variant name '{name}' must be non-empty and use only "
@@ -125,7 +156,10 @@ def named_variants(table: Mapping[str, Any], flatten: Any, src: str) -> list[Var
         cid = body.pop("controller", None)
         if not isinstance(cid, str) or not cid:
             raise ScenarioError(src, f"{key}.controller", "is required (a controller id)")
-        out.append(Variant(str(name), cid, _items(flatten(body))))
+        overrides = flatten(body)
+        for k, x in overrides.items():
+            check_value(x, src, f"{key}.{k}")
+        out.append(Variant(str(name), cid, _items(overrides)))
     return out
 
 
@@ -207,7 +241,10 @@ def _ladder(data: Mapping[str, Any], flatten: Any, src: str, where: str,
             v = _number(body.pop("value"), src, f"{where}.rungs[{i}].value")
             if not body:
                 raise ScenarioError(src, f"{where}.rungs[{i}]", "sets no scenario key")
-            out.append(Rung(v, _items(flatten(body))))
+            overrides = flatten(body)
+            for k, x in overrides.items():
+                check_value(x, src, f"{where}.rungs[{i}].{k}")
+            out.append(Rung(v, _items(overrides)))
     scenarios = data.get("scenarios", [])
     if single and scenarios:
         raise ScenarioError(src, f"{where}.scenarios", "only the array form [[ladder]] names "
@@ -227,9 +264,17 @@ def _ladder(data: Mapping[str, Any], flatten: Any, src: str, where: str,
 
 
 def _number(v: Any, src: str, key: str) -> float:
+    """A rung's value: a finite number (the x axis of the ladder, and a row's ``ladder_value``)."""
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ScenarioError(src, key, f"must be a number, got {v!r}")
-    return float(v)
+    try:
+        value = float(v)
+    except OverflowError:
+        raise ScenarioError(src, key, "is beyond the float range") from None
+    if not math.isfinite(value):
+        raise ScenarioError(src, key, f"must be a finite number, got {value}: a result row "
+                                      "is JSON, which holds no NaN or inf")
+    return value
 
 
 def ladder_variants(ladders: Sequence[Ladder], variants: Sequence[Variant],

@@ -47,7 +47,7 @@ class VFHParams:
     """Parameters of the improved VFH* and of its blending rule (paper 000 Table 2)."""
 
     num_sectors: int = param(25, doc="Angular sectors K over 2 pi (Table 2 'Angular Selector').",
-                             ge=4)
+                             ge=4, le=3600)
     distance_limits: tuple[float, float] = param(
         (0.05, 3.5), doc="LiDAR ranges used in the histogram (Table 2 'Distance limits' = "
                          "upper; lower = MATLAB default).", unit="m", ge=0.0)

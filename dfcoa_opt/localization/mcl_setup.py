@@ -30,7 +30,7 @@ class Params:
 
     particle_limits: tuple[int, int] = param(
         (50, 5000), doc="Smallest and largest particle count per robot (paper; MATLAB "
-                        "ParticleLimits default [500, 5000]).", ge=1)
+                        "ParticleLimits default [500, 5000]).", ge=1, le=1_000_000)
     initial_covariance: tuple[float, float, float] = param(
         (0.05, 0.05, 0.05), doc="Diagonal of the initial pose covariance (x, y, theta) "
                                 "around the start pose (paper; MATLAB default eye(3)).",
@@ -57,7 +57,7 @@ class Params:
         (0.0, 200.0), doc="Ranges outside [min, max] are ignored; max also divides z_rand "
                           "(paper; MATLAB default [0 12]).", unit="m", ge=0.0)
     num_beams: int = param(120, doc="Beams used per scan, evenly spaced over the scan "
-                                    "(paper; MATLAB default 60).", ge=1)
+                                    "(paper; MATLAB default 60).", ge=1, le=100_000)
     measurement_noise: float = param(0.25, doc="sigma_hit of the likelihood field (paper; "
                                                "MATLAB default 0.2).", unit="m", gt=0.0)
     expected_measurement_weight: float = param(

@@ -33,8 +33,9 @@ from numpy.typing import NDArray
 
 from dfcoa_opt import __version__, dispatch
 from dfcoa_opt.control.base import Controller, Limits
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.errors import DfcoaError, RunFailed
 from dfcoa_opt.robots.models import make_model
+from dfcoa_opt.sim.budget import check_budget
 from dfcoa_opt.sim.log import BatchLog, RunLog
 from dfcoa_opt.sim.scenario import Scenario, World
 from dfcoa_opt.sim.stepper import Ended, Stepper, is_batched
@@ -43,7 +44,7 @@ from dfcoa_opt.world.lidar import Lidar
 FloatArray = NDArray[np.float64]
 
 
-class ControllerError(DfcoaError):
+class ControllerError(RunFailed):
     """A controller returned a malformed or non-finite command (the run fails)."""
 
 
@@ -80,6 +81,7 @@ class BatchSimulator:
         self.seeds = [scenario.spec.seed if s is None else int(s) for s in seeds]
         if not self.seeds:
             raise DfcoaError("a batch needs at least one seed")
+        check_budget(scenario.spec, scenario.source, 0.0, len(self.seeds), record_scans)
         #: The scenario as given; each run's is ``template.for_seed(seed)``.
         self.template = scenario
         self.scenarios = [scenario.for_seed(s) for s in self.seeds]

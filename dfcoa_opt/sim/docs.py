@@ -16,6 +16,12 @@ lie on free cells inside the map; `dt` must not exceed `t_max`; polygons must be
 counter-clockwise; the planner, localization mode and every
 `[controllers.<id>]` table must name something registered.
 
+Sizes: a run has at most 1e7 instants (`t_max / dt + 1`), and its estimated
+memory (log, grid, LiDAR, particles; a batch of seeds counts each run's log)
+is at most 2 GiB: a larger one is refused with the estimate and the key that
+drives it (docs/robustness.md). The ranges below are checked as each key is
+read; NaN and infinities are refused unless a key says otherwise.
+
 Frames: metres, radians, angles counter-clockwise from +x; the map origin is
 its bottom-left corner. ASCII maps and images are written top row first; a
 `map_yaml` map is read as ROS `map_server` reads it (docs/ros.md).

@@ -3,11 +3,16 @@
 Every problem raises :class:`~dfcoa_opt.errors.ScenarioError` whose text is one
 line naming the file, the key path and the problem; the CLI prints it and exits
 with code 2. Checks beyond the per-key ones of :mod:`dfcoa_opt.sim.schema`:
-the map must load, polygons must be counter-clockwise, the leader's start and
-goal and explicit robot poses must lie on free cells inside the map, the leader
-planner, the localization mode and every ``[controllers.<id>]`` table must be
-known, and the planner must find a path. Whatever the planner, the goal must
-be in the start's free region of the map (a grid search), and no robot may
+the map must load, polygons must be simple (no crossing or touching edges, no
+repeated vertex) and counter-clockwise, no ``world.obstacles[i]`` may lie wholly
+outside the map, the leader's start and goal, its via points
+(``leader.waypoints``) and explicit robot poses must lie on free cells inside
+the map, the leader planner, the localization mode and every
+``[controllers.<id>]`` table must be known, and the planner must find a path.
+Whatever the planner, the goal must be in the start's free region of the map
+(a grid search). Every robot must start inside the map (formation slots
+too), no two robots may start overlapping (centres closer than
+``2 * robots.radius``, unless ``team.allow_start_contact``), and no robot may
 start on a formation slot inside an obstacle (an error; a robot body that only
 overlaps an obstacle at the start is allowed and counted as a contact), and no
 formation slot may lie within (or at) a robot radius of an obstacle at the goal
@@ -34,9 +39,11 @@ from typing import Any
 
 import numpy as np
 
+from dfcoa_opt.atomic import file_exists
 from dfcoa_opt.errors import DfcoaError, ScenarioError
 from dfcoa_opt.formation import formation_offsets, slot_positions
 from dfcoa_opt.params import build
+from dfcoa_opt.sim.budget import check_budget
 from dfcoa_opt.sim.checks import (
     MAX_CELLS,
     MAX_EXTENT,
@@ -46,7 +53,11 @@ from dfcoa_opt.sim.checks import (
     check_free,
     check_goal_clear,
     check_names,
+    check_obstacles_in_map,
+    check_polygons,
     check_start_clear,
+    check_start_poses,
+    check_via_points,
     check_waypoints,
     final_leader_poses,
 )
@@ -56,7 +67,7 @@ from dfcoa_opt.sim.schema_world import check_map_yaml_keys
 from dfcoa_opt.world.clutter import random_discs
 from dfcoa_opt.world.dynamic import DynamicObstacles, MovingDisc
 from dfcoa_opt.world.grid import OccupancyGrid
-from dfcoa_opt.world.map_server import file_exists, load_map_yaml
+from dfcoa_opt.world.map_server import check_image, load_map_yaml
 from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle, Shape
 
 _INDEX = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)\[(\d+)\]$")
@@ -169,6 +180,7 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
     offsets = formation_offsets(spec.formation, spec.team.n)
     check_extents(spec, offsets, source)
     check_names(spec, source)
+    check_budget(spec, source, _cells(spec.world))
     check_waypoints(spec, source)
     world, path = _build_world(spec, source, Path(base_dir), offsets)
     heading = spec.leader.heading
@@ -188,6 +200,7 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
             for i, p in enumerate(xy):
                 check_free(world.grid, p, source, f"team.start_behind (robot {i})")
         pose = np.column_stack((xy, np.full(spec.team.n, heading)))
+    check_start_poses(world.grid, pose, spec, source)
     check_start_clear(world, pose, spec, source)
     check_connected(world.grid, spec, source)
     check_goal_clear(world, final_leader_poses(np.asarray(path, dtype=float), spec, heading),
@@ -280,6 +293,7 @@ def _plan_leader(world: World, spec: ScenarioSpec, source: str) -> np.ndarray | 
 
     check_free(world.grid, spec.leader.start, source, "leader.start")
     check_free(world.grid, spec.leader.goal, source, "leader.goal")
+    check_via_points(world.grid, spec, source)
     options = planner_options(spec.leader.planner, spec.leader.planner_options, source)
     try:
         path = get_planner(spec.leader.planner)(world.grid, np.asarray(spec.leader.start, float),
@@ -288,6 +302,13 @@ def _plan_leader(world: World, spec: ScenarioSpec, source: str) -> np.ndarray | 
     except DfcoaError as exc:
         raise ScenarioError(source, "leader.goal", str(exc)) from None
     return None if path is None or len(path) == 0 else np.asarray(path, dtype=float)
+
+
+def _cells(ws: WorldSpec) -> float:
+    """Cells of a ``world.size`` grid (0 with a map file: its size is checked as it loads)."""
+    if ws.size is None or ws.map_ascii or ws.map_image or ws.map_yaml:
+        return 0.0
+    return math.prod(max(1.0, s * ws.resolution) for s in ws.size)
 
 
 def _map_file(ws: WorldSpec, source: str, base_dir: Path) -> OccupancyGrid | None:
@@ -305,8 +326,7 @@ def _map_file(ws: WorldSpec, source: str, base_dir: Path) -> OccupancyGrid | Non
     if ws.map_image is None:
         return None
     img = (base_dir / ws.map_image)
-    if not img.is_file():
-        raise ScenarioError(source, "world.map_image", f"image file '{img}' not found")
+    check_image(img, source, "world.map_image", MAX_CELLS)
     try:
         return OccupancyGrid.from_image(img, ws.resolution, ws.image_threshold, ws.origin)
     except (OSError, ValueError, SyntaxError) as exc:
@@ -335,7 +355,9 @@ def _build_world(spec: ScenarioSpec, source: str, base_dir: Path, offsets: np.nd
         if abs(w - ws.size[0]) > grid.cell_size / 2 or abs(h - ws.size[1]) > grid.cell_size / 2:
             raise ScenarioError(source, "world.size", f"{list(ws.size)} m does not match the map, "
                                 f"which is {w:g} x {h:g} m at {grid.resolution:g} cells/m")
+    check_polygons(ws.obstacles, source)
     shapes = tuple(_shape(o, source, f"world.obstacles[{i}]") for i, o in enumerate(ws.obstacles))
+    check_obstacles_in_map(shapes, grid.extent, source)
     shapes += _clutter(spec, offsets, grid.extent, source)
     discs = tuple(MovingDisc(d.radius, d.speed, d.waypoints, d.start_time, d.end)
                   for d in ws.dynamic_obstacles)

@@ -48,6 +48,12 @@ class TeamSpec:
                                          "far behind its slot, along the leader's start "
                                          "heading (0: centres on the slots; dfcoa's d puts "
                                          "its tracking point on the slot).", unit="m")
+    allow_start_contact: bool = param(False, doc="Let robots start overlapping each other "
+                                                 "(centres closer than 2 x robots.radius, "
+                                                 "counted as contacts at t = 0), for runs "
+                                                 "that begin in contact on purpose; false: "
+                                                 "such a start is an error. Starts outside "
+                                                 "the map are refused either way.")
 
     def check(self, src: str, key: str) -> None:
         """Poses match n; ids unique."""
@@ -83,7 +89,7 @@ class FormationSpec:
     angle: float = param(math.pi / 6, doc="V half-angle phi between a wing and the backward "
                                           "axis (paper 002 eq 5-6).", unit="rad", gt=0.0,
                          lt=math.pi)
-    columns: int = param(0, doc="Grid columns; 0 = ceil(sqrt(n)).", ge=0)
+    columns: int = param(0, doc="Grid columns; 0 = ceil(sqrt(n)).", ge=0, le=100_000)
 
     def check(self, src: str, key: str) -> None:
         """No key that the shape ignores: ``offsets`` need offsets/polar, ``columns`` a grid.
@@ -131,7 +137,8 @@ class LidarSpec:
     """2-D LiDAR, the same on every robot (angles in the robot frame)."""
 
     enabled: bool = param(True, doc="Simulate the LiDAR.")
-    beams: int = param(120, doc="Number of beams.", ge=1)
+    beams: int = param(120, doc="Number of beams (a real 2-D LiDAR has at most a few "
+                                "thousand).", ge=1, le=100_000)
     fov: float = param(2 * math.pi, doc="Field of view, centred on the heading.", unit="rad",
                        gt=0.0, le=2 * math.pi)
     range_min: float = param(0.0, doc="Returns closer than this are reported as -inf.",
@@ -160,7 +167,7 @@ class SensorSpec:
     comm_radius: float = param(10.0, doc="Neighbours within this distance are observed.",
                                unit="m", gt=0.0, finite=False)
     max_neighbors: int = param(10, doc="At most this many nearest neighbours are observed.",
-                               ge=0)
+                               ge=0, le=100_000)
     obstacle_range: float | None = param(None, doc="Moving obstacles within this distance are "
                                                    "observed; default lidar.range_max.",
                                          unit="m", gt=0.0, finite=False)
@@ -212,7 +219,8 @@ class DisturbanceSpec:
                            "are no ids.", ge=0)
     t_start: float = param(doc="Window start.", unit="s", ge=0.0)
     t_end: float = param(doc="Window end (exclusive).", unit="s", ge=0.0)
-    value: Vec2 = param(doc="Disturbance vector, world frame.", unit="m/s or N")
+    value: Vec2 = param(doc="Disturbance vector, world frame (each component within "
+                            "+-1e4).", unit="m/s or N", ge=-1e4, le=1e4)
     kind: Literal["velocity", "force"] = param(
         "velocity", doc="'velocity': world-frame velocity added to the motion (any model); "
                         "'force': force on a double integrator.")
@@ -304,8 +312,10 @@ class ScenarioSpec:
     leader: LeaderSpec = param(doc="Virtual leader mission.")
     name: str = param("", doc="Scenario name; default: the file name without .toml.")
     description: str = param("", doc="Free text.")
-    dt: float = param(0.1, doc="Control and integration step.", unit="s", gt=0.0)
-    t_max: float = param(60.0, doc="Time limit.", unit="s", gt=0.0)
+    dt: float = param(0.1, doc="Control and integration step (at least 1 us).", unit="s",
+                      ge=1e-6)
+    t_max: float = param(60.0, doc="Time limit; t_max / dt + 1 is at most 1e7 instants.",
+                         unit="s", gt=0.0)
     seed: int = param(0, doc="Seed of the run's random generator (CLI --seed overrides).", ge=0)
     stop_on_collision: bool = param(False, doc="End the run at the first collision.")
     stop_on_deadlock: bool = param(False, doc="End the run once it is stalled (metrics."
@@ -346,6 +356,10 @@ class ScenarioSpec:
                 raise ScenarioError(src, f"disturbances[{i}].kind", "'force' needs "
                                     "robots.model = 'double_integrator'")
         for name in ("latency", "leader_latency"):
+            if getattr(self.comms, name) > self.t_max:
+                raise ScenarioError(src, f"comms.{name}", f"({getattr(self.comms, name):g} s) "
+                                    f"exceeds t_max ({self.t_max:g} s): no message would "
+                                    "arrive within the run")
             steps = getattr(self.comms, name) / self.dt
             if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
                 raise ScenarioError(src, f"comms.{name}", f"({getattr(self.comms, name)} s) is "

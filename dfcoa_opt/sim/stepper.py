@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from dfcoa_opt.control.adapters import convert
 from dfcoa_opt.control.base import MovingObstacles
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.errors import DfcoaError, RunFailed
 from dfcoa_opt.localization import TruthEstimator, make_estimators
 from dfcoa_opt.outcome import StallMonitor
 from dfcoa_opt.robots.models import CommandKind, RobotState
@@ -261,6 +261,19 @@ class Stepper(Observing, RunLookups):
                                                 nb_age), moving=moving, heard=heard,
                        heard_slots=heard_slots, team=team)
 
+    def _diverged(self, pose: FloatArray, active: NDArray[np.intp], kk: NDArray[np.int64]
+                  ) -> None:
+        """Stop the batch: a robot's new pose is NaN or inf (a state beyond float range).
+
+        Raises:
+            RunFailed: Naming the run's seed, the robot and the time.
+        """
+        row = int(np.flatnonzero(~np.isfinite(pose).all(axis=1))[0])
+        j, i = divmod(row, self.n)
+        raise RunFailed(f"robot {i}'s pose is not finite after t = {kk[j] * self.dt:.6g} s "
+                        f"(seed {self.sim.seeds[active[j]]}): a disturbance or command beyond "
+                        "float range")
+
     def _row_constants(self) -> tuple[Any, ...]:
         """Per-row constants of the active set, made again when it changes.
 
@@ -332,6 +345,8 @@ class Stepper(Observing, RunLookups):
         new_state = sim.model.step(*args) if not std else sim.model.step(  # type: ignore[call-arg]
             *args, wheel_noise=np.concatenate([self.rngs[e].normal(0.0, std, (n, 2))
                                                for e in active]))
+        if not np.isfinite(new_state.pose).all():
+            self._diverged(new_state.pose, active, kk)
         # -- contacts at t_k
         clearance = self._clearance(pos, active)
         static_hit = clearance < sim.radius

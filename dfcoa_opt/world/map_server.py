@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dfcoa_opt.atomic import file_exists
 from dfcoa_opt.errors import ScenarioError, did_you_mean
 from dfcoa_opt.world.flat_yaml import parse_flat_yaml
 from dfcoa_opt.world.grid import OccupancyGrid
@@ -197,32 +198,49 @@ def read_map_image(meta: MapYaml, max_cells: int | None = None) -> NDArray[np.ui
     from PIL import Image  # Pillow, a dependency of matplotlib; only maps need it
 
     src, img = str(meta.path), meta.image
-    if not file_exists(img):
-        raise ScenarioError(src, "image", f"image file '{img}' not found")
+    check_image(img, src, "image", max_cells)
     try:
-        with warnings.catch_warnings():  # the size is bounded here, not by Pillow's guess
+        with warnings.catch_warnings():  # the size is bounded by check_image, not Pillow
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)
             with Image.open(img) as im:
-                w, h = im.size
-                if max_cells is not None and w * h > max_cells:
-                    raise ScenarioError(src, "image", f"'{img}' is {w} x {h} pixels, more than "
-                                                      f"the {max_cells:.0e} cells this toolkit "
-                                                      "accepts")
                 im.load()
                 return _pixels(im, src, img)
-    except Image.DecompressionBombError as exc:
-        raise ScenarioError(src, "image", f"'{img}' is larger than this toolkit accepts: "
-                                          f"{exc}") from None
     except (OSError, ValueError, SyntaxError) as exc:
         raise ScenarioError(src, "image", f"cannot read image '{img}': {exc}") from None
 
 
-def file_exists(path: Path) -> bool:
-    """Whether ``path`` is a file; False for a name the system cannot look up (too long)."""
+def check_image(img: Path, src: str, key: str, max_cells: int | None = None) -> None:
+    """An image file exists, is readable, and has at most ``max_cells`` pixels.
+
+    Only the header is read (Pillow), so a huge image is refused before its
+    pixels are decoded.
+
+    Args:
+        img: The image file.
+        src: The file that names it (for messages).
+        key: The key that names it (for messages).
+        max_cells: Most pixels accepted (None: no bound).
+
+    Raises:
+        ScenarioError: The file is missing or unreadable, or has too many pixels.
+    """
+    from PIL import Image
+
+    if not file_exists(img):
+        raise ScenarioError(src, key, f"image file '{img}' not found")
     try:
-        return path.is_file()
-    except OSError:  # e.g. a name too long
-        return False
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(img) as im:
+                w, h = im.size
+    except Image.DecompressionBombError as exc:
+        raise ScenarioError(src, key, f"'{img}' is larger than this toolkit accepts: "
+                                      f"{exc}") from None
+    except (OSError, ValueError, SyntaxError) as exc:
+        raise ScenarioError(src, key, f"cannot read image '{img}': {exc}") from None
+    if max_cells is not None and w * h > max_cells:
+        raise ScenarioError(src, key, f"'{img}' is {w} x {h} pixels, more than the "
+                                      f"{max_cells:.0e} cells this toolkit accepts")
 
 
 def _pixels(im: Any, src: str, img: Path) -> NDArray[np.uint8]:

@@ -14,12 +14,22 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.geometry import circle_polygon, points_in_polygon, polygon_signed_area
+from dfcoa_opt.geometry import (
+    circle_polygon,
+    points_in_polygon,
+    polygon_defect,
+    polygon_signed_area,
+)
 
 
 @dataclass(frozen=True)
 class Polygon:
     """A simple polygon.
+
+    Refused (``ValueError``): fewer than 3 vertices, a polygon that is not
+    simple (:func:`~dfcoa_opt.geometry.polygon_defect`: edges that cross or
+    touch, a repeated vertex, a zero-length edge; the even-odd inside test
+    and the clearance would disagree on it), clockwise order or zero area.
 
     Attributes:
         vertices: ``((x, y), ...)`` in m, counter-clockwise, first vertex not repeated.
@@ -30,6 +40,9 @@ class Polygon:
     def __post_init__(self) -> None:
         if len(self.vertices) < 3:
             raise ValueError("a polygon needs at least 3 vertices")
+        defect = polygon_defect(self.vertices)
+        if defect is not None:
+            raise ValueError(f"polygon is not simple: {describe_defect(self.vertices, defect)}")
         if polygon_signed_area(self.vertices) <= 0.0:
             raise ValueError("polygon vertices must be counter-clockwise with non-zero area")
 
@@ -120,6 +133,47 @@ class Circle:
 
 
 Shape = Polygon | Rectangle | Circle
+
+
+def describe_defect(vertices: Sequence[Sequence[float]], defect: tuple[int, int]) -> str:
+    """A :func:`~dfcoa_opt.geometry.polygon_defect` in words, with the vertices' numbers.
+
+    Args:
+        vertices: ``(V, 2)`` polygon vertices in m.
+        defect: ``(i, j)`` edge indices from :func:`~dfcoa_opt.geometry.polygon_defect`.
+    """
+    v = [tuple(float(c) for c in p) for p in vertices]
+    n = len(v)
+
+    def pt(k: int) -> str:
+        return f"({v[k % n][0]:.6g}, {v[k % n][1]:.6g})"
+
+    def edge(k: int) -> str:
+        return f"edge {k} {pt(k)}-{pt(k + 1)}"
+
+    i, j = defect
+    if i == j:
+        hint = "; the first vertex is not repeated at the end" if i == n - 1 else ""
+        return (f"vertices {i} and {(i + 1) % n} are the same point {pt(i)} (a zero-length "
+                f"edge{hint})")
+    if (j - i) % n in (1, n - 1):
+        return f"{edge(i)} and {edge(j)} fold back onto each other"
+    for k in (i, i + 1):
+        if v[k % n] in (v[j], v[(j + 1) % n]):
+            at = j if v[k % n] == v[j] else (j + 1) % n
+            return (f"vertices {k % n} and {at} are the same point {pt(k)}, where {edge(i)} and "
+                    f"{edge(j)} meet; edges may meet only at the vertex they share")
+    p, r = np.array(v[i]), np.array(v[(i + 1) % n]) - np.array(v[i])
+    q, t = np.array(v[j]), np.array(v[(j + 1) % n]) - np.array(v[j])
+    denom = r[0] * t[1] - r[1] * t[0]
+    if denom != 0.0:
+        x, y = p + r * (((q - p)[0] * t[1] - (q - p)[1] * t[0]) / denom)
+        if not any(np.array_equal(c, (x, y)) for c in (v[i], v[(i + 1) % n], v[j],
+                                                          v[(j + 1) % n])):
+            return (f"{edge(i)} and {edge(j)} cross at ({x:.6g}, {y:.6g}); edges may meet "
+                    f"only at the vertex they share")
+    return (f"{edge(i)} and {edge(j)} touch (a vertex on the other edge, or an overlap); edges "
+            f"may meet only at the vertex they share")
 
 
 def polygon_arrays(shapes: Sequence[Shape], n: int = 32) -> list[NDArray[np.float64]]:

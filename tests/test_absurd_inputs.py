@@ -1,0 +1,132 @@
+"""Legal-looking but absurd inputs: each is one line and exit 2 (or a run that fails cleanly).
+
+Each case is one a mutation fuzzer found to end in a traceback, a memory
+blow-up or a silent wrong run. They go through ``dfcoa run`` (in process,
+``dfcoa_opt.cli.main``): the answer must come before any large allocation,
+so a regression shows as a MemoryError or a traceback here.
+"""
+
+from __future__ import annotations
+
+import resource
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import dfcoa_opt as d
+from dfcoa_opt.cli import main
+from dfcoa_opt.errors import DfcoaError, RunFailed
+from dfcoa_opt.sim import budget
+from dfcoa_opt.sim.checks import MAX_CELLS
+from dfcoa_opt.sim.simulator import Simulator
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIO = ROOT / "scenarios" / "example_obstacles.toml"
+
+
+def _refused(capsys, args, key: str, words: str) -> None:
+    """``dfcoa run`` exits 2 with one line naming the file and ``key``, containing ``words``."""
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    assert main(["run", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("dfcoa: error: "), err
+    assert f": {key}: " in err and words in err, err
+    grown = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss
+    assert grown < 300_000, f"peak memory grew by {grown / 1e3:.0f} MB"  # kB: refused early
+
+
+@pytest.mark.parametrize(("sets", "key", "words"), [
+    (["comms.latency=1e308"], "comms.latency", "exceeds t_max"),
+    (["comms.leader_latency=1e300"], "comms.leader_latency", "exceeds t_max"),
+    (["t_max=1e308"], "t_max", "instants"),
+    (["t_max=1e9"], "t_max", "instants"),
+    (["dt=1e-300", "t_max=1e-300"], "dt", ">= 1e-06"),
+    (["sensors.lidar.beams=1000000000"], "sensors.lidar.beams", "<= 100000"),
+    (["controllers.reshape.rotations=1000000000"], "controllers.reshape.rotations", "<= 1000"),
+    (["world.size=[1000.0, 999.0]"], "world.size", "GiB"),
+    (["t_max=900000.0", "team.n=50"], "t_max", "GiB"),
+])
+def test_refused_before_any_allocation(capsys, sets, key, words):
+    args = [str(SCENARIO)]
+    for s in sets:
+        args += ["--set", s]
+    _refused(capsys, args, key, words)
+
+
+def test_a_batch_too_big_is_refused(capsys):
+    _refused(capsys, [str(SCENARIO), "--seeds", "0-100000"], "t_max", "100001 runs")
+
+
+def test_load_raises_dfcoa_error_not_overflow():
+    with pytest.raises(DfcoaError, match="comms.latency"):
+        d.load(SCENARIO, comms__latency=1e308)
+
+
+def test_estimate_grows_with_each_key():
+    """The estimate is what the keys drive: twice the steps, twice the log."""
+    s = d.load(SCENARIO).spec
+    one = budget.estimate(s)
+    long = budget.estimate(d.load(SCENARIO, t_max=240.1).spec)  # (t_max / dt + 1) doubles
+    assert long["t_max"] == pytest.approx(2 * one["t_max"])
+    assert budget.estimate(s, runs=3)["t_max"] == pytest.approx(3 * one["t_max"])
+    rec = budget.estimate(s, record_scans=True)["sensors.lidar.beams"]
+    assert rec - one["sensors.lidar.beams"] == pytest.approx(budget.steps_of(s) * 5 * 120 * 8)
+    assert budget.estimate(s, cells=1e6)["world.size"] == 1e6 * budget.CELL_BYTES
+
+
+def test_a_huge_map_image_is_refused_from_its_header(tmp_path, capsys):
+    from PIL import Image
+
+    side = int(MAX_CELLS ** 0.5) + 1
+    Image.new("1", (side, side), 1).save(tmp_path / "big.png")
+    text = SCENARIO.read_text().replace("size = [24.0, 14.0]", 'map_image = "big.png"')
+    (tmp_path / "s.toml").write_text(text)
+    _refused(capsys, [str(tmp_path / "s.toml")], "world.map_image", "pixels")
+
+
+def test_long_file_names_are_one_line(tmp_path, capsys):
+    text = SCENARIO.read_text().replace("size = [24.0, 14.0]", f'map_image = "{"x" * 300}.png"')
+    (tmp_path / "s.toml").write_text(text)
+    _refused(capsys, [str(tmp_path / "s.toml")], "world.map_image", "not found")
+
+
+def test_disturbance_values_are_bounded(tmp_path, capsys):
+    (tmp_path / "s.toml").write_text(SCENARIO.read_text() + (
+        '\n[[disturbances]]\nrobot = 0\nt_start = 1.0\nt_end = 2.0\nvalue = [1e308, 1e308]\n'))
+    _refused(capsys, [str(tmp_path / "s.toml")], "disturbances[0].value[0]", "<= 10000")
+
+
+def test_a_state_beyond_float_range_fails_the_run():
+    """A pose that is no longer finite stops the run with RunFailed, never a silent result."""
+    s = d.load(SCENARIO, t_max=3.0)
+    sim = Simulator(s, _goto(s), 0)
+    step = sim.model.step
+
+    def poisoned(*args, **kwargs):
+        out = step(*args, **kwargs)
+        out.pose[3, 1] = np.nan
+        return out
+
+    sim.model.step = poisoned
+    with pytest.raises(RunFailed, match=r"robot 3's pose is not finite after t = 0 s \(seed 0\)"):
+        sim.run()
+
+
+def _goto(s):
+    from dfcoa_opt.control.registry import build_controller
+
+    return build_controller("goto_slot", s.spec.controllers, s.source)
+
+
+def test_control_characters_stay_on_one_line(capsys):
+    assert main(["run", str(SCENARIO), "--controller", "goto\nslot"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "'goto\\nslot'" in err
+
+
+def test_a_missing_policy_names_the_scenario_and_key(tmp_path, capsys):
+    (tmp_path / "s.toml").write_text(SCENARIO.read_text() + '\n[controllers.learned]\n'
+                                     'policy = "0.5"\n')
+    _refused(capsys, [str(tmp_path / "s.toml"), "--controller", "learned"],
+             "controllers.learned.policy", "'0.5' not found")
