@@ -88,7 +88,10 @@ def _typename(tp: Any) -> str:
 _INT64_MAX = 2**63 - 1  # the TOML spec's integer range (tomllib accepts more)
 
 
-def _check_number(x: float, meta: Mapping[str, Any], src: str, key: str) -> None:
+def _check_number(x: float, meta: Mapping[str, Any], src: str, key: str,
+                  shown: Any = None) -> None:
+    """``x`` against the field's bounds; ``shown`` is the value as given (an int stays one)."""
+    shown = x if shown is None else shown
     if math.isnan(x):
         raise ScenarioError(src, key, "must be a number, got NaN")
     if meta.get("finite", True) and math.isinf(x):
@@ -97,7 +100,7 @@ def _check_number(x: float, meta: Mapping[str, Any], src: str, key: str) -> None
                            ("le", lambda b: x <= b, "<="), ("lt", lambda b: x < b, "<")):
         bound = meta.get(name)
         if bound is not None and not ok(bound):
-            raise ScenarioError(src, key, f"must be {word} {bound}, got {x}")
+            raise ScenarioError(src, key, f"must be {word} {bound}, got {shown}")
 
 
 def _convert(value: Any, tp: Any, meta: Mapping[str, Any], src: str, key: str) -> Any:
@@ -128,7 +131,7 @@ def _convert(value: Any, tp: Any, meta: Mapping[str, Any], src: str, key: str) -
         if abs(value) > _INT64_MAX:
             raise ScenarioError(src, key, f"must fit in 64 bits (TOML integers do), got "
                                           f"{len(str(abs(value)))} digits")
-        _check_number(float(value), meta, src, key)
+        _check_number(float(value), meta, src, key, value)
         return value
     if tp is bool:
         if not isinstance(value, bool):

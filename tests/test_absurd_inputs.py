@@ -130,3 +130,26 @@ def test_a_missing_policy_names_the_scenario_and_key(tmp_path, capsys):
                                      'policy = "0.5"\n')
     _refused(capsys, [str(tmp_path / "s.toml"), "--controller", "learned"],
              "controllers.learned.policy", "'0.5' not found")
+
+
+def test_a_long_scenario_name_runs_under_a_shortened_file_name(tmp_path, capsys):
+    """A 250-character name is legitimate: the run's files get a stable, shorter stem."""
+    from dfcoa_opt.bench.sweep import NAME_MAX
+
+    (tmp_path / "s.toml").write_text(f'name = "{"n" * 250}"\n' + SCENARIO.read_text())
+    out = tmp_path / "out"
+    args = ["run", str(tmp_path / "s.toml"), "--set", "t_max=2.0", "--out", str(out)]
+    assert main(args) == 0
+    first = sorted(p.name for p in out.iterdir())
+    assert len(first) == 2 and all(len(name) <= NAME_MAX + 5 for name in first), first
+    assert main(args) == 0 and sorted(p.name for p in out.iterdir()) == first  # stable
+    capsys.readouterr()
+
+
+def test_counts_show_their_bounds_in_the_key_reference():
+    from dfcoa_opt.sim.docs import schema_markdown
+
+    text = schema_markdown()
+    assert "| `sensors.lidar.beams` |" in text
+    row = next(line for line in text.splitlines() if line.startswith("| `sensors.lidar.beams`"))
+    assert "Range: >= 1, <= 100000." in row

@@ -39,13 +39,11 @@ from typing import Any
 
 import numpy as np
 
-from dfcoa_opt.atomic import file_exists
 from dfcoa_opt.errors import DfcoaError, ScenarioError
 from dfcoa_opt.formation import formation_offsets, slot_positions
 from dfcoa_opt.params import build
 from dfcoa_opt.sim.budget import check_budget
 from dfcoa_opt.sim.checks import (
-    MAX_CELLS,
     MAX_EXTENT,
     check_cells,
     check_connected,
@@ -53,21 +51,23 @@ from dfcoa_opt.sim.checks import (
     check_free,
     check_goal_clear,
     check_names,
+    check_waypoints,
+    final_leader_poses,
+)
+from dfcoa_opt.sim.checks_start import (
     check_obstacles_in_map,
     check_polygons,
     check_start_clear,
     check_start_poses,
     check_via_points,
-    check_waypoints,
-    final_leader_poses,
 )
+from dfcoa_opt.sim.map_files import grid_cells, map_file
 from dfcoa_opt.sim.scenario import Scenario, World
-from dfcoa_opt.sim.schema import ObstacleSpec, ScenarioSpec, WorldSpec
+from dfcoa_opt.sim.schema import ObstacleSpec, ScenarioSpec
 from dfcoa_opt.sim.schema_world import check_map_yaml_keys
 from dfcoa_opt.world.clutter import random_discs
 from dfcoa_opt.world.dynamic import DynamicObstacles, MovingDisc
 from dfcoa_opt.world.grid import OccupancyGrid
-from dfcoa_opt.world.map_server import check_image, load_map_yaml
 from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle, Shape
 
 _INDEX = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)\[(\d+)\]$")
@@ -180,7 +180,7 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
     offsets = formation_offsets(spec.formation, spec.team.n)
     check_extents(spec, offsets, source)
     check_names(spec, source)
-    check_budget(spec, source, _cells(spec.world))
+    check_budget(spec, source, grid_cells(spec.world))
     check_waypoints(spec, source)
     world, path = _build_world(spec, source, Path(base_dir), offsets)
     heading = spec.leader.heading
@@ -304,41 +304,11 @@ def _plan_leader(world: World, spec: ScenarioSpec, source: str) -> np.ndarray | 
     return None if path is None or len(path) == 0 else np.asarray(path, dtype=float)
 
 
-def _cells(ws: WorldSpec) -> float:
-    """Cells of a ``world.size`` grid (0 with a map file: its size is checked as it loads)."""
-    if ws.size is None or ws.map_ascii or ws.map_image or ws.map_yaml:
-        return 0.0
-    return math.prod(max(1.0, s * ws.resolution) for s in ws.size)
-
-
-def _map_file(ws: WorldSpec, source: str, base_dir: Path) -> OccupancyGrid | None:
-    """The grid of ``map_ascii``, ``map_image`` or ``map_yaml``; None without a map file."""
-    if ws.map_ascii is not None:
-        try:
-            return OccupancyGrid.from_ascii(ws.map_ascii, ws.resolution, ws.origin)
-        except ValueError as exc:
-            raise ScenarioError(source, "world.map_ascii", str(exc)) from None
-    if ws.map_yaml is not None:  # ROS map_server's YAML + image (dfcoa_opt.world.map_server)
-        yaml = base_dir / ws.map_yaml
-        if not file_exists(yaml):
-            raise ScenarioError(source, "world.map_yaml", f"map YAML file '{yaml}' not found")
-        return load_map_yaml(yaml, MAX_CELLS)
-    if ws.map_image is None:
-        return None
-    img = (base_dir / ws.map_image)
-    check_image(img, source, "world.map_image", MAX_CELLS)
-    try:
-        return OccupancyGrid.from_image(img, ws.resolution, ws.image_threshold, ws.origin)
-    except (OSError, ValueError, SyntaxError) as exc:
-        raise ScenarioError(source, "world.map_image", f"cannot read image '{img}': "
-                                                       f"{exc}") from None
-
-
 def _build_world(spec: ScenarioSpec, source: str, base_dir: Path, offsets: np.ndarray
                  ) -> tuple[World, np.ndarray]:
     """The world of the file (map, shapes, clutter, a generated world) and the leader's path."""
     ws = spec.world
-    raster = _map_file(ws, source, base_dir)
+    raster = map_file(ws, source, base_dir)
     if raster is None:
         check_cells(ws.size, ws.resolution, source)  # type: ignore[arg-type]
         grid = OccupancyGrid.empty(ws.size, ws.resolution, ws.origin)  # type: ignore[arg-type]
