@@ -118,6 +118,8 @@ def _entry(draw: Any, path: tuple[Any, ...]) -> tuple[Any, Any]:
     in_overrides = any(p in ("grid", "variants", "rungs") for p in path if isinstance(p, str))
     key = draw(st.one_of(st.sampled_from(OVERRIDE_KEYS), SWEEP_KEY) if in_overrides
                else SWEEP_KEY)
+    if key == "plugins":
+        return key, draw(_value_for(path, key))
     if path == ("grid",):
         return key, draw(st.one_of(st.lists(override_values(key), max_size=3), SWEEP_MUTANTS))
     return key, draw(override_values(key))
