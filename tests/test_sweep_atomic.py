@@ -10,6 +10,7 @@ import functools
 import hashlib
 import json
 import re
+import signal
 import time
 from pathlib import Path
 
@@ -18,6 +19,7 @@ import pytest
 from dfcoa_opt.bench import harness
 from dfcoa_opt.bench import sweep as sweep_mod
 from dfcoa_opt.bench.executors import ExecutorConfig
+from dfcoa_opt.bench.lifecycle import SweepInterrupted
 from dfcoa_opt.bench.store import ResultsStore
 from dfcoa_opt.bench.sweep import (
     KEY_MAX,
@@ -182,6 +184,29 @@ def test_a_failure_before_the_first_run_finishes_writes_no_manifest_or_csv(fille
     with pytest.raises(OSError, match="No space"):
         harness.run_sweep(sweep, filled, ExecutorConfig("serial"), progress=False)
     assert _snapshot(filled) == before
+
+
+def test_ctrl_c_just_after_the_first_row_is_stored_still_lists_it(tmp_path, monkeypatch):
+    """SIGINT that lands between storing a row and writing the manifest (a race the
+    subprocess signal tests hit now and then): the row, the manifest that lists it and
+    results.csv are all written, and the sweep stops with SweepInterrupted."""
+    sweep = tmp_path / "two.toml"
+    sweep.write_text(OK.replace("seeds = 1", "seeds = 2"))
+    out = tmp_path / "out"
+    stored = ResultsStore.write
+
+    def write_then_ctrl_c(self, outcome):
+        path = stored(self, outcome)
+        signal.raise_signal(signal.SIGINT)
+        return path
+
+    monkeypatch.setattr(ResultsStore, "write", write_then_ctrl_c)
+    with pytest.raises(SweepInterrupted) as info:
+        harness.run_sweep(sweep, out, ExecutorConfig("serial"), progress=False)
+    assert (info.value.saved, info.value.total) == (1, 2)
+    keys = json.loads((out / "manifest.json").read_text())["keys"]
+    assert len(keys) == 2 and len(list((out / "rows").glob("*.json"))) == 1
+    assert len((out / "results.csv").read_text().splitlines()) == 2  # header and the row
 
 
 def test_a_row_that_is_not_json_writes_neither_row_nor_log(tmp_path):

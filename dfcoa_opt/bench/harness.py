@@ -17,7 +17,7 @@ from typing import Any
 
 from dfcoa_opt.bench import precision
 from dfcoa_opt.bench.executors import ExecutorConfig, run_all
-from dfcoa_opt.bench.lifecycle import Interrupted, SweepInterrupted, interruptible
+from dfcoa_opt.bench.lifecycle import Interrupted, SweepInterrupted, deferred, interruptible
 from dfcoa_opt.bench.store import ResultsStore
 from dfcoa_opt.bench.sweep import (
     DICT_SOURCE,
@@ -162,8 +162,9 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
             while True:
                 with contextlib.closing(run_all(todo, config or ExecutorConfig())) as outcomes:
                     for outcome in outcomes:
-                        store.write(outcome)
-                        record()
+                        with deferred():  # a row and the manifest that lists it, or neither
+                            store.write(outcome)
+                            record()
                         ran += 1
                         failed += outcome.row["status"] != "ok"
                         bar.update()
