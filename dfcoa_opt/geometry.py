@@ -331,6 +331,38 @@ def point_segment_distance(points: ArrayLike, a: ArrayLike, b: ArrayLike) -> Flo
     return np.linalg.norm(p - closest_point_on_segment(p, a, b), axis=-1)
 
 
+def clip_segments_to_box(a: ArrayLike, b: ArrayLike, box: tuple[float, float, float, float]
+                         ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+    """The parts of segments ``[a_k, b_k]`` inside an axis-aligned box (Liang-Barsky).
+
+    Args:
+        a: ``(K, 2)`` segment starts, m.
+        b: ``(K, 2)`` segment ends, m.
+        box: ``(xmin, ymin, xmax, ymax)``, m.
+
+    Returns:
+        ``(a', b', hit)``: the clipped ends (a segment inside the box keeps its
+        ends exactly) and whether each segment meets the (closed) box at all; rows
+        with ``hit`` False hold their input ends.
+    """
+    a, b = np.asarray(a, dtype=float).reshape(-1, 2), np.asarray(b, dtype=float).reshape(-1, 2)
+    d = b - a
+    lo, hi = np.zeros(len(a)), np.ones(len(a))
+    hit = np.ones(len(a), dtype=bool)
+    for axis, (low, high) in enumerate(((box[0], box[2]), (box[1], box[3]))):
+        for p, q in ((-d[:, axis], a[:, axis] - low), (d[:, axis], high - a[:, axis])):
+            parallel = p == 0.0
+            hit &= ~(parallel & (q < 0.0))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = np.where(parallel, 0.0, q / np.where(parallel, 1.0, p))
+            lo = np.where(~parallel & (p < 0.0), np.maximum(lo, t), lo)
+            hi = np.where(~parallel & (p > 0.0), np.minimum(hi, t), hi)
+    hit &= lo <= hi
+    start = np.where((hit & (lo > 0.0))[:, None], a + lo[:, None] * d, a)
+    end = np.where((hit & (hi < 1.0))[:, None], a + hi[:, None] * d, b)
+    return start, end, hit
+
+
 def circle_polygon(center: ArrayLike, radius: ArrayLike, n: int = 32) -> FloatArray:
     """Counter-clockwise polygons with ``n`` vertices on circles.
 

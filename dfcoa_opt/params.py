@@ -86,6 +86,13 @@ def _typename(tp: Any) -> str:
 
 
 _INT64_MAX = 2**63 - 1  # the TOML spec's integer range (tomllib accepts more)
+#: Largest magnitude of a finite number (a float key): products and squares of two
+#: such numbers stay far inside the float range (1.8e308), and nothing physical in
+#: SI units here comes near it (lengths stop at 1e6 m; see ``sim.checks.MAX_EXTENT``).
+MAX_MAGNITUDE = 1e9
+#: Smallest value of a key that must be strictly positive (``gt=0``): quotients by it
+#: stay finite, and a 5e-324 that underflows to 0 in the first division is refused.
+MIN_POSITIVE = 1e-9
 
 
 def _check_number(x: float, meta: Mapping[str, Any], src: str, key: str,
@@ -101,6 +108,19 @@ def _check_number(x: float, meta: Mapping[str, Any], src: str, key: str,
         bound = meta.get(name)
         if bound is not None and not ok(bound):
             raise ScenarioError(src, key, f"must be {word} {bound}, got {shown}")
+
+
+def _check_magnitude(x: float, meta: Mapping[str, Any], src: str, key: str) -> None:
+    """A float within :data:`MAX_MAGNITUDE`; a positive one (``gt=0``) from :data:`MIN_POSITIVE`.
+
+    Infinities, where a key allows them, pass.
+    """
+    if math.isfinite(x) and abs(x) > MAX_MAGNITUDE:
+        raise ScenarioError(src, key, f"must lie within +-{MAX_MAGNITUDE:g} (the range of "
+                                      f"every number here), got {x:g}")
+    if meta.get("gt") == 0 and x < MIN_POSITIVE:
+        raise ScenarioError(src, key, f"must be >= {MIN_POSITIVE:g} (the smallest positive "
+                                      f"number here), got {x:g}")
 
 
 def _convert(value: Any, tp: Any, meta: Mapping[str, Any], src: str, key: str) -> Any:
@@ -123,6 +143,7 @@ def _convert(value: Any, tp: Any, meta: Mapping[str, Any], src: str, key: str) -
             raise ScenarioError(src, key, f"is beyond the float range, got an integer of "
                                           f"{len(str(abs(value)))} digits") from None
         _check_number(value, meta, src, key)
+        _check_magnitude(value, meta, src, key)
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
@@ -206,6 +227,17 @@ def build(cls: type[T], data: Mapping[str, Any], src: str, prefix: str = "") -> 
     if callable(check):
         check(src, prefix)
     return obj
+
+
+def check_robot_index(index: int, n: int, src: str, key: str) -> None:
+    """A robot index (``leader_index``, say) names one of the team's ``n`` robots.
+
+    Raises:
+        ScenarioError: ``index >= n``.
+    """
+    if index >= n:
+        raise ScenarioError(src, key, f"is robot {index}, but the team has {n} robot(s) "
+                                      f"(0..{n - 1}; team.n)")
 
 
 def build_options(cls: type | None, options: Mapping[str, Any], src: str, key: str,

@@ -12,6 +12,7 @@ import dataclasses
 import math
 import types
 import typing
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal, get_args, get_origin, get_type_hints
 
@@ -265,22 +266,38 @@ def _value_for(path: tuple[Any, ...], key: Any) -> st.SearchStrategy[Any]:
     return st.one_of(MUTANTS, _field_strategy(cls, key, get_type_hints(cls)[key]))
 
 
-def _mutate(draw: Any, data: dict[str, Any]) -> None:
-    """One random edit of ``data`` in place (the edit is in Hypothesis's report)."""
+EDITS = ["replace", "replace", "delete", "add", "append", "scale"]
+
+
+def mutate_tree(draw: Any, data: dict[str, Any],
+                entry: Callable[[tuple[Any, ...]], st.SearchStrategy[tuple[Any, Any]]],
+                value_for: Callable[[tuple[Any, ...], Any], st.SearchStrategy[Any]],
+                fresh: Callable[[tuple[Any, ...]], st.SearchStrategy[Any]]) -> None:
+    """One random edit of a parsed TOML tree in place (the edit is in Hypothesis's report).
+
+    A value replaced, a key deleted, a key added to a table, an array grown, or a
+    number scaled by one of :data:`NUMBER_FACTORS`.
+
+    Args:
+        draw: Hypothesis's draw.
+        data: The tree.
+        entry: A table's path -> the ``(key, value)`` an addition puts there.
+        value_for: ``(path of the parent, key)`` -> a replacement value.
+        fresh: An array's path -> a new element (besides copies of its own).
+    """
     nodes = _nodes(data)
-    op = draw(st.sampled_from(["replace", "replace", "delete", "add", "append", "scale"]))
+    op = draw(st.sampled_from(EDITS))
     lists = [p for p, v in nodes if isinstance(v, list)]
     numbers = [p for p, v in nodes if num(v) is not None and math.isfinite(num(v))]
     if op == "add":
         path = draw(st.sampled_from([p for p, v in nodes if isinstance(v, dict)]))
-        real = _keys_for(path)
-        key = draw(st.one_of(st.sampled_from(real), KEY) if real else KEY)
-        _at(data, path)[key] = copy.deepcopy(draw(_value_for(path, key)))
+        key, value = draw(entry(path))
+        _at(data, path)[key] = copy.deepcopy(value)
         return
     if op == "append" and lists:
-        seq = _at(data, draw(st.sampled_from(lists)))
-        seq.append(copy.deepcopy(draw(st.one_of(st.sampled_from(seq), MUTANTS) if seq
-                                      else MUTANTS)))
+        path = draw(st.sampled_from(lists))
+        seq, new = _at(data, path), fresh(path)
+        seq.append(copy.deepcopy(draw(st.one_of(st.sampled_from(seq), new) if seq else new)))
         return
     if op == "scale" and numbers:
         path = draw(st.sampled_from(numbers))
@@ -291,7 +308,20 @@ def _mutate(draw: Any, data: dict[str, Any]) -> None:
     if op == "delete":
         del parent[last]
     else:
-        parent[last] = copy.deepcopy(draw(_value_for(path[:-1], last)))
+        parent[last] = copy.deepcopy(draw(value_for(path[:-1], last)))
+
+
+@st.composite
+def _entry(draw: Any, path: tuple[Any, ...]) -> tuple[Any, Any]:
+    """A key of the table at ``path`` of a scenario (a real one, or any) and its value."""
+    real = _keys_for(path)
+    key = draw(st.one_of(st.sampled_from(real), KEY) if real else KEY)
+    return key, draw(_value_for(path, key))
+
+
+def _mutate(draw: Any, data: dict[str, Any]) -> None:
+    """One random edit of a scenario in place (:func:`mutate_tree`)."""
+    mutate_tree(draw, data, _entry, _value_for, lambda path: MUTANTS)
 
 
 @st.composite

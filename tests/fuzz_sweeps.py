@@ -21,8 +21,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import types
-import typing
 from pathlib import Path
 from typing import Any, get_args, get_origin, get_type_hints
 
@@ -31,8 +29,8 @@ from hypothesis import strategies as st
 from dfcoa_opt.bench.sweep import MAX_SEEDS, SweepSpec
 from dfcoa_opt.control.registry import available
 from dfcoa_opt.sim.schema import ScenarioSpec
-from tests.fuzz_schema import CONTROLLER_PARAMS, ROOT, num
-from tests.fuzz_strategies import ANY, KEY, TEXT, _at, _nodes, typed
+from tests.fuzz_schema import CONTROLLER_PARAMS, ROOT
+from tests.fuzz_strategies import ANY, KEY, TEXT, _unwrap, mutate_tree, typed
 
 try:
     import tomllib
@@ -49,12 +47,6 @@ SWEEP_BASES: dict[str, dict[str, Any]] = {
 
 
 # ------------------------------------------------------------------- keys
-def _unwrap(tp: Any) -> Any:
-    if get_origin(tp) in (typing.Union, types.UnionType):
-        return next(a for a in get_args(tp) if a is not type(None))
-    return tp
-
-
 def _dotted(cls: type, prefix: str, out: dict[str, Any]) -> None:
     """Every leaf key of a schema dataclass as a dotted override key -> its type."""
     hints = get_type_hints(cls)
@@ -101,7 +93,6 @@ SWEEP_MUTANTS = st.one_of(
 PLUGIN_MUTANTS = st.sampled_from(["dfcoa_fuzz_no_such_module", "no_such_plugin.py", "", "..",
                                   "/", "x" * 300, "a.b.c.d", ".hidden", 1, math.nan, [], {}])
 SWEEP_KEY = st.one_of(st.sampled_from(SWEEP_KEYS), st.sampled_from(OVERRIDE_KEYS), KEY)
-NUMBER_FACTORS = [-1, 0, 2, 10, 1000, 0.5, 1e-9, 1e9, 1e300]
 
 
 def override_values(key: Any) -> st.SearchStrategy[Any]:
@@ -136,33 +127,9 @@ def _value_for(path: tuple[Any, ...], key: Any) -> st.SearchStrategy[Any]:
 
 
 def mutate_sweep(draw: Any, data: dict[str, Any]) -> None:
-    """One random edit of a sweep dict in place (the edit is in Hypothesis's report)."""
-    nodes = _nodes(data)
-    op = draw(st.sampled_from(["replace", "replace", "delete", "add", "append", "scale"]))
-    lists = [p for p, v in nodes if isinstance(v, list)]
-    numbers = [p for p, v in nodes if num(v) is not None and math.isfinite(num(v))]
-    if op == "add":
-        path = draw(st.sampled_from([p for p, v in nodes if isinstance(v, dict)]))
-        key, value = draw(_entry(path))
-        _at(data, path)[key] = copy.deepcopy(value)
-        return
-    if op == "append" and lists:
-        path = draw(st.sampled_from(lists))
-        seq = _at(data, path)
-        fresh = _value_for(path, path[-1] if path else None)
-        seq.append(copy.deepcopy(draw(st.one_of(st.sampled_from(seq), fresh) if seq
-                                      else fresh)))
-        return
-    if op == "scale" and numbers:
-        path = draw(st.sampled_from(numbers))
-        _at(data, path[:-1])[path[-1]] = _at(data, path) * draw(st.sampled_from(NUMBER_FACTORS))
-        return
-    path = draw(st.sampled_from([p for p, _ in nodes[1:]]))
-    parent, last = _at(data, path[:-1]), path[-1]
-    if op == "delete":
-        del parent[last]
-    else:
-        parent[last] = copy.deepcopy(draw(_value_for(path[:-1], last)))
+    """One random edit of a sweep dict in place (:func:`~tests.fuzz_strategies.mutate_tree`)."""
+    mutate_tree(draw, data, _entry, _value_for,
+                lambda path: _value_for(path, path[-1] if path else None))
 
 
 @st.composite

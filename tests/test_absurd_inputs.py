@@ -17,6 +17,7 @@ import pytest
 import dfcoa_opt as d
 from dfcoa_opt.cli import main
 from dfcoa_opt.errors import DfcoaError, RunFailed
+from dfcoa_opt.robots.models import make_model
 from dfcoa_opt.sim import budget
 from dfcoa_opt.sim.checks import MAX_CELLS
 from dfcoa_opt.sim.simulator import Simulator
@@ -37,9 +38,31 @@ def _refused(capsys, args, key: str, words: str) -> None:
 
 
 @pytest.mark.parametrize(("sets", "key", "words"), [
-    (["comms.latency=1e308"], "comms.latency", "exceeds t_max"),
-    (["comms.leader_latency=1e300"], "comms.leader_latency", "exceeds t_max"),
-    (["t_max=1e308"], "t_max", "instants"),
+    (["comms.latency=1e308"], "comms.latency", "must lie within +-1e+09"),
+    (["comms.latency=1e6"], "comms.latency", "exceeds t_max"),
+    (["comms.leader_latency=1e9"], "comms.leader_latency", "exceeds t_max"),
+    (["t_max=1e308"], "t_max", "must lie within +-1e+09"),
+    (["leader.speed=1e300"], "leader.speed", "must lie within +-1e+09"),
+    (["formation.spacing=1e10"], "formation.spacing", "must lie within +-1e+09"),
+    (["sensors.pose_noise_std=1e300"], "sensors.pose_noise_std", "must lie within +-1e+09"),
+    (["metrics.fste_window=1e300"], "metrics.fste_window", "must lie within +-1e+09"),
+    (["robots.radius=5e-324"], "robots.radius", "must be >= 1e-09"),
+    (["controllers.virtual_spring.beta=1e-300"], "controllers.virtual_spring.beta",
+     "must be >= 1e-09"),
+    (["controllers.dfcoa.vfh.min_turning_radius=1.3e154"],
+     "controllers.dfcoa.vfh.min_turning_radius", "must lie within +-1e+09"),
+    (["world.obstacles=[{type='circle', center=[5.0, 5.0], radius=1e-15}]"],
+     "world.obstacles[0].radius", "must be >= 0.001"),
+    (["controllers.orca_nav.ivo_max_segment=1e-6"], "controllers.orca_nav.ivo_max_segment",
+     "must be >= 0.05"),
+    (["controllers.reshape.replan_period=1e-7"], "controllers.reshape.replan_period",
+     "must be >= 0.01"),
+    (["controllers.cbf.max_obstacles=10000000"], "controllers.cbf.max_obstacles",
+     "must be <= 1000"),
+    (["controllers.lf_vo.leader_index=5"], "controllers.lf_vo.leader_index",
+     "is robot 5, but the team has 5 robot(s) (0..4; team.n)"),
+    (["controllers.virtual_spring.leader_index=9"], "controllers.virtual_spring.leader_index",
+     "is robot 9, but the team has 5 robot(s)"),
     (["t_max=1e9"], "t_max", "instants"),
     (["dt=1e-300", "t_max=1e-300"], "dt", ">= 1e-06"),
     (["sensors.lidar.beams=1000000000"], "sensors.lidar.beams", "<= 100000"),
@@ -153,3 +176,26 @@ def test_counts_show_their_bounds_in_the_key_reference():
     assert "| `sensors.lidar.beams` |" in text
     row = next(line for line in text.splitlines() if line.startswith("| `sensors.lidar.beams`"))
     assert "Range: >= 1, <= 100000." in row
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@pytest.mark.parametrize("controller", ["virtual_spring", "virtual_spring_basic", "lf_vo"])
+def test_a_team_of_one_runs(controller):
+    """The leader-robot controllers with nobody to follow them (virtual_spring took an
+    argmax over an empty neighbour axis at the first step)."""
+    run = d.run(d.load(SCENARIO, **{"team.n": 1, "t_max": 4.0}), controller, seed=0)
+    assert np.isfinite(run.log.pose).all() and run.log.pose.shape[1] == 1
+    assert np.hypot(*(run.log.pose[-1, 0, :2] - run.log.pose[0, 0, :2])) > 0.3  # it moves
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@pytest.mark.parametrize("model", ["single_integrator", "double_integrator"])
+def test_largest_speed_limits_with_a_zero_command(model):
+    """v_max and a_max of 1e9 with a robot commanded to stay: the speed clip divided the
+    limit by 1e-300 for every robot (overflow warning) before it chose not to clip."""
+    s = d.load(SCENARIO, **{"robots.model": model, "robots.v_max": 1e9, "robots.a_max": 1e9})
+    robot = make_model(s.spec.robots)
+    zero = np.zeros((3, 3))
+    np.testing.assert_array_equal(robot.saturate(zero), zero)
+    fast = np.array([[3e9, 4e9, 0.0]])
+    np.testing.assert_allclose(robot.saturate(fast)[0, :2], [0.6e9, 0.8e9])

@@ -25,7 +25,7 @@ comes next, on the same kind of input:
   ``scenarios/sweeps/`` with one to three edits (:func:`tests.fuzz_sweeps.mutated_sweeps`),
   given as a dict (``sweep_from_dict``) or written as a TOML file (``load_sweep``),
   expands to at most ``MAX_RUNS`` runs with unique keys of at most ``KEY_MAX``
-  characters whose identities can be written as JSON, or raises a DfcoaError on
+  characters whose identities can be written as JSON, or raises a ScenarioError on
   one line that names the sweep (or the file at fault); the sweep machinery
   takes less than :data:`SWEEP_SECONDS` for it.
 - **A mutated small sweep benches, or changes nothing.** A shipped sweep cut down
@@ -37,9 +37,7 @@ comes next, on the same kind of input:
 
 Any other exception, a ``RuntimeWarning`` (the bases run with every controller,
 and their metrics are computed, without one), or a non-finite number in the log
-fails. Examples that run into a known, unfixed bug are kept out by name (the
-"known bugs" section below; ``skipped: known bug ...`` in the statistics of
-``pytest --hypothesis-show-statistics``).
+fails.
 
 Bounded cost. Examples the loader fuzz tests skip as too costly to load
 (:func:`tests.fuzz_schema.too_costly`) are skipped here too, and so are scenarios
@@ -129,178 +127,6 @@ def event(text: str) -> None:
 def one_line(exc: BaseException) -> None:
     msg = str(exc)
     assert msg and "\n" not in msg and "\r" not in msg, f"message is not one line: {msg!r}"
-
-
-# ---------------------------------------------------------------- known bugs
-# Each function names the known, unfixed bug an example runs into (None: none), and the
-# test keeps that example out with ``assume`` (its count is in the hypothesis statistics,
-# ``skipped: known bug ...``). Each entry has a reproduction in its comment; remove the
-# entry with the fix.
-
-
-def known_load_bug(data: dict[str, Any]) -> str | None:
-    """The name of a known, unfixed loader bug the mutated dict runs into, or None."""
-    formation = data.get("formation")
-    spacing = num(formation.get("spacing")) if isinstance(formation, dict) else None
-    if spacing is not None and abs(spacing) > 1e300:
-        # formation.spacing near the float maximum: v_offsets and grid_offsets multiply it by
-        # the rank and overflow (RuntimeWarning) before the loader refuses the offsets
-        # ("the slot offsets reach beyond the 1e+06 m this toolkit accepts")
-        return "formation.spacing overflow"
-    if isinstance(formation, dict) and formation.get("shape") == "rectangle":
-        width, length = num(formation.get("width", 0.0)), num(formation.get("length", 1.0))
-        if width and length and width > 0.0 and length > 0.0 and width / length == 0.0:
-            # formation.width / formation.length underflows to 0 (width = 5e-324, length = 2):
-            # rectangle_polar divides by sin(atan(0)) -> ZeroDivisionError out of the loader
-            return "rectangle formation width underflow"
-    return None
-
-
-def extreme(value: Any) -> bool:
-    """A number (or a table or list holding one) beyond 1e150 or below 1e-150 in magnitude
-    (zero excepted): its square, or a quotient by it, may overflow."""
-    if isinstance(value, dict):
-        return any(map(extreme, value.values()))
-    if isinstance(value, (list, tuple)):
-        return any(map(extreme, value))
-    x = num(value)
-    return x is not None and (abs(x) > 1e150 or 0.0 < abs(x) < 1e-150)
-
-
-def known_bug(scenario: Scenario, controller: str) -> str | None:
-    """The name of a known, unfixed bug the scenario runs into, or None.
-
-    Each entry keeps the examples of one bug out of the run (``assume``) until it is
-    fixed; remove the entry with the fix.
-    """
-    spec = scenario.spec
-    if spec.leader.speed > 1e100:
-        # leader.speed has no upper bound, and the virtual leader moves speed * dt per step
-        # whatever is left to its goal: it overshoots (from ~goal_radius / dt m/s) and at
-        # ~1e150 m/s its slots overflow the squares of metrics.summary and virtual_spring
-        # (RuntimeWarning: overflow encountered in multiply)
-        return "leader.speed overshoot"
-    noise = (spec.team.start_noise, spec.team.heading_noise, spec.robots.command_noise_std,
-             spec.sensors.pose_noise_std, spec.sensors.heading_noise_std)
-    if max(noise) > 1e150:
-        # noise standard deviations have no upper bound: near the float maximum the
-        # N(0, 1) draws times the std overflow (Scenario.start_pose, Comms.command; a
-        # pose_noise_std of 1e300 overflows the controllers' squares): RuntimeWarning,
-        # then an inf heading or estimate fails the run (RunFailed "pose is not finite after
-        # t = 0 s ... a disturbance or command", ControllerError NaN/inf)
-        return "noise std overflow"
-    holonomic = spec.robots.model in ("single_integrator", "double_integrator")
-    if spec.robots.v_max > 1e150 or (holonomic and max(spec.robots.v_max,
-                                                       spec.robots.a_max or 0.0) > 1e8):
-        # robots.v_max and a_max have no upper bound; from v_max ~1e155 m/s ORCA's obstacle
-        # reach (time_horizon_obst * v_max) squared, consensus_ivo, virtual_spring's and
-        # reshape's speed caps overflow (RuntimeWarning; consensus_ivo then fails with
-        # ControllerError); from 1.8e8 the integrators' _clip_norm overflows for a zero
-        # command, as its np.where computes limit / max(norm, 1e-300) for every robot
-        return "robot limit overflow"
-    if controller.startswith("reshape") and spec.sensors.pose_noise_std > 1e3:
-        # reshape's tracking.free_many samples the segment from a robot's estimate to its
-        # target with points proportional to its length: an estimate 1e5 m off (pose_noise_std
-        # = 1e5) takes 600 MB, 1e7 m MemoryError (3.5 GiB) after 11 s, 1e15 m 100 PiB
-        return "reshape free_many memory blow-up"
-    values = [num(getattr(spec.metrics, f.name)) or 0.0
-              for f in dataclasses.fields(spec.metrics)]
-    if (max(spec.metrics.fste_window, spec.metrics.deadlock_window) / spec.dt > 1e18
-            or max(values) > 1e150):
-        # [metrics] settings have no upper bound: metrics.summary raises OverflowError, a
-        # traceback after the run, for an fste_window or deadlock_window of more than 2**63
-        # steps (int(round(window / dt)) of inf, or an int beyond a C long) and for a
-        # risk_reference_distance from 1.35e154 m (its square, a Python float)
-        return "metric settings overflow"
-    parts = [spec.controllers.get(part, {}) for part in controller.split("+")]
-    if any(extreme(table) for table in parts):
-        # controller parameters have no bounds towards the float extremes: with
-        # goto_slot.kp, virtual_spring.alpha or learned.gain_forward = 1.8e308 the command
-        # overflows in velocity_to_unicycle, virtual_spring's leader_velocity or
-        # metrics_deploy's wheel_speeds; consensus_ivo.v_max = 1e300 in the ORCA filter's
-        # norm; virtual_spring.beta = 1e-300 in its cap_speed; orca_nav.ivo_max_segment =
-        # 1e-300 in an int cast (RuntimeWarning each; the runs themselves end normally)
-        return "controller parameter overflow"
-    if any((num(table.get("ivo_max_segment")) or 1.0) < 1e-3 for table in parts):
-        # orca's ivo_max_segment has no lower bound: StaticWorlds splits every obstacle edge
-        # into pieces that long whatever the mode, so 1e-6 m on dfcoa_s2 takes 4.6 GB and
-        # 17 s before the first step (1e-7 m: out of memory)
-        return "ivo_max_segment memory blow-up"
-    if any(isinstance(v, int) and not isinstance(v, bool) and v > 100_000
-           for table in parts for v in table.values()):
-        # count parameters of controllers have no upper bound (sensors.max_neighbors stops at
-        # 100,000): cbf.max_obstacles = 10**7 takes 3.9 GB and 2 minutes for 2 s of tiny.toml,
-        # 2**31 raises MemoryError (160 GiB) in StaticObstacles.nearest
-        return "controller count memory blow-up"
-    if any((num(table.get("replan_period")) or 1.0) < 1e-4 for table in parts):
-        # reshape's replan_period has no useful lower bound: PlanRelay keeps HISTORY /
-        # replan_period plans of (runs, n, 2) floats, so 1e-7 s raises MemoryError (7.45 GiB)
-        # and 2e-98 s ValueError "Maximum allowed dimension exceeded", at the first step
-        return "reshape replan_period memory blow-up"
-    vfh = spec.controllers.get("dfcoa", {}).get("vfh", {})
-    if controller.startswith("dfcoa") and isinstance(vfh, dict) and any(
-            (num(vfh.get(k)) or 0.0) > 1e150
-            for k in ("min_turning_radius", "robot_radius", "safety_distance")):
-        # VFHStar.reset squares (min_turning_radius + robot_radius + safety_distance) as a
-        # Python float: from 1.35e154 it raises OverflowError (34, 'Numerical result out of
-        # range'), a traceback at the first step
-        return "dfcoa vfh radius squared"
-    if "orca" in controller and any(c.radius < 1e-9 for c in scenario.world.circles):
-        # a circle of radius <= ~1e-15 m loads, but its polygon's vertices all round to its
-        # centre: ORCA's prepare_obstacles raises ValueError "an obstacle has a zero-length
-        # edge (repeated vertex)" (goto_slot+orca, orca_nav)
-        return "tiny circle in ORCA"
-    lead = spec.controllers.get(controller.split("+")[0], {}).get("leader_index", 0)
-    if isinstance(lead, int) and lead >= spec.team.n:
-        # controllers.<virtual_spring|virtual_spring_basic|lf_vo>.leader_index >= team.n loads;
-        # reset_batch then raises a plain ValueError (a traceback, not a ScenarioError
-        # naming the key)
-        return "leader_index beyond the team"
-    if controller.startswith("virtual_spring") and spec.team.n == 1:
-        # virtual_spring's leader_state takes np.argmax over an empty neighbour axis:
-        # ValueError "attempt to get argmax of an empty sequence" at the first step
-        return "virtual_spring with one robot"
-    return None
-
-
-def _ladders(data: dict[str, Any]) -> list[Any]:
-    ladder = data.get("ladder")
-    return ladder if isinstance(ladder, list) else [ladder] if ladder is not None else []
-
-
-def known_sweep_bug(data: dict[str, Any]) -> str | None:
-    """The name of a known, unfixed bug a mutated sweep runs into, or None.
-
-    Each entry keeps the examples of one bug out of the test (``assume``) until it is
-    fixed; remove the entry with the fix.
-    """
-    for lad in _ladders(data):
-        if isinstance(lad, dict) and not isinstance(lad.get("scenarios", []), (list, str)):
-            # a ladder's scenarios is not type-checked: a number or a boolean raises
-            # TypeError "'float' object is not iterable" in variants._ladder
-            return "ladder scenarios not an array"
-        rungs = lad.get("rungs") if isinstance(lad, dict) else None
-        if isinstance(rungs, list) and any(
-                _table_in_array(v) for r in rungs if isinstance(r, dict) for v in r.values()):
-            # a rung override holding a table inside an array ("comms.latency" = [{}]) raises
-            # TypeError "unhashable type: 'dict'" when the Ladder is hashed (variants._items
-            # turns arrays into tuples but keeps their tables)
-            return "rung override with a table in an array"
-    return None
-
-
-def _table_in_array(value: Any) -> bool:
-    """An array holding a table (at any depth); tables are searched too."""
-    if isinstance(value, dict):
-        return any(map(_table_in_array, value.values()))
-    return isinstance(value, list) and any(
-        isinstance(x, dict) or _table_in_array(x) for x in value)
-
-
-EMPTY_SWEEP = "empty sweep"
-# controllers = [] (without named variants) expands to 0 runs, and dfcoa bench "runs" it,
-# exit 0, rewriting the folder's manifest.json (keys []) and results.csv (a header only);
-# scenarios = [] is refused ("lists no scenario").
 
 
 # ------------------------------------------------------------- scenario runs
@@ -413,18 +239,10 @@ def test_mutated_scenarios_run_their_first_steps(warm, case: tuple[str, str, dic
     outcome, or a one-line DfcoaError (see the module docstring)."""
     controller, name, data, seed = case
     assume(not too_costly(data))
-    bug = known_load_bug(data)
-    if bug:
-        event(f"skipped: known bug {bug}")
-    assume(bug is None)
     _, source, folder, _ = BASES[name]
     scenario = check_outcome(lambda: scenario_from_dict(data, source, folder), source)
     assume(scenario is not None)
     assume(not too_slow_to_run(scenario, controller))
-    bug = known_bug(scenario, controller)
-    if bug:
-        event(f"skipped: known bug {bug}")
-    assume(bug is None)
     check_run(scenario, controller, seed)
 
 
@@ -471,7 +289,7 @@ def cached_loads():
 
 
 def check_sweep(call: Any, source: str) -> Sweep | None:
-    """Expand a sweep: a bounded Sweep whose rows can be written, or a one-line DfcoaError."""
+    """Expand a sweep: a bounded Sweep whose rows can be written, or a one-line ScenarioError."""
     with cached_loads() as timer:
         t0 = time.perf_counter()
         try:
@@ -481,10 +299,8 @@ def check_sweep(call: Any, source: str) -> Sweep | None:
             where = str(exc).split(": ")[0]
             assert str(exc).startswith(f"{source}: ") or Path(where).exists(), (
                 f"the message names neither the sweep nor a file: {exc}")
-            if not isinstance(exc, ScenarioError):
-                event(f"sweep: {type(exc).__name__}")
-            else:
-                event(f"sweep: ScenarioError at {exc.key.split('.')[0].split('[')[0] or '<file>'}")
+            assert isinstance(exc, ScenarioError), f"not a ScenarioError: {exc!r}"
+            event(f"sweep: ScenarioError at {exc.key.split('.')[0].split('[')[0] or '<file>'}")
             sweep = None
         elapsed = time.perf_counter() - t0 - timer["seconds"]
     event(f"sweep: {next(b for b in (0.1, 0.5, 1.0, 2.0, math.inf) if elapsed < b)} s or less "
@@ -492,10 +308,7 @@ def check_sweep(call: Any, source: str) -> Sweep | None:
     assert elapsed < SWEEP_SECONDS, f"the sweep took {elapsed:.1f} s besides its scenario loads"
     if sweep is None:
         return None
-    assert isinstance(sweep, Sweep) and len(sweep.runs) <= MAX_RUNS
-    if not sweep.runs:
-        event(f"skipped: known bug {EMPTY_SWEEP}")
-        assume(False)
+    assert isinstance(sweep, Sweep) and 0 < len(sweep.runs) <= MAX_RUNS
     event("sweep: expanded")
     keys = [r.key for r in sweep.runs]
     assert len(set(keys)) == len(keys), "two runs share a key"
@@ -529,10 +342,6 @@ def test_mutated_sweeps_expand_or_fail_on_one_line(sweep_folder: Path,
     """A mutated shipped sweep, as a dict or a written file, expands within bounds or raises
     a one-line DfcoaError; nothing else escapes, and it is quick (see the module docstring)."""
     name, data = case
-    bug = known_sweep_bug(data)
-    if bug:
-        event(f"skipped: known bug {bug}")
-    assume(bug is None)
     if not as_file:
         check_sweep(lambda: sweep_from_dict(data, SWEEPS_DIR), "<dict>")
         return
@@ -587,9 +396,8 @@ def test_small_mutated_sweeps_bench_or_change_nothing(filled: Path, tmp_path_fac
         sweep = work / f"{name}.toml"
         sweep.write_text(to_toml(data), encoding="utf-8")
         count = _runs_of(sweep)
-        if count == 0:
-            event(f"skipped: known bug {EMPTY_SWEEP}")
-        assume(count != 0 and count <= BENCH_RUNS)
+        assert count != 0, "a sweep expanded to no run"
+        assume(count <= BENCH_RUNS)
         shutil.copytree(filled, work / "out", symlinks=True)
         check_bench(sweep, work / "out")
     finally:

@@ -5,6 +5,7 @@ from hypothesis import strategies as st
 
 from dfcoa_opt.geometry import (
     body_to_world,
+    clip_segments_to_box,
     pairwise_distances,
     point_segment_distance,
     points_in_polygon,
@@ -94,3 +95,23 @@ def test_polygon_arrays_are_each_shapes_polygon_bit_for_bit():
     for shape, ring in zip(shapes, got, strict=True):
         assert np.array_equal(ring, shape.to_polygon().as_array())
     assert polygon_arrays([]) == []
+
+
+def test_clip_segments_to_box_matches_shapely():
+    rng = np.random.default_rng(3)
+    box = (-1.0, -2.0, 3.0, 4.0)
+    a, b = rng.uniform(-6.0, 6.0, (2, 600, 2))
+    a[:40, 0] = b[:40, 0]  # vertical segments
+    a[40:80, 1] = b[40:80, 1]  # horizontal ones
+    a[80:120], b[80:120] = rng.uniform(-1.0, 3.0, (2, 40, 2))  # segments inside
+    start, end, hit = clip_segments_to_box(a, b, box)
+    inside = np.all((a >= box[:2]) & (a <= box[2:]) & (b >= box[:2]) & (b <= box[2:]), axis=1)
+    assert inside.sum() > 20 and (~hit).sum() > 50  # every case occurs
+    np.testing.assert_array_equal(start[inside], a[inside])  # kept exactly
+    np.testing.assert_array_equal(end[inside], b[inside])
+    for k in range(len(a)):
+        part = shapely.LineString([a[k], b[k]]).intersection(shapely.box(*box))
+        assert part.is_empty == (not hit[k]), k
+        if hit[k]:
+            assert abs(part.length - np.hypot(*(end[k] - start[k]))) < 1e-9, k
+            assert shapely.box(*box).buffer(1e-9).contains(shapely.Point(start[k]))

@@ -25,7 +25,7 @@ def _drive(sc: Scenario) -> tuple[np.ndarray, float]:
     """Drive the simulator's virtual leader until it is at its goal: its pose and the time."""
     leader, steps = VirtualLeader(sc), 0
     while not leader.at_goal and steps * sc.spec.dt < sc.spec.t_max:
-        leader.state()
+        leader.state(sc.spec.dt)
         leader.advance(sc.spec.dt)
         steps += 1
     assert leader.at_goal

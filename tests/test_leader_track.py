@@ -30,7 +30,7 @@ def test_track_is_the_leader_stepped_as_a_run_steps_it():
     for k in range(steps):
         assert track.at_goal[k] == lead.at_goal
         reached += int(lead.at_goal)
-        state = lead.state()
+        state = lead.state(dt)
         np.testing.assert_array_equal(track.state[k], state)
         np.testing.assert_array_equal(track.slots[k], slot_positions(state[:3], sc.offsets))
         lead.advance(dt)
@@ -69,3 +69,24 @@ def test_a_run_gives_the_same_bits_with_a_fresh_or_a_cached_track():
     track = next(iter(leader_mod._TRACKS.values()))
     np.testing.assert_array_equal(fresh.leader, track.state[:steps])
     np.testing.assert_array_equal(fresh.slots, track.slots[:steps])
+
+
+@pytest.mark.parametrize("speed, dt", [(47.0, 0.05), (3.3, 1.0), (1e6, 0.05)])
+def test_a_leader_faster_than_its_goal_region_per_step_lands_on_its_goal(speed, dt):
+    """A step longer than goal_radius used to jump past the goal and circle back (or, fast
+    enough, never stop): the leader slows for its last step and stops within the region."""
+    sc = load_scenario(SCEN / "example_empty.toml",
+                       overrides={"leader.speed": speed, "dt": dt, "t_max": 200.0})
+    spec = sc.spec.leader
+    assert speed * dt > spec.goal_radius
+    steps = 200
+    track = leader_track(sc, dt, steps)
+    k = int(np.argmax(track.at_goal))
+    assert track.at_goal[k] and track.at_goal[k:].all()
+    goal = np.asarray(spec.goal)
+    assert np.hypot(*(track.state[k, :2] - goal)) <= spec.goal_radius
+    path = np.hypot(*np.diff(track.state[: k + 1, :2], axis=0).T).sum()
+    planned = np.hypot(*np.diff(sc.leader_path, axis=0).T).sum()
+    assert path <= planned + 1.0  # no detour past the goal and back
+    v = track.state[:k, 3]
+    assert np.all(v <= speed) and np.all(v > 0.0)  # it never stops short of its goal

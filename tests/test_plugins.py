@@ -105,7 +105,7 @@ def test_a_missing_sweep_plugin_names_the_sweep_file(tmp_path: Path) -> None:
     (tmp_path / "s.toml").write_text(f'scenarios = ["{OBSTACLES}"]\nplugins = ["gone.py"]\n')
     proc = _dfcoa("bench", "s.toml", cwd=tmp_path)
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
-    assert re.search(r"s\.toml: plugins: .*gone\.py: plugin file not found", proc.stderr)
+    assert re.search(r"s\.toml: plugins\[0\]: .*gone\.py: plugin file not found", proc.stderr)
 
 
 def test_a_script_without_a_main_guard_sweeps_on_worker_processes(tmp_path: Path) -> None:

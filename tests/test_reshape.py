@@ -236,3 +236,21 @@ def test_free_segment_answer_does_not_depend_on_the_clearance_cap():
         assert guide.free(a, b, c) == expected
         answers.append(expected)
     assert 30 < sum(answers) < 270  # both answers occur
+
+
+def test_free_probes_only_the_part_of_a_segment_near_the_map():
+    """An estimate far off the map (huge pose noise) made free_many probe every 0.1 m of
+    the way: 1e9 m took gigabytes. Beyond the map by more than the clearance nothing is
+    occupied, so only the part of a segment within that margin is probed."""
+    from dfcoa_opt.world.grid import OccupancyGrid
+    grid = OccupancyGrid.from_shapes((20.0, 20.0), 10.0, [Rectangle((4.0, 0.0), (5.0, 7.0))])
+    guide = Guidance(grid, 0.3)
+    far = 1e9
+    a = np.array([[2.0, 3.0], [2.0, 12.0], [-far, -far], [-far, 3.0]])
+    b = np.array([[far, 3.0], [far, 12.0], [-far, far], [far, 3.0]])
+    # through the wall; above it; never near the map; across the map through the wall
+    assert guide.free_many(a, b, 0.3).tolist() == [False, True, True, False]
+    # the answer of a segment inside the map is the probe test's, as before
+    np.testing.assert_array_equal(guide.free_many(a[:2] * [1, 1], np.array([[7.0, 3.0],
+                                                                          [7.0, 12.0]]), 0.3),
+                                  [False, True])

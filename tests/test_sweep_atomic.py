@@ -70,6 +70,9 @@ FAILURES = {
         OK + f'[[ladder]]\nscenarios = ["{TINY.as_posix()}"]\nkey = "sensors.comm_radius"\n'
              "values = [5.0, 8.0, inf]\n", (),
         ["ladder[0].values[2]", "must be a finite number, got inf"]),
+    "ladder_log_x_not_a_boolean": (
+        OK + '[ladder]\nkey = "sensors.comm_radius"\nvalues = [5.0, 8.0]\nlog_x = "no"\n', (),
+        ["ladder.log_x", "must be true or false, got 'no'"]),
     "ladder_value_nan": (
         OK + '[ladder]\nkey = "sensors.comm_radius"\nvalues = [5.0, nan]\n', (),
         ["ladder.values[1]", "must be a finite number, got nan"]),
@@ -107,6 +110,64 @@ FAILURES = {
     "unknown_controller": (
         HEAD + 'controllers = ["goto_slott"]\nseeds = 1\n', (),
         ["controllers[0]: unknown controller 'goto_slott'"]),
+    # a ladder's scenarios: an array of strings, as the sweep's own
+    "ladder_scenarios_a_number": (
+        OK + '[[ladder]]\nscenarios = 3.0\nkey = "sensors.comm_radius"\nvalues = [5.0]\n', (),
+        ["ladder[0].scenarios: must be an array, got float 3.0"]),
+    "ladder_scenarios_false": (
+        OK + '[ladder]\nkey = "sensors.comm_radius"\nvalues = [5.0]\nscenarios = false\n', (),
+        ["ladder.scenarios: must be an array, got bool False"]),
+    "ladder_scenarios_entry_a_number": (
+        OK + '[[ladder]]\nscenarios = [1]\nkey = "sensors.comm_radius"\nvalues = [5.0]\n', (),
+        ["ladder[0].scenarios[0]: must be a string, got int 1"]),
+    # a table inside an array: refused by the scenario where its key takes no such value,
+    # in a ladder rung as in a grid or a variant
+    "ladder_rung_table_in_array": (
+        OK + '[ladder]\nlabel = "lag"\n[[ladder.rungs]]\nvalue = 1.0\n'
+             '"comms.latency" = [{}]\n', (),
+        ["comms.latency: must be a number, got list [{}]"]),
+    "grid_table_in_array": (
+        OK + '[grid]\n"comms.latency" = [[{}]]\n', (),
+        ["comms.latency: must be a number, got list [{}]"]),
+    "variant_table_in_array": (
+        HEAD + 'seeds = 1\n[variants.lagging]\ncontroller = "goto_slot"\n'
+               '"comms.latency" = [{}]\n', (),
+        ["comms.latency: must be a number, got list [{}]"]),
+    # a sweep of no run at all
+    "no_controller": (
+        HEAD + "controllers = []\nseeds = 1\n", (),
+        ["controllers: lists no controller (and the sweep names no variant)"]),
+    "no_controller_with_override_sets": (
+        HEAD + 'controllers = []\nseeds = 1\n[[variants]]\n"sensors.comm_radius" = 5.0\n', (),
+        ["controllers: lists no controller"]),
+    "no_scenario": (
+        'scenarios = []\ncontrollers = ["goto_slot"]\nseeds = 1\n', (),
+        ["scenarios: lists no scenario"]),
+    # plugins and variant files that cannot be loaded: the sweep file, the key, the problem
+    "plugin_module_missing": (
+        OK + 'plugins = ["no_such_module_for_dfcoa"]\n', (),
+        ["plugins[0]: no_such_module_for_dfcoa: no such module or .py file"]),
+    "plugin_file_missing": (
+        OK + 'plugins = ["gone.py"]\n', (),
+        ["plugins[0]: ", "gone.py: plugin file not found"]),
+    "variant_file_not_toml": (
+        OK + 'variant_files = ["broken.toml"]\n', (),
+        ["variant_files[0]: ", "broken.toml: not valid TOML"]),
+    "variant_file_a_folder": (
+        OK + 'variant_files = ["tuned/*"]\n', (),
+        ["variant_files[0]: ", "folder.toml: is a directory"]),
+    "variant_file_without_variants": (
+        OK + 'variant_files = ["tuned.toml", "novariants.toml"]\n', (),
+        ["variant_files[1]: ", "novariants.toml: variants: is required"]),
+}
+
+#: Files beside the sweep of a FAILURES case (a folder for None).
+BESIDE = {
+    "variant_file_not_toml": {"broken.toml": "[variants.x\ncontroller = 1\n"},
+    "variant_file_a_folder": {"tuned/": None, "tuned/folder.toml/": None},
+    "variant_file_without_variants": {
+        "tuned.toml": '[variants.tuned]\ncontroller = "goto_slot"\n',
+        "novariants.toml": '[tuned]\nvariant = "goto_slot"\n'},
 }
 
 
@@ -116,6 +177,11 @@ def test_a_failed_bench_leaves_the_results_folder_byte_identical(case, filled, t
     """Exit 2, one stderr line naming the sweep file (or the option) and the key; no file
     of the folder written, touched or added; the bounds refuse in well under a second."""
     text, extra, fragments = FAILURES[case]
+    for name, body in BESIDE.get(case, {}).items():
+        if body is None:
+            (tmp_path / name).mkdir()
+        else:
+            (tmp_path / name).write_text(body)
     sweep = tmp_path / f"{case}.toml"
     sweep.write_text(text)
     before = _snapshot(filled)

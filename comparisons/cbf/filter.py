@@ -100,8 +100,8 @@ class CbfFilter(BatchedController):
         obstacle_range: float = param(3.0, doc="Static obstacles farther than this (signed "
                                                "distance) get no row.", unit="m", gt=0.0,
                                       tune=(1.0, 5.0))
-        max_obstacles: int = param(6, doc="Most static obstacles per robot (nearest first).",
-                                   ge=0)
+        max_obstacles: int = param(6, doc="Most static obstacles per robot (nearest first); "
+                                          "each is a QP row.", ge=0, le=1000)
         infeasible: Literal["least_violation", "stop", "pass_through"] = param(
             "least_violation", doc="Policy when the barrier rows have no common point.")
         solver: str = param("auto", doc="'auto': 'exact' in distributed mode, 'osqp' in "

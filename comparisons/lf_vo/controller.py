@@ -99,7 +99,7 @@ from comparisons.lf_vo.equations import (
 from comparisons.lf_vo.kernel import vo_clearance
 from dfcoa_opt.control.base import BatchedController, Observation, as_batch
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.params import param
+from dfcoa_opt.params import check_robot_index, param
 
 if TYPE_CHECKING:
     from dfcoa_opt.sim.scenario import Scenario
@@ -183,6 +183,10 @@ class LeaderFollowerVO(BatchedController):
         kernel: Literal["numba", "numpy"] = param(
             "numba", doc="Clearance code: the numba kernel (comparisons.lf_vo.kernel) or the "
                          "numpy reference (rollout + path_clearance); same decisions.")
+
+        def check_team(self, n: int, src: str, key: str) -> None:
+            """``leader_index`` names a robot of the scenario's team of ``n``."""
+            check_robot_index(self.leader_index, n, src, f"{key}.leader_index")
 
     def __init__(self, params: Params) -> None:
         self.p = params

@@ -90,8 +90,10 @@ class OrcaFilter(BatchedController):
                           "('center') or from its rim ('gap') to the ellipse, over the speed.")
         ivo_max_segment: float | None = param(
             None, doc="Mode 'ivo': split polygon edges into pieces no longer than this, each "
-                      "with its own eq-8 ellipse; default: one ellipse per edge (facade).",
-            unit="m", gt=0.0)
+                      "with its own eq-8 ellipse; default: one ellipse per edge (facade). From "
+                      "5 cm: shorter pieces add ellipses far below a robot's size, and their "
+                      "count (edge length over this) sets the filter's memory.",
+            unit="m", ge=0.05)
         safe_discrete: bool = param(False, doc="Add hard half-planes that forbid overlap at "
                                                "the next step (comparisons/orca/safe.py).")
 

@@ -115,7 +115,8 @@ class Reshape(BatchedController):
     class Params:
         """Parameters of ``reshape`` (``[controllers.reshape]``)."""
 
-        replan_period: float = param(0.5, doc="Time between two plans.", unit="s", gt=0.0)
+        replan_period: float = param(0.5, doc="Time between two plans (from 10 ms: the relay "
+                                              "keeps 10 s of plans).", unit="s", ge=0.01)
         lookahead: float = param(3.0, doc="Look-ahead along the leader's path beyond the "
                                           "formation's progress.", unit="m", gt=0.0,
                                  tune=(1.0, 6.0))

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from comparisons.reshape.routes import cell_of
-from dfcoa_opt.geometry import point_segment_distance, rotate
+from dfcoa_opt.geometry import clip_segments_to_box, point_segment_distance, rotate
 from dfcoa_opt.planning.astar import search
 from dfcoa_opt.world.grid import OccupancyGrid
 
@@ -69,6 +69,16 @@ class Guidance:
         """
         if len(a) == 0:
             return np.zeros(0, dtype=bool)
+        # every occupied cell lies in the map: beyond it by more than ``clearance`` a probe
+        # is free, so only the part of a segment inside that margin is probed (an
+        # estimate far off the map would otherwise take a probe every PROBE m of the way)
+        x0, x1, y0, y1 = self.grid.extent
+        a, b, meets = clip_segments_to_box(a, b, (x0 - clearance, y0 - clearance,
+                                                  x1 + clearance, y1 + clearance))
+        if not meets.all():
+            out = np.ones(len(a), dtype=bool)
+            out[meets] = self.free_many(a[meets], b[meets], clearance)
+            return out
         d = b - a
         counts = [max(2, int(math.ceil(math.hypot(dx, dy) / PROBE)) + 1)
                   for dx, dy in d.tolist()]

@@ -102,7 +102,7 @@ from comparisons.virtual_spring.kernels import (
 from dfcoa_opt.control.base import BatchedController, Observation, as_batch, slot_velocity
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.geometry import body_to_world, rotate
-from dfcoa_opt.params import param
+from dfcoa_opt.params import check_robot_index, param
 
 #: Below this broadcast speed the leader robot's heading is the virtual leader's, m/s.
 _STILL = 1e-3
@@ -168,6 +168,10 @@ class VirtualSpring(BatchedController):
         obstacle_share: float = param(2.0, doc="Robot i's eq 17 change against a moving "
                                                "obstacle, in halves of |v_i - v_ck| (it does "
                                                "not take its half).", ge=0.0)
+
+        def check_team(self, n: int, src: str, key: str) -> None:
+            """``leader_index`` names a robot of the scenario's team of ``n``."""
+            check_robot_index(self.leader_index, n, src, f"{key}.leader_index")
 
     def __init__(self, params: Params) -> None:
         self.p = params
@@ -247,15 +251,19 @@ class VirtualSpring(BatchedController):
         rows = np.arange(obs.n)
         hit = self._neighbour_robots(obs, -1) == self.p.leader_index
         seen = hit.any(axis=1)
-        k = np.argmax(hit, axis=1)
+        if hit.shape[1]:
+            k = np.argmax(hit, axis=1)
+            nb_p, nb_v = nb.position[rows, k], nb.velocity[rows, k]
+        else:  # no neighbour columns (a team of one): nobody sees the leader robot
+            nb_p = nb_v = np.zeros((obs.n, 2))
         own = (obs.robot_ids == self.p.leader_index)[:, None]
         lead = obs.row_leader()
         virt = v_virt = np.zeros(2)  # only used by the rows that neither are nor see the leader
         if not (seen | own[:, 0]).all():
             virt = body_to_world(lead[:, :3], self._lead_offset[obs.env])
             v_virt = slot_velocity(lead, virt)
-        p_l = np.where(own, obs.pose[:, :2], np.where(seen[:, None], nb.position[rows, k], virt))
-        v_l = np.where(own, obs.velocity, np.where(seen[:, None], nb.velocity[rows, k], v_virt))
+        p_l = np.where(own, obs.pose[:, :2], np.where(seen[:, None], nb_p, virt))
+        v_l = np.where(own, obs.velocity, np.where(seen[:, None], nb_v, v_virt))
         moving = np.hypot(v_l[:, 0], v_l[:, 1]) > _STILL
         heading = np.where(moving, np.arctan2(v_l[:, 1], v_l[:, 0]), lead[:, 2])
         return p_l, v_l, heading

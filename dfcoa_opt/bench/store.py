@@ -82,7 +82,8 @@ NOT_RUN = ("dfcoa_opt/__main__.py", "dfcoa_opt/cli.py", "dfcoa_opt/cli_text.py",
            "dfcoa_opt/sim/docs.py", "dfcoa_opt/bench/")
 #: The harness sources a run does execute (loading the run's scenario, summarising it).
 RUN_SOURCES = ("dfcoa_opt/bench/__init__.py", "dfcoa_opt/bench/runner.py",
-               "dfcoa_opt/bench/sweep.py", "dfcoa_opt/bench/variants.py")
+               "dfcoa_opt/bench/sweep.py", "dfcoa_opt/bench/specs.py",
+               "dfcoa_opt/bench/factors.py", "dfcoa_opt/bench/variants.py")
 
 
 #: The package of the built-in controllers: those of its modules that no other ``dfcoa_opt``

@@ -91,11 +91,29 @@ class Ladder:
     variants: tuple[str, ...] = ()
 
 
+class _Table(dict):
+    """A table inside an override's array (``"world.obstacles" = [{...}]``), made hashable.
+
+    Its values are frozen (:func:`_freeze`) and it is never changed after it is
+    made; it stays a dict, so JSON writes it as the table it was.
+    """
+
+    def __hash__(self) -> int:  # type: ignore[override]
+        return hash(frozenset(self.items()))
+
+
+def _freeze(value: Any) -> Any:
+    """A hashable form of an override value: arrays become tuples, tables :class:`_Table`."""
+    if isinstance(value, (list, tuple)):
+        return tuple(_freeze(x) for x in value)
+    if isinstance(value, Mapping):
+        return _Table({k: _freeze(x) for k, x in value.items()})
+    return value
+
+
 def _items(mapping: Mapping[str, Any]) -> tuple[tuple[str, Any], ...]:
-    """Sorted, hashable items of an override mapping (lists become tuples)."""
-    def freeze(v: Any) -> Any:
-        return tuple(freeze(x) for x in v) if isinstance(v, list) else v
-    return tuple(sorted((str(k), freeze(v)) for k, v in mapping.items()))
+    """Sorted, hashable items of an override mapping (:func:`_freeze` of each value)."""
+    return tuple(sorted((str(k), _freeze(v)) for k, v in mapping.items()))
 
 
 def json_problem(value: Any) -> str | None:
@@ -139,7 +157,8 @@ def named_variants(table: Mapping[str, Any], flatten: Any, src: str) -> list[Var
 
     Args:
         table: The table as read.
-        flatten: Nested tables -> dotted keys (the sweep's ``_flatten``).
+        flatten: Nested tables -> dotted keys
+            (:func:`~dfcoa_opt.bench.factors.flatten`).
         src: Sweep file for messages.
 
     Raises:
@@ -245,7 +264,7 @@ def _ladder(data: Mapping[str, Any], flatten: Any, src: str, where: str,
             for k, x in overrides.items():
                 check_value(x, src, f"{where}.rungs[{i}].{k}")
             out.append(Rung(v, _items(overrides)))
-    scenarios = data.get("scenarios", [])
+    scenarios = _patterns(data.get("scenarios", []), src, f"{where}.scenarios")
     if single and scenarios:
         raise ScenarioError(src, f"{where}.scenarios", "only the array form [[ladder]] names "
                                                        "its own scenarios")
@@ -259,8 +278,25 @@ def _ladder(data: Mapping[str, Any], flatten: Any, src: str, where: str,
     names = data.get("variants", [])
     if not isinstance(names, list) or not all(isinstance(x, str) and x for x in names):
         raise ScenarioError(src, f"{where}.variants", "must be an array of variant names")
-    return Ladder(label, tuple(out), tuple(str(s) for s in scenarios),
-                  bool(data.get("log_x", False)), tuple(names))
+    log_x = data.get("log_x", False)
+    if not isinstance(log_x, bool):
+        raise ScenarioError(src, f"{where}.log_x", f"must be true or false, got {log_x!r}")
+    return Ladder(label, tuple(out), scenarios, log_x, tuple(names))
+
+
+def _patterns(value: Any, src: str, key: str) -> tuple[str, ...]:
+    """A ladder's ``scenarios``: an array of file names or globs, as the sweep's own.
+
+    Raises:
+        ScenarioError: Naming ``key``: not an array, or an entry that is not a string.
+    """
+    if not isinstance(value, (list, tuple)):
+        raise ScenarioError(src, key, f"must be an array, got {type(value).__name__} {value!r}")
+    for i, x in enumerate(value):
+        if not isinstance(x, str):
+            raise ScenarioError(src, f"{key}[{i}]",
+                                f"must be a string, got {type(x).__name__} {x!r}")
+    return tuple(value)
 
 
 def _number(v: Any, src: str, key: str) -> float:

@@ -342,8 +342,16 @@ def build_controller(controller_id: str, tables: Mapping[str, Mapping[str, Any]]
                                      f"controllers.{filt}")))
 
 
-def check_overrides(controllers: Mapping[str, Mapping[str, Any]], source: str) -> None:
+def check_overrides(controllers: Mapping[str, Mapping[str, Any]], source: str,
+                    team_size: int | None = None) -> None:
     """Validate every ``[controllers.<id>]`` table of a file.
+
+    Args:
+        controllers: The tables, by controller or filter id.
+        source: File name for messages.
+        team_size: The scenario's ``team.n``: a ``Params`` with a
+            ``check_team(n, src, key)`` method checks its values against it (a robot
+            index within the team, say). None skips that check.
 
     Raises:
         ScenarioError: Unknown controller id or a bad key; a table of a policy
@@ -358,4 +366,7 @@ def check_overrides(controllers: Mapping[str, Mapping[str, Any]], source: str) -
         if cls is None:
             raise ScenarioError(source, f"controllers.{cid}", "unknown controller or filter"
                                 + did_you_mean(cid, [*_REGISTRY, *_FILTERS]))
-        build(cls.Params, dict(table), source, f"controllers.{cid}")
+        params = build(cls.Params, dict(table), source, f"controllers.{cid}")
+        check_team = getattr(params, "check_team", None)
+        if team_size is not None and callable(check_team):
+            check_team(team_size, source, f"controllers.{cid}")

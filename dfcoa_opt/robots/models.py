@@ -259,7 +259,7 @@ class _Holonomic:
     @staticmethod
     def _clip_norm(a: FloatArray, limit: float) -> FloatArray:
         n = np.hypot(a[:, 0], a[:, 1])
-        return a * np.where(n > limit, limit / np.maximum(n, 1e-300), 1.0)[:, None]
+        return a * np.where(n > limit, limit / np.maximum(n, limit), 1.0)[:, None]  # no 1/0
 
 
 class SingleIntegrator(_Holonomic):

@@ -42,7 +42,7 @@ def check_names(spec: ScenarioSpec, source: str) -> None:
                             f"{did_you_mean(spec.localization.mode, estimator_names())}; "
                             f"available: {', '.join(estimator_names())}")
     estimator_options(spec.localization.mode, spec.localization.options, source)
-    check_overrides(spec.controllers, source)
+    check_overrides(spec.controllers, source, spec.team.n)
 
 
 def check_waypoints(spec: ScenarioSpec, source: str) -> None:

@@ -20,7 +20,9 @@ Sizes: a run has at most 1e7 instants (`t_max / dt + 1`), and its estimated
 memory (log, grid, LiDAR, particles; a batch of seeds counts each run's log)
 is at most 2 GiB: a larger one is refused with the estimate and the key that
 drives it (docs/robustness.md). The ranges below are checked as each key is
-read; NaN and infinities are refused unless a key says otherwise.
+read; NaN and infinities are refused unless a key says otherwise. Every number
+lies within +-1e9, and a key that must be positive (`> 0`) is at least 1e-9: the
+products and quotients the controllers form stay inside the float range.
 
 Frames: metres, radians, angles counter-clockwise from +x; the map origin is
 its bottom-left corner. ASCII maps and images are written top row first; a

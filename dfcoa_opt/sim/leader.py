@@ -48,12 +48,23 @@ class VirtualLeader:
     def _within_goal(self) -> bool:
         return bool(np.hypot(*(self.pose[:2] - self.goal)) <= self.spec.goal_radius)
 
-    def state(self) -> FloatArray:
-        """Broadcast state ``(x, y, theta, v, omega)``; computes this step's command."""
+    def state(self, dt: float) -> FloatArray:
+        """Broadcast state ``(x, y, theta, v, omega)``; computes this step's command.
+
+        A leader whose step of ``dt`` s at ``leader.speed`` would be longer than its
+        distance to the goal slows for that step (``v`` and ``omega`` scaled alike:
+        the same arc, shorter), so a fast leader or a long step lands on its goal
+        instead of passing it and circling back. A leader that reaches its goal
+        region at a step of at most ``goal_radius`` never slows.
+        """
         if self.at_goal:
             self.v, self.w = 0.0, 0.0
         else:
             self.v, self.w, _ = self.tracker.command(self.pose)
+            left = float(np.hypot(*(self.pose[:2] - self.goal)))
+            if self.v * dt > left:
+                scale = left / (self.v * dt)
+                self.v, self.w = self.v * scale, self.w * scale
         return np.array([*self.pose, self.v, self.w])
 
     def advance(self, dt: float) -> None:
@@ -116,7 +127,7 @@ def leader_track(scenario: Scenario, dt: float, steps: int) -> LeaderTrack:
     slots = np.empty((steps, *offsets.shape))
     for k in range(steps):
         at_goal[k] = leader.at_goal
-        state[k] = leader.state()
+        state[k] = leader.state(dt)
         slots[k] = slot_positions(state[k, :3], offsets)
         before = leader.pose
         leader.advance(dt)

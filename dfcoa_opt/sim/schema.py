@@ -117,7 +117,9 @@ class LeaderSpec:
     speed: float = param(0.3, doc="Desired speed.", unit="m/s", gt=0.0)
     w_max: float = param(1.5, doc="Largest leader turn rate.", unit="rad/s", gt=0.0)
     lookahead: float = param(0.5, doc="Pure-pursuit look-ahead distance.", unit="m", gt=0.0)
-    goal_radius: float = param(0.5, doc="Leader is at the goal within this distance.",
+    goal_radius: float = param(0.5, doc="Leader is at the goal within this distance (a "
+                                        "step that would pass the goal is shortened to end "
+                                        "on it).",
                                unit="m", gt=0.0)
     settle_tolerance: float = param(0.5, doc="Formation is settled when every robot is this "
                                              "close to its slot.", unit="m", gt=0.0)

@@ -27,7 +27,9 @@ class ObstacleSpec:
     type: Literal["polygon", "circle", "rectangle"] = param(doc="Shape kind.")
     vertices: tuple[Vec2, ...] = param((), doc="Polygon vertices, counter-clockwise.", unit="m")
     center: Vec2 | None = param(None, doc="Circle centre.", unit="m")
-    radius: float | None = param(None, doc="Circle radius.", unit="m", gt=0.0)
+    radius: float | None = param(None, doc="Circle radius (from 1 mm: ORCA turns a circle "
+                                           "into a polygon whose vertices must stay "
+                                           "distinct).", unit="m", ge=1e-3)
     min: Vec2 | None = param(None, doc="Rectangle lower-left corner.", unit="m")
     max: Vec2 | None = param(None, doc="Rectangle upper-right corner.", unit="m")
 
@@ -88,7 +90,8 @@ class ClutterSpec:
 
     density: float = param(0.0, doc="Fraction of the region's area covered by discs; 0 = no "
                                     "clutter.", ge=0.0, lt=0.9)
-    radius_min: float = param(0.2, doc="Smallest disc radius.", unit="m", gt=0.0)
+    radius_min: float = param(0.2, doc="Smallest disc radius (from 1 mm, as a circle's).",
+                              unit="m", ge=1e-3)
     radius_max: float = param(0.5, doc="Largest disc radius.", unit="m", gt=0.0)
     region: tuple[float, float, float, float] | None = param(
         None, doc="(x0, y0, x1, y1) box of the disc centres; default: the whole map.", unit="m")
