@@ -10,13 +10,15 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import os
 import types
 import typing
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal, get_args, get_origin, get_type_hints
 
-from hypothesis import event
+from hypothesis import currently_in_test_context
+from hypothesis import event as _event
 from hypothesis import strategies as st
 
 from dfcoa_opt.errors import ScenarioError
@@ -359,3 +361,25 @@ def parses(text: str) -> dict[str, Any] | None:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError:
         return None
+
+
+def examples(default: int) -> int:
+    """``default`` examples, or ``DFCOA_FUZZ_EXAMPLES`` scaled from the 150 of the big tests."""
+    raw = os.environ.get("DFCOA_FUZZ_EXAMPLES", "").strip()
+    if not raw:
+        return default
+    if not raw.isdigit() or int(raw) < 1:
+        raise ValueError(f"DFCOA_FUZZ_EXAMPLES must be a positive integer, got {raw!r}")
+    return max(1, round(int(raw) * default / 150))
+
+
+def event(text: str) -> None:
+    """Hypothesis's ``event`` (its statistics), a no-op outside a hypothesis test."""
+    if currently_in_test_context():
+        _event(text)
+
+
+def one_line(exc: BaseException) -> None:
+    """The message of ``exc`` is one non-empty line."""
+    msg = str(exc)
+    assert msg and "\n" not in msg and "\r" not in msg, f"message is not one line: {msg!r}"

@@ -1,4 +1,4 @@
-"""Mutations of the shipped sweep files for the run fuzz tests (``tests/test_fuzz_runs.py``).
+"""Mutations of the shipped sweep files for the fuzz tests of runs and sweeps.
 
 - ``SWEEP_BASES``: every sweep of ``scenarios/sweeps/`` as parsed (``tomllib``).
 - :func:`mutated_sweeps`: a shipped sweep with one to three edits at random
