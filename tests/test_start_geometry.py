@@ -15,8 +15,8 @@ import pytest
 import shapely
 
 from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.geometry import is_simple_polygon, polygon_defect
 from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.simple_polygons import is_simple_polygon, polygon_defect
 from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle
 
 SRC = "<start-geometry>"

@@ -17,10 +17,11 @@ from typing import Any
 import numpy as np
 
 from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.geometry import points_in_polygon, polygon_defect, segments_intersect
+from dfcoa_opt.geometry import points_in_polygon
 from dfcoa_opt.sim.checks import check_free
 from dfcoa_opt.sim.scenario import World
 from dfcoa_opt.sim.schema import ObstacleSpec, ScenarioSpec
+from dfcoa_opt.simple_polygons import polygon_defect, segments_intersect
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.shapes import Circle, Rectangle, Shape, describe_defect
 
@@ -145,7 +146,7 @@ def check_via_points(grid: OccupancyGrid, spec: ScenarioSpec, source: str) -> No
 
 
 def check_polygons(obstacles: Sequence[ObstacleSpec], source: str) -> None:
-    """Every ``polygon`` obstacle is simple (:func:`~dfcoa_opt.geometry.polygon_defect`).
+    """Every ``polygon`` obstacle is simple (:func:`~dfcoa_opt.simple_polygons.polygon_defect`).
 
     A polygon whose edges cross or touch, or that repeats a vertex, is not
     the obstacle the file means: its signed area can still be positive (so
