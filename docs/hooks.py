@@ -32,7 +32,9 @@ def _params_page() -> str:
            "Every registered controller's and safety filter's parameters: the keys of a "
            "scenario's `[controllers.<id>]` table (a filter's under its own id, e.g. "
            "`[controllers.cbf]` for `goto_slot+cbf`). A bad key or value is a one-line "
-           "error naming it. Generated from the code by the documentation build.", ""]
+           "error naming it. Every number lies within +-1e9, and a key that must be "
+           "positive (`> 0`) is at least 1e-9. Generated from the code by the "
+           "documentation build.", ""]
     tables = [(cid, registry.controller_class(cid)) for cid in registry.available()]
     # a filter's class: the second of the classes behind "goto_slot+<filter>"
     tables += [(fid, registry.component_classes(f"goto_slot+{fid}")[1])
