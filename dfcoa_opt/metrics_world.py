@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 from dfcoa_opt.formation import team_width
 from dfcoa_opt.planning.postprocess import path_length, sample_path
 from dfcoa_opt.sim.scenario import Scenario
+from dfcoa_opt.simple_polygons import segments_cross
 from dfcoa_opt.world.dynamic import DynamicObstacles
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.lidar_kernel import cast_grid
@@ -167,12 +168,6 @@ def narrow_passages(width: FloatArray, formation_width: float) -> int:
     return int(np.count_nonzero(narrow[1:] & ~narrow[:-1]))
 
 
-def _orient(a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
-    """Sign of the turn a -> b -> c (cross product), broadcast."""
-    return np.sign((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
-                   - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
-
-
 def moving_crossings(dynamic: DynamicObstacles, path: FloatArray, t_end: float,
                      dt: float) -> int:
     """Times a moving disc's centre crosses the path during ``[0, t_end]``.
@@ -194,9 +189,7 @@ def moving_crossings(dynamic: DynamicObstacles, path: FloatArray, t_end: float,
     a, b = pos[:-1].reshape(-1, 1, 2), pos[1:].reshape(-1, 1, 2)
     p = np.asarray(path, dtype=float).reshape(-1, 2)
     c, d = p[None, :-1], p[None, 1:]
-    cross = ((_orient(a, b, c) * _orient(a, b, d) < 0)
-             & (_orient(c, d, a) * _orient(c, d, b) < 0))
-    return int(np.count_nonzero(cross))
+    return int(np.count_nonzero(segments_cross(a, b, c, d)))
 
 
 def difficulty_index(values: Mapping[str, Any]) -> float:

@@ -45,13 +45,36 @@ def segments_intersect(p1: ArrayLike, q1: ArrayLike, p2: ArrayLike,
         Boolean mask, the broadcast shape without the last axis.
     """
     p1, q1, p2, q2 = (np.asarray(x, dtype=float) for x in (p1, q1, p2, q2))
-    d1, d2 = _orient(p2, q2, p1), _orient(p2, q2, q1)
-    d3, d4 = _orient(p1, q1, p2), _orient(p1, q1, q2)
-    proper = (((d1 > 0) & (d2 < 0)) | ((d1 < 0) & (d2 > 0))) & \
-             (((d3 > 0) & (d4 < 0)) | ((d3 < 0) & (d4 > 0)))
+    d1, d2, d3, d4 = _orientations(p1, q1, p2, q2)
     touch = (((d1 == 0) & _in_box(p2, q2, p1)) | ((d2 == 0) & _in_box(p2, q2, q1))
              | ((d3 == 0) & _in_box(p1, q1, p2)) | ((d4 == 0) & _in_box(p1, q1, q2)))
-    return proper | touch
+    return _proper(d1, d2, d3, d4) | touch
+
+
+def segments_cross(p1: ArrayLike, q1: ArrayLike, p2: ArrayLike,
+                   q2: ArrayLike) -> NDArray[np.bool_]:
+    """Whether segments ``[p1, q1]`` and ``[p2, q2]`` cross properly.
+
+    Each segment's ends lie strictly on opposite sides of the other's line:
+    touching and collinear overlap do not count (:func:`segments_intersect`
+    counts them). Arguments broadcast as there, ``(..., 2)`` in m.
+    """
+    p1, q1, p2, q2 = (np.asarray(x, dtype=float) for x in (p1, q1, p2, q2))
+    return _proper(*_orientations(p1, q1, p2, q2))
+
+
+def _orientations(p1: FloatArray, q1: FloatArray, p2: FloatArray, q2: FloatArray
+                  ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The four orientation tests of two segments: each end against the other's line."""
+    return (_orient(p2, q2, p1), _orient(p2, q2, q1), _orient(p1, q1, p2),
+            _orient(p1, q1, q2))
+
+
+def _proper(d1: FloatArray, d2: FloatArray, d3: FloatArray,
+            d4: FloatArray) -> NDArray[np.bool_]:
+    """Strictly opposite signs in both pairs (no product: nothing to overflow)."""
+    return ((((d1 > 0) & (d2 < 0)) | ((d1 < 0) & (d2 > 0)))
+            & (((d3 > 0) & (d4 < 0)) | ((d3 < 0) & (d4 > 0))))
 
 
 #: Edge pairs tested at once by :func:`polygon_defect` (bounds its memory on long polygons).

@@ -16,7 +16,12 @@ import shapely
 
 from dfcoa_opt.errors import ScenarioError
 from dfcoa_opt.sim.loader import scenario_from_dict
-from dfcoa_opt.simple_polygons import is_simple_polygon, polygon_defect
+from dfcoa_opt.simple_polygons import (
+    is_simple_polygon,
+    polygon_defect,
+    segments_cross,
+    segments_intersect,
+)
 from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle
 
 SRC = "<start-geometry>"
@@ -114,6 +119,22 @@ def _random_polygons(rng: np.random.Generator, count: int) -> list[np.ndarray]:
                 p[[i, j]] = p[[j, i]]
         out.append(p)
     return out
+
+
+def test_segment_tests_agree_with_shapely_on_grid_segments():
+    """segments_intersect is shapely's intersects, segments_cross its crosses (a proper
+    crossing: touching, a T and a collinear overlap do not count), on integer-grid segments
+    where every degenerate case occurs and the orientation tests are exact."""
+    rng = np.random.default_rng(11)
+    p = rng.integers(0, 5, (3000, 4, 2)).astype(float)
+    p = p[np.any(p[:, 0] != p[:, 1], axis=1) & np.any(p[:, 2] != p[:, 3], axis=1)]
+    meet = segments_intersect(p[:, 0], p[:, 1], p[:, 2], p[:, 3])
+    cross = segments_cross(p[:, 0], p[:, 1], p[:, 2], p[:, 3])
+    for k, (a, b, c, d) in enumerate(p):
+        one, two = shapely.LineString([a, b]), shapely.LineString([c, d])
+        assert meet[k] == one.intersects(two), (a, b, c, d)
+        assert cross[k] == one.crosses(two), (a, b, c, d)
+    assert 100 < cross.sum() < meet.sum() < len(p) - 100  # every case occurs
 
 
 def test_the_simple_polygon_test_agrees_with_shapely_on_random_polygons():
