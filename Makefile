@@ -24,8 +24,11 @@ docs: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
+# Then the paper-scale checks (tests marked slow): the learned policy retrained from seed 0
+# gives the shipped bytes (about 2.5 min on one core).
 figures: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m dfcoa_opt figures --out paper_figures
+	MPLBACKEND=Agg $(BIN)/python -m pytest -q -m slow
 
 # Every method tuned with the same budget on training seeds (docs/heldout.md): writes
 # scenarios/sweeps/tuned/*.toml; the trials' runs stay in .dfcoa-cache/tune (resumable).
