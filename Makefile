@@ -25,7 +25,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 
 # Then the paper-scale checks (tests marked slow): the learned policy retrained from seed 0
-# gives the shipped bytes (about 2.5 min on one core).
+# gives the shipped bytes (6 min on one core of the 2-core Intel Xeon).
 figures: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m dfcoa_opt figures --out paper_figures
 	MPLBACKEND=Agg $(BIN)/python -m pytest -q -m slow
