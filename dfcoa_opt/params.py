@@ -26,7 +26,8 @@ _MISSING = dataclasses.MISSING
 def param(default: Any = _MISSING, *, doc: str, unit: str = "", ge: float | None = None,
           gt: float | None = None, le: float | None = None, lt: float | None = None,
           finite: bool = True, default_factory: Any = _MISSING,
-          tune: tuple[Any, Any] | None = None, scale: str = "linear") -> Any:
+          tune: tuple[Any, Any] | None = None, scale: str = "linear",
+          robot_index: bool = False) -> Any:
     """A dataclass field with documentation and validation metadata.
 
     Args:
@@ -42,6 +43,8 @@ def param(default: Any = _MISSING, *, doc: str, unit: str = "", ge: float | None
         tune: ``(low, high)``: the range ``dfcoa tune`` searches for this key (a
             float or int field), or ``(False, True)`` for a boolean one (:func:`tunables`).
         scale: ``"linear"`` or ``"log"`` (low > 0): how the range is searched.
+        robot_index: The value is a robot index: it must name one of the scenario's
+            ``team.n`` robots (:func:`check_robot_indices`).
 
     Raises:
         ValueError: A tuning range out of order, or a log scale that reaches 0.
@@ -53,7 +56,7 @@ def param(default: Any = _MISSING, *, doc: str, unit: str = "", ge: float | None
         if scale == "log" and not tune[0] > 0:
             raise ValueError(f"tune={tune!r}: a log scale needs low > 0")
     meta = {"doc": doc, "unit": unit, "ge": ge, "gt": gt, "le": le, "lt": lt, "finite": finite,
-            "tune": tune, "scale": scale}
+            "tune": tune, "scale": scale, "robot_index": robot_index}
     if default_factory is not _MISSING:
         return dataclasses.field(default_factory=default_factory, metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
@@ -229,15 +232,17 @@ def build(cls: type[T], data: Mapping[str, Any], src: str, prefix: str = "") -> 
     return obj
 
 
-def check_robot_index(index: int, n: int, src: str, key: str) -> None:
-    """A robot index (``leader_index``, say) names one of the team's ``n`` robots.
+def check_robot_indices(params: Any, n: int, src: str, prefix: str) -> None:
+    """Every ``robot_index`` field of a built ``Params`` names one of the team's ``n`` robots.
 
     Raises:
-        ScenarioError: ``index >= n``.
+        ScenarioError: Naming ``prefix.<field>``: an index ``>= n``.
     """
-    if index >= n:
-        raise ScenarioError(src, key, f"is robot {index}, but the team has {n} robot(s) "
-                                      f"(0..{n - 1}; team.n)")
+    for f in dataclasses.fields(params):
+        index = getattr(params, f.name)
+        if f.metadata.get("robot_index") and index >= n:
+            raise ScenarioError(src, f"{prefix}.{f.name}", f"is robot {index}, but the team "
+                                                           f"has {n} robot(s) (0..{n - 1}; team.n)")
 
 
 def build_options(cls: type | None, options: Mapping[str, Any], src: str, key: str,

@@ -329,10 +329,17 @@ def _mutate(draw: Any, data: dict[str, Any]) -> None:
 @st.composite
 def mutated_bases(draw: Any) -> tuple[str, dict[str, Any]]:
     """A valid base scenario (by name) with one to three random edits."""
-    name = draw(st.sampled_from(sorted(BASES)))
-    data = copy.deepcopy(BASES[name][0])
-    for _ in range(draw(st.integers(1, 3))):
-        _mutate(draw, data)
+    return edited(draw, {name: base[0] for name, base in BASES.items()}, _mutate, 1)
+
+
+def edited(draw: Any, bases: dict[str, dict[str, Any]],
+           mutate: Callable[[Any, dict[str, Any]], None],
+           least: int) -> tuple[str, dict[str, Any]]:
+    """A copy of one of ``bases`` (drawn by name) with ``least`` to three ``mutate`` edits."""
+    name = draw(st.sampled_from(sorted(bases)))
+    data = copy.deepcopy(bases[name])
+    for _ in range(draw(st.integers(least, 3))):
+        mutate(draw, data)
     return name, data
 
 

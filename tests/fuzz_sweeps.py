@@ -30,7 +30,7 @@ from dfcoa_opt.bench.sweep import MAX_SEEDS, SweepSpec
 from dfcoa_opt.control.registry import available
 from dfcoa_opt.sim.schema import ScenarioSpec
 from tests.fuzz_schema import CONTROLLER_PARAMS, ROOT
-from tests.fuzz_strategies import ANY, KEY, TEXT, _unwrap, mutate_tree, typed
+from tests.fuzz_strategies import ANY, KEY, TEXT, _unwrap, edited, mutate_tree, typed
 
 try:
     import tomllib
@@ -135,11 +135,7 @@ def mutate_sweep(draw: Any, data: dict[str, Any]) -> None:
 @st.composite
 def mutated_sweeps(draw: Any) -> tuple[str, dict[str, Any]]:
     """A shipped sweep (by name) with one to three random edits."""
-    name = draw(st.sampled_from(sorted(SWEEP_BASES)))
-    data = copy.deepcopy(SWEEP_BASES[name])
-    for _ in range(draw(st.integers(1, 3))):
-        mutate_sweep(draw, data)
-    return name, data
+    return edited(draw, SWEEP_BASES, mutate_sweep, 1)
 
 
 # ------------------------------------------------- scenarios with overrides
@@ -214,11 +210,7 @@ SMALL_BASES = {name: small(data) for name, data in SWEEP_BASES.items()}
 @st.composite
 def small_sweeps(draw: Any) -> tuple[str, dict[str, Any]]:
     """A cut-down shipped sweep (:func:`small`) with zero to three random edits."""
-    name = draw(st.sampled_from(sorted(SMALL_BASES)))
-    data = copy.deepcopy(SMALL_BASES[name])
-    for _ in range(draw(st.integers(0, 3))):
-        mutate_sweep(draw, data)
-    return name, data
+    return edited(draw, SMALL_BASES, mutate_sweep, 0)
 
 
 # ----------------------------------------------------------------- files

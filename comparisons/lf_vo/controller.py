@@ -99,7 +99,7 @@ from comparisons.lf_vo.equations import (
 from comparisons.lf_vo.kernel import vo_clearance
 from dfcoa_opt.control.base import BatchedController, Observation, as_batch
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.params import check_robot_index, param
+from dfcoa_opt.params import param
 
 if TYPE_CHECKING:
     from dfcoa_opt.sim.scenario import Scenario
@@ -130,7 +130,8 @@ class LeaderFollowerVO(BatchedController):
         """Parameters of ``lf_vo`` (Table I for the speed limits)."""
 
         leader_index: int = param(0, doc="Robot index of the paper's leader robot (its slot "
-                                         "should be the formation apex).", ge=0)
+                                         "should be the formation apex).", ge=0,
+                                  robot_index=True)
         leader_v_max: float = param(0.5, doc="Leader robot's largest speed (Table I).",
                                     unit="m/s", gt=0.0)
         follower_v_max: float = param(0.65, doc="Followers' largest speed (Table I's 6.5 m/s "
@@ -183,10 +184,6 @@ class LeaderFollowerVO(BatchedController):
         kernel: Literal["numba", "numpy"] = param(
             "numba", doc="Clearance code: the numba kernel (comparisons.lf_vo.kernel) or the "
                          "numpy reference (rollout + path_clearance); same decisions.")
-
-        def check_team(self, n: int, src: str, key: str) -> None:
-            """``leader_index`` names a robot of the scenario's team of ``n``."""
-            check_robot_index(self.leader_index, n, src, f"{key}.leader_index")
 
     def __init__(self, params: Params) -> None:
         self.p = params

@@ -102,7 +102,7 @@ from comparisons.virtual_spring.kernels import (
 from dfcoa_opt.control.base import BatchedController, Observation, as_batch, slot_velocity
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.geometry import body_to_world, rotate
-from dfcoa_opt.params import check_robot_index, param
+from dfcoa_opt.params import param
 
 #: Below this broadcast speed the leader robot's heading is the virtual leader's, m/s.
 _STILL = 1e-3
@@ -129,7 +129,8 @@ class VirtualSpring(BatchedController):
         """Parameters of ``virtual_spring`` (the paper gives none of their values)."""
 
         leader_index: int = param(0, doc="Robot index of the paper's leader robot (slot offset "
-                                         "(0, 0)).", ge=0)
+                                         "(0, 0)).", ge=0,
+                                  robot_index=True)
         offset_frame: Literal["world", "leader"] = param(
             "world", doc="E_i = offsets[i] - offsets[leader_index] turned by the virtual "
                          "leader's start heading, then fixed world vectors (Table 1), or "
@@ -168,10 +169,6 @@ class VirtualSpring(BatchedController):
         obstacle_share: float = param(2.0, doc="Robot i's eq 17 change against a moving "
                                                "obstacle, in halves of |v_i - v_ck| (it does "
                                                "not take its half).", ge=0.0)
-
-        def check_team(self, n: int, src: str, key: str) -> None:
-            """``leader_index`` names a robot of the scenario's team of ``n``."""
-            check_robot_index(self.leader_index, n, src, f"{key}.leader_index")
 
     def __init__(self, params: Params) -> None:
         self.p = params

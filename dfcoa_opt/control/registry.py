@@ -36,7 +36,7 @@ from typing import Any, TypeVar
 
 from dfcoa_opt.control import plugins
 from dfcoa_opt.errors import DfcoaError, ScenarioError, UnknownNameError, did_you_mean
-from dfcoa_opt.params import Tunable, build, tunables
+from dfcoa_opt.params import Tunable, build, check_robot_indices, tunables
 
 ENTRY_POINT_GROUP = "dfcoa_opt.controllers"
 #: Controller ids ``policy:PATH`` name a policy file; its classes come from this module.
@@ -349,9 +349,8 @@ def check_overrides(controllers: Mapping[str, Mapping[str, Any]], source: str,
     Args:
         controllers: The tables, by controller or filter id.
         source: File name for messages.
-        team_size: The scenario's ``team.n``: a ``Params`` with a
-            ``check_team(n, src, key)`` method checks its values against it (a robot
-            index within the team, say). None skips that check.
+        team_size: The scenario's ``team.n``: every ``param(robot_index=True)`` field
+            must name one of its robots. None skips that check.
 
     Raises:
         ScenarioError: Unknown controller id or a bad key; a table of a policy
@@ -367,6 +366,5 @@ def check_overrides(controllers: Mapping[str, Mapping[str, Any]], source: str,
             raise ScenarioError(source, f"controllers.{cid}", "unknown controller or filter"
                                 + did_you_mean(cid, [*_REGISTRY, *_FILTERS]))
         params = build(cls.Params, dict(table), source, f"controllers.{cid}")
-        check_team = getattr(params, "check_team", None)
-        if team_size is not None and callable(check_team):
-            check_team(team_size, source, f"controllers.{cid}")
+        if team_size is not None:
+            check_robot_indices(params, team_size, source, f"controllers.{cid}")
