@@ -35,7 +35,7 @@ import numpy as np
 from benchmarks.timing import interleave, print_rows, row
 from dfcoa_opt.planning import postprocess
 from dfcoa_opt.planning.astar import AStarParams, obstacle_term, plan, search
-from dfcoa_opt.planning.astar_improved import ImprovedAStarParams, Task
+from dfcoa_opt.planning.improved_astar import ImprovedAStarParams, Task
 from dfcoa_opt.world.grid import OccupancyGrid
 
 SQRT2 = math.sqrt(2.0)
@@ -85,7 +85,7 @@ def heapq_astar(occ: list[list[bool]], start: tuple[int, int],
 
 def s1_grid() -> OccupancyGrid:
     """The dfcoa_s1 scenario's obstacles at 1 cell/m (35 x 35 cells)."""
-    from dfcoa_opt.sim.loader import read_toml, scenario_from_dict
+    from dfcoa_opt.scenario.loader import read_toml, scenario_from_dict
 
     path = sorted((ROOT / "scenarios").rglob("dfcoa_s1.toml"))[0]
     data = read_toml(path)

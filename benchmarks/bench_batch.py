@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.timing import REPS, print_rows, row
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.batch import BatchSimulator
-from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.simulator import batch_controllers
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 WARM_UP = """
 import time
 from dfcoa_opt.control.registry import available, build_controller
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.simulator import Simulator
 t0 = time.perf_counter()
 for name in available() + ["goto_slot+cbf", "goto_slot+orca"]:

@@ -1,4 +1,4 @@
-"""Benchmark: Monte Carlo localization (dfcoa_opt.localization.mcl) on the DFCOA S1 map.
+"""Benchmark: Monte Carlo localization (dfcoa_opt.sim.localization.mcl) on the DFCOA S1 map.
 
 Run ``python -m benchmarks.bench_mcl``. The true poses of a whole S1 run
 (``scenarios/dfcoa_s1.toml``, 4 robots, 120-beam LiDAR, ``goto_slot``) are
@@ -22,9 +22,9 @@ import numpy as np
 from benchmarks.bench_sim import scanning
 from benchmarks.timing import REPS, print_rows, row
 from dfcoa_opt.control.registry import make_controller
-from dfcoa_opt.localization import mcl_models
-from dfcoa_opt.localization.mcl import MonteCarloLocalization
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.scenario.loader import load_scenario
+from dfcoa_opt.sim.localization import mcl_models
+from dfcoa_opt.sim.localization.mcl import MonteCarloLocalization
 from dfcoa_opt.sim.simulator import Simulator
 from dfcoa_opt.world.lidar import Lidar
 
@@ -43,7 +43,7 @@ def s1_path() -> Path:
 
 def numpy_sensor_update(parts, w, ptr, upd, ex, ey, nvalid, table, outside, ox, oy, inv_h, amcl,
                         est):
-    """Reference: :func:`dfcoa_opt.localization.mcl_models.sensor_update` in vectorised numpy.
+    """Reference: :func:`dfcoa_opt.sim.localization.mcl_models.sensor_update` in vectorised numpy.
 
     Same arguments and in-place results (weights and estimates of robots ``upd``).
     """

@@ -35,7 +35,7 @@ import numpy as np
 
 from comparisons.nmpc import Nmpc, solve_time_stats
 from dfcoa_opt.control.registry import build_controller
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.simulator import Simulator
 
 ROOT = Path(__file__).resolve().parents[1]

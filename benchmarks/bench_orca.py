@@ -10,7 +10,7 @@ LP, numba); the reference is pyrvo's ``do_step`` (C++, single thread as built
 on PyPI). The preferred velocities are set outside the timed region for both.
 The main rows run ours on one thread too (``numba.set_num_threads(1)``), so
 thread for thread; the "all cores" rows give ours every numba thread that
-:mod:`dfcoa_opt.threads` lets a call of that size use on the machine's load
+:mod:`dfcoa_opt.core.runtime.threads` lets a call of that size use on the machine's load
 (one below 1000 agents or on a busy machine), and say so. The per-step pairs
 are split into :data:`~benchmarks.timing.REPS` blocks for the ratio's spread.
 """
@@ -45,7 +45,7 @@ def run() -> list[dict]:
             for n, radius in CASES:
                 ours, ref = _paired_steps(pyrvo, n, radius)
                 label = ("one thread" if threads == 1 else
-                         f"all cores ({threads} threads, as dfcoa_opt.threads allows)")
+                         f"all cores ({threads} threads, as dfcoa_opt.core.runtime.threads allows)")
                 rows.append(row(f"ORCA step, Circle N={n}, {label}", blocks(1e6 * ours),
                                 "pyrvo do_step (one thread)", blocks(1e6 * ref)))
         finally:

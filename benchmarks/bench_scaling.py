@@ -45,10 +45,10 @@ from benchmarks.scaling_memory import memory_child, peak_memory
 from benchmarks.scaling_report import median_ms, plot, print_summary, summarise, write_csv
 from benchmarks.scaling_scenario import DEFAULT_MODEL, model_of, open_scenario
 from dfcoa_opt.control.registry import available, make_controller
-from dfcoa_opt.environment import machine, versions
+from dfcoa_opt.core.runtime.provenance import machine, versions
+from dfcoa_opt.scenario.scenario import Scenario
 from dfcoa_opt.sim import neighbours as sim_neighbours
 from dfcoa_opt.sim import simulator as sim_module
-from dfcoa_opt.sim.scenario import Scenario
 from dfcoa_opt.sim.simulator import Simulator
 from dfcoa_opt.world import lidar as lidar_module
 

@@ -25,7 +25,7 @@ from benchmarks import (
     bench_vmas,
 )
 from benchmarks.timing import ratio_text
-from dfcoa_opt.environment import machine, versions
+from dfcoa_opt.core.runtime.provenance import machine, versions
 
 #: Targets from the issues (what, us). Matched by row-title prefix.
 TARGETS = {

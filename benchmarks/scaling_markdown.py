@@ -11,7 +11,7 @@ import numpy as np
 
 from benchmarks.scaling_report import TARGET_SLOPE, UPPER_FROM, Summary, fmt, loglog_slope
 from benchmarks.scaling_scenario import AREA_PER_ROBOT, DT, LEADER_SPEED, model_of
-from dfcoa_opt.environment import machine, versions
+from dfcoa_opt.core.runtime.provenance import machine, versions
 from dfcoa_opt.sim import neighbours as sim_neighbours
 from dfcoa_opt.world import lidar as lidar_module
 
@@ -271,7 +271,7 @@ def findings() -> list[str]:
         "robot-to-moving-obstacle distances and (N, M, 2) padded obstacle arrays every step: "
         "O(N M). Linear in N for a fixed crowd, O(N^2) if the crowd grows with the team "
         "(none in this open scenario).",
-        "`dfcoa_opt/sim/scenario.py:World.clearance` (called every step by the simulator) -- "
+        "`dfcoa_opt/scenario/scenario.py:World.clearance` (called every step by the simulator) -- "
         "one numba loop (`world/shape_clearance.py`) over every static circle and every "
         "polygon edge, with an even-odd test for the polygons whose box holds the robot: "
         "O(N (C + E)) per step, about 5 us for 4 robots in S1. "

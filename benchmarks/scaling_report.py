@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from benchmarks.scaling_scenario import model_of
-from dfcoa_opt.environment import machine
+from dfcoa_opt.core.runtime.provenance import machine
 
 if TYPE_CHECKING:
     from benchmarks.bench_scaling import Sample

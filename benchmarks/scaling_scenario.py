@@ -1,6 +1,6 @@
 """Scenario of the scaling study (:mod:`benchmarks.bench_scaling`): one per N and robot model.
 
-Built with :func:`dfcoa_opt.sim.loader.scenario_from_dict`: an open field without
+Built with :func:`dfcoa_opt.scenario.loader.scenario_from_dict`: an open field without
 obstacles whose area grows with N (:data:`AREA_PER_ROBOT` m^2 per robot, square), a
 grid formation (1 m spacing, ``ceil(sqrt(N))`` columns) around a virtual leader on a
 straight line along +x at 0.35 m/s, 8 nearest neighbours within 5 m, and a small
@@ -13,8 +13,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from dfcoa_opt.sim.loader import scenario_from_dict
-from dfcoa_opt.sim.scenario import Scenario
+from dfcoa_opt.scenario.loader import scenario_from_dict
+from dfcoa_opt.scenario.scenario import Scenario
 
 #: Field area per robot, m^2 (constant density: the square field's side is sqrt(area * N)).
 AREA_PER_ROBOT = 16.0

@@ -11,7 +11,7 @@ The module paths of release 0.1 (``comparisons.lf_vo_core``, ...) still import,
 with a :class:`DeprecationWarning` naming the new path, until 0.3.
 """
 
-from dfcoa_opt.moved import keep_old_paths
+from dfcoa_opt.core.moved import keep_old_paths
 
 #: Module paths of release 0.1 -> their homes since 0.2.
 MOVED = {

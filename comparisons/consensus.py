@@ -77,9 +77,9 @@ from dfcoa_opt.control.base import (
     slot_velocity,
 )
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.geometry import body_to_world
-from dfcoa_opt.params import param
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.core.geometry import body_to_world
+from dfcoa_opt.core.params import param
 
 #: Below this distance to its slot (m), eq 17's direction is undefined: v_pref = 0.
 PREF_EPS = 1e-9

@@ -20,13 +20,13 @@ controller").
 import importlib.util as _util
 from pathlib import Path as _Path
 
-from dfcoa_opt import dispatch as _dispatch
+from dfcoa_opt.core.runtime import dispatch as _dispatch
 
 # before anything imports numpy: the same SIMD loops, so the same bits, on every x86-64
-# machine (dfcoa_opt/dispatch.py; DFCOA_SIMD_CAP=native turns it off)
+# machine (dfcoa_opt/core/runtime/dispatch.py; DFCOA_SIMD_CAP=native turns it off)
 _dispatch.pin()
 
-from dfcoa_opt.kernel_cache import refresh as _refresh_kernel_cache  # noqa: E402
+from dfcoa_opt.core.runtime.kernel_cache import refresh as _refresh_kernel_cache  # noqa: E402
 
 # before any kernel runs: numba's cache would keep code of edited modules a kernel imports
 _spec = _util.find_spec("comparisons")

@@ -15,9 +15,9 @@ import::
     res.report()                  # report.md, paired statistics and figures
 
 The facade calls the same code as the ``dfcoa`` command line
-(:func:`~dfcoa_opt.sim.loader.load_scenario`,
+(:func:`~dfcoa_opt.scenario.loader.load_scenario`,
 :class:`~dfcoa_opt.sim.simulator.Simulator`, :func:`~dfcoa_opt.metrics.summary`,
-:mod:`~dfcoa_opt.plotting`), so a run from Python gives the same numbers, bit
+:mod:`~dfcoa_opt.viz.plotting`), so a run from Python gives the same numbers, bit
 for bit, as ``dfcoa run`` with the same scenario, controller and seed.
 """
 
@@ -31,13 +31,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.core.errors import DfcoaError
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
+    from dfcoa_opt.scenario.scenario import Scenario
     from dfcoa_opt.sim.log import RunLog
-    from dfcoa_opt.sim.scenario import Scenario
 
 __all__ = ["Results", "Run", "controllers", "load", "register", "report", "run", "run_batch",
            "sweep"]
@@ -56,7 +56,7 @@ def load(path: str | Path, *, seed: int | None = None,
             ``load(path, t_max=30, leader__speed=0.4)``.
 
     Returns:
-        The :class:`~dfcoa_opt.sim.scenario.Scenario`.
+        The :class:`~dfcoa_opt.scenario.scenario.Scenario`.
 
     Raises:
         ScenarioError: A bad file or key, in one line naming the file, the key
@@ -68,7 +68,7 @@ def load(path: str | Path, *, seed: int | None = None,
         >>> s.spec.t_max
         20.0
     """
-    from dfcoa_opt.sim.loader import load_scenario
+    from dfcoa_opt.scenario.loader import load_scenario
 
     merged = {**dict(overrides or {}), **{k.replace("__", "."): v for k, v in keys.items()}}
     return load_scenario(path, seed, merged or None)
@@ -222,8 +222,8 @@ class Run:
         Returns:
             The matplotlib ``Figure`` (shown inline in a notebook).
         """
-        from dfcoa_opt import plotting
-        from dfcoa_opt.bench.plots import save_png
+        from dfcoa_opt.bench.report.plots import save_png
+        from dfcoa_opt.viz import plotting
 
         sc = self.scenario
         fig = plotting.run_figure(self.log, sc.world.grid, sc.spec.leader.goal,
@@ -247,7 +247,7 @@ class Run:
         Raises:
             DfcoaError: ``path`` does not end in ``.gif``.
         """
-        from dfcoa_opt import animation
+        from dfcoa_opt.viz import animation
 
         if not str(path).lower().endswith(".gif"):
             raise DfcoaError(f"animate: '{path}' must end in .gif")
@@ -318,7 +318,7 @@ def sweep(spec: str | Path | Mapping[str, Any], out: str | Path | None = None, *
     """
     from dfcoa_opt.bench.executors import ExecutorConfig
     from dfcoa_opt.bench.harness import default_folder, run_sweep
-    from dfcoa_opt.bench.sweep import load_sweep, sweep_from_dict
+    from dfcoa_opt.bench.sweep.expand import load_sweep, sweep_from_dict
     from dfcoa_opt.control.registry import known_to_workers
 
     if isinstance(spec, Mapping):
@@ -354,7 +354,7 @@ def report(results: str | Path | Results, out: str | Path | None = None,
         >>> d.report("results/examples")[0].name      # after d.sweep(..., "results/examples")
         'report.md'
     """
-    from dfcoa_opt.bench.report import make_report
+    from dfcoa_opt.bench.report.document import make_report
 
     folder = results.folder if isinstance(results, Results) else Path(results)
     return make_report(folder, out, baseline=baseline)
@@ -373,7 +373,7 @@ class Results:
     @property
     def rows(self) -> list[dict[str, Any]]:
         """One dict per run: its keys (``scenario``, ``variant``, ``seed``, ...), its metrics."""
-        from dfcoa_opt.bench.store import CSV_FIELDS, ResultsStore
+        from dfcoa_opt.bench.results.store import CSV_FIELDS, ResultsStore
 
         out = []
         for r in ResultsStore(self.folder).rows():
@@ -400,7 +400,7 @@ class Results:
         Raises:
             DfcoaError: No such run in the folder, naming what is there.
         """
-        from dfcoa_opt.bench.store import ResultsStore
+        from dfcoa_opt.bench.results.store import ResultsStore
         from dfcoa_opt.sim.log import RunLog
 
         rows = ResultsStore(self.folder).rows()

@@ -1,7 +1,7 @@
 """Griffe extension: Sphinx roles in docstrings become cross-references in the API pages.
 
 The docstrings of ``dfcoa_opt`` and ``comparisons`` name other objects with Sphinx roles,
-e.g. ``:class:`Observation``` or ``:func:`~dfcoa_opt.sim.loader.load_scenario```.
+e.g. ``:class:`Observation``` or ``:func:`~dfcoa_opt.scenario.loader.load_scenario```.
 mkdocstrings renders Markdown, where such a role would show as raw markup. Once a package
 is loaded, this extension rewrites every role of its docstrings into a mkdocs-autorefs
 cross-reference:
@@ -9,7 +9,7 @@ cross-reference:
 - the target is resolved the way Python would see the name from the documented object:
   its own members, then its parents' (a class, its module, with the module's imports),
   so ``Observation`` in ``dfcoa_opt.api`` is ``dfcoa_opt.control.base.Observation``; a
-  dotted target (``dfcoa_opt.sim.loader.load_scenario``, ``Grid.inflate``) resolves its
+  dotted target (``dfcoa_opt.scenario.loader.load_scenario``, ``Grid.inflate``) resolves its
   first name the same way, and a re-export is followed to the object it names;
 - the reference is an *optional* autoref: a link where the target is rendered somewhere on
   the site, the plain code name where it is not (a private helper, the standard library);
@@ -86,7 +86,7 @@ def resolve_target(obj: Object, target: str, loader: GriffeLoader) -> str | None
     except _LOOKUP_ERRORS:
         if not rest:
             return None
-        path = first  # an absolute path such as dfcoa_opt.sim.loader.load_scenario
+        path = first  # an absolute path such as dfcoa_opt.scenario.loader.load_scenario
     full = f"{path}.{rest}" if rest else path
     return _canonical(full, loader)
 

@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def _params_page() -> str:
     import dfcoa_opt  # noqa: F401 - first: pins numpy's SIMD dispatch
     from dfcoa_opt.control import registry
-    from dfcoa_opt.params import describe, tunables
+    from dfcoa_opt.core.params import describe, tunables
 
     out = ["# Controller parameters", "",
            "Every registered controller's and safety filter's parameters: the keys of a "
@@ -55,7 +55,7 @@ def _params_page() -> str:
     return "\n".join(out)
 
 
-def _range(t) -> str:  # noqa: ANN001 - a dfcoa_opt.params.Tunable
+def _range(t) -> str:  # noqa: ANN001 - a dfcoa_opt.core.params.Tunable
     if t.kind == "bool":
         return f"`{t.key}` false or true"
     return f"`{t.key}` [{t.low:g}, {t.high:g}]" + (" (log)" if t.scale == "log" else "")
@@ -63,7 +63,7 @@ def _range(t) -> str:  # noqa: ANN001 - a dfcoa_opt.params.Tunable
 
 def _families_page() -> str:
     import dfcoa_opt  # noqa: F401 - first: pins numpy's SIMD dispatch
-    from dfcoa_opt.params import describe
+    from dfcoa_opt.core.params import describe
     from dfcoa_opt.world import generate
 
     out = ["# World families", "",

@@ -44,11 +44,11 @@ def all_numba_threads(monkeypatch) -> int:
     """Every thread numba has (``NUMBA_NUM_THREADS``); skips the test when that is one.
 
     The kernels then get every thread they are given, whatever their size and the
-    machine's load (``dfcoa_opt.threads`` would otherwise keep small calls on one).
+    machine's load (``dfcoa_opt.core.runtime.threads`` would otherwise keep small calls on one).
     """
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("numba has one thread here: no thread count to compare")
-    from dfcoa_opt import threads
+    from dfcoa_opt.core.runtime import threads
 
     monkeypatch.setattr(threads, "PARALLEL_MIN_ROWS", 0)
     monkeypatch.setattr(threads, "free_cores", lambda: numba.config.NUMBA_NUM_THREADS)

@@ -15,11 +15,11 @@ from pathlib import Path
 from typing import Any, Literal, get_args, get_origin, get_type_hints
 
 from dfcoa_opt.control.registry import available, available_filters, controller_class
-from dfcoa_opt.localization import estimator_names
-from dfcoa_opt.localization.mcl import MonteCarloLocalization
-from dfcoa_opt.planning.astar_improved import ImprovedAStarParams
+from dfcoa_opt.planning.improved_astar import ImprovedAStarParams
 from dfcoa_opt.planning.registry import planner_names
-from dfcoa_opt.sim.schema import ScenarioSpec
+from dfcoa_opt.scenario.schema import ScenarioSpec
+from dfcoa_opt.sim.localization import estimator_names
+from dfcoa_opt.sim.localization.mcl import MonteCarloLocalization
 
 ROOT = Path(__file__).resolve().parents[1]
 

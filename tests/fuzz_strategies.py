@@ -21,9 +21,9 @@ from hypothesis import currently_in_test_context
 from hypothesis import event as _event
 from hypothesis import strategies as st
 
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.sim.scenario import Scenario
-from dfcoa_opt.sim.schema import ScenarioSpec
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.scenario.scenario import Scenario
+from dfcoa_opt.scenario.schema import ScenarioSpec
 
 try:
     import tomllib

@@ -26,9 +26,9 @@ from typing import Any, get_args, get_origin, get_type_hints
 
 from hypothesis import strategies as st
 
-from dfcoa_opt.bench.sweep import MAX_SEEDS, SweepSpec
+from dfcoa_opt.bench.sweep.expand import MAX_SEEDS, SweepSpec
 from dfcoa_opt.control.registry import available
-from dfcoa_opt.sim.schema import ScenarioSpec
+from dfcoa_opt.scenario.schema import ScenarioSpec
 from tests.fuzz_schema import CONTROLLER_PARAMS, ROOT
 from tests.fuzz_strategies import ANY, KEY, TEXT, _unwrap, edited, mutate_tree, typed
 
@@ -148,7 +148,7 @@ def overridden_bases(draw: Any, controller: str = "") -> tuple[str, dict[str, An
     (``"goto_slot+cbf"``: goto_slot's and cbf's) are drawn as often as the other keys.
 
     Returns ``(base name, data, overrides)``; the overrides are not applied yet
-    (:func:`~dfcoa_opt.sim.loader.apply_overrides` refuses an index beyond an array).
+    (:func:`~dfcoa_opt.scenario.loader.apply_overrides` refuses an index beyond an array).
     """
     from tests.fuzz_strategies import BASES
 

@@ -10,7 +10,7 @@ import comparisons.nmpc.compiled as nmpc_compiled
 import comparisons.nmpc.problem as nmpc_problem
 from dfcoa_opt.control.base import MovingObstacles, Observation
 from dfcoa_opt.control.registry import make_controller
-from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.scenario.loader import scenario_from_dict
 from tests.helpers import neighbours_from_lists
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -16,11 +16,11 @@ import pytest
 
 import dfcoa_opt as d
 from dfcoa_opt.cli import main
-from dfcoa_opt.errors import DfcoaError, RunFailed
-from dfcoa_opt.robots.models import make_model
-from dfcoa_opt.sim import budget
-from dfcoa_opt.sim.checks import MAX_CELLS
+from dfcoa_opt.core.errors import DfcoaError, RunFailed
+from dfcoa_opt.scenario import budget
+from dfcoa_opt.scenario.checks import MAX_CELLS
 from dfcoa_opt.sim.simulator import Simulator
+from dfcoa_opt.world.robots.models import make_model
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "scenarios" / "example_obstacles.toml"
@@ -157,7 +157,7 @@ def test_a_missing_policy_names_the_scenario_and_key(tmp_path, capsys):
 
 def test_a_long_scenario_name_runs_under_a_shortened_file_name(tmp_path, capsys):
     """A 250-character name is legitimate: the run's files get a stable, shorter stem."""
-    from dfcoa_opt.bench.sweep import NAME_MAX
+    from dfcoa_opt.bench.sweep.expand import NAME_MAX
 
     (tmp_path / "s.toml").write_text(f'name = "{"n" * 250}"\n' + SCENARIO.read_text())
     out = tmp_path / "out"
@@ -170,7 +170,7 @@ def test_a_long_scenario_name_runs_under_a_shortened_file_name(tmp_path, capsys)
 
 
 def test_counts_show_their_bounds_in_the_key_reference():
-    from dfcoa_opt.sim.docs import schema_markdown
+    from dfcoa_opt.scenario.reference import schema_markdown
 
     text = schema_markdown()
     assert "| `sensors.lidar.beams` |" in text

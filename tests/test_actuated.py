@@ -1,4 +1,4 @@
-"""Actuated differential drive (dfcoa_opt.robots.actuated) against closed forms."""
+"""Actuated differential drive (dfcoa_opt.world.robots.actuated) against closed forms."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from dfcoa_opt.robots.models import ActuatedUnicycle, RobotState, Unicycle, make_model
-from dfcoa_opt.sim.schema import RobotSpec
+from dfcoa_opt.scenario.schema import RobotSpec
+from dfcoa_opt.world.robots.models import ActuatedUnicycle, RobotState, Unicycle, make_model
 
 R, D = 0.05, 0.3  # wheel radius and track, m
 

@@ -7,11 +7,11 @@ import pytest
 
 import dfcoa_opt as d
 from dfcoa_opt.cli import main
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.robots.models import ActuatedUnicycle, Unicycle
-from dfcoa_opt.robots.profiles import PROFILES
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.batch import BatchSimulator
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.world.robots.models import ActuatedUnicycle, Unicycle
+from dfcoa_opt.world.robots.profiles import PROFILES
 
 SCEN = "scenarios/example_obstacles.toml"
 

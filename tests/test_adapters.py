@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from dfcoa_opt.control.adapters import convert, velocity_to_unicycle
-from dfcoa_opt.robots.models import DoubleIntegrator, RobotState, SingleIntegrator, Unicycle
-from dfcoa_opt.sim.schema import RobotSpec
+from dfcoa_opt.scenario.schema import RobotSpec
+from dfcoa_opt.world.robots.models import DoubleIntegrator, RobotState, SingleIntegrator, Unicycle
 
 POSE = np.array([[0.0, 0.0, 0.3], [1.0, 2.0, -2.0]])
 VEL = np.array([[0.1, 0.0], [0.0, -0.2]])

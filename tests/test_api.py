@@ -11,8 +11,8 @@ import pytest
 from matplotlib.figure import Figure
 
 import dfcoa_opt as d
-from dfcoa_opt.errors import DfcoaError, ScenarioError, UnknownNameError
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.core.errors import DfcoaError, ScenarioError, UnknownNameError
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.simulator import run_scenario
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -10,10 +10,10 @@ import math
 import numpy as np
 import pytest
 
-from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.planning import postprocess
 from dfcoa_opt.planning.astar import AStarParams, plan, search
-from dfcoa_opt.planning.astar_improved import (
+from dfcoa_opt.planning.improved_astar import (
     PAPER_CLAIMS,
     ImprovedAStarParams,
     compare_planners,
@@ -23,7 +23,7 @@ from dfcoa_opt.planning.astar_improved import (
     random_tasks,
 )
 from dfcoa_opt.planning.registry import get_planner, planner_names
-from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.scenario.loader import scenario_from_dict
 from dfcoa_opt.world.grid import OccupancyGrid
 from tests.astar_oracles import (
     MOVINGAI,

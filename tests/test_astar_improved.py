@@ -10,7 +10,7 @@ import pytest
 
 from dfcoa_opt.planning import postprocess
 from dfcoa_opt.planning.astar import AStarParams, obstacle_term, plan, search
-from dfcoa_opt.planning.astar_improved import (
+from dfcoa_opt.planning.improved_astar import (
     ImprovedAStarParams,
     random_map,
 )

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.sim.loader import load_scenario, scenario_from_dict
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.scenario.loader import load_scenario, scenario_from_dict
 
 CORPUS = Path(__file__).parent / "data" / "bad_scenarios"
 FILES = sorted(CORPUS.glob("*.toml"))

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import dfcoa_opt as d
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.core.errors import DfcoaError
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.batch import BatchSimulator
-from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.simulator import Simulator, run_batch_logs, run_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -169,7 +169,7 @@ def test_a_batched_centralized_cbf_solves_each_run_apart():
                          ids=lambda p: p.stem)
 def test_one_batched_mcl_estimator_gives_each_run_its_single_run_estimates(path):
     """dfcoa with MCL, 3 runs: one estimator for the batch (clutter: a map per run)."""
-    from dfcoa_opt.localization import make_estimators
+    from dfcoa_opt.sim.localization import make_estimators
 
     overrides = {"t_max": 3.0, "localization": "mcl"}
     sc = load_scenario(path, 0, overrides)

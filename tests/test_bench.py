@@ -16,16 +16,16 @@ import numpy as np
 import pytest
 
 import dfcoa_opt
-from dfcoa_opt.bench import store
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
+from dfcoa_opt.bench.results import store
 from dfcoa_opt.bench.runner import DETERMINISTIC_KEYS, execute
-from dfcoa_opt.bench.sweep import RunSpec, canonical, load_sweep
+from dfcoa_opt.bench.sweep.expand import RunSpec, canonical, load_sweep
 from dfcoa_opt.cli import main
 from dfcoa_opt.control import registry
-from dfcoa_opt.errors import DfcoaError, ScenarioError
-from dfcoa_opt.params import param
-from dfcoa_opt.sim.loader import apply_overrides
+from dfcoa_opt.core.errors import DfcoaError, ScenarioError
+from dfcoa_opt.core.params import param
+from dfcoa_opt.scenario.loader import apply_overrides
 
 DATA = Path(__file__).parent / "data" / "bench"
 TINY = DATA / "tiny.toml"
@@ -231,10 +231,10 @@ def test_sigkill_midway_then_resume_loses_and_duplicates_nothing(tmp_path):
 def test_atomic_write_killed_mid_write_leaves_the_old_or_the_new_file_whole(tmp_path):
     """A writer SIGKILLed while rewriting a 16 MB file: the target is one whole version,
     and the partial file it leaves is hidden and removed by ``remove_partials``."""
-    from dfcoa_opt.atomic import remove_partials
+    from dfcoa_opt.core.atomic import remove_partials
 
     target, size = tmp_path / "big.csv", 16 * 2**20
-    code = ("import sys, itertools\nfrom dfcoa_opt.atomic import atomic_write\n"
+    code = ("import sys, itertools\nfrom dfcoa_opt.core.atomic import atomic_write\n"
             f"for k in itertools.count():\n    atomic_write({str(target)!r}, bytes([97 + k % 2]) "
             f"* {size})\n    print(k, flush=True)\n")
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
@@ -363,7 +363,7 @@ def test_process_pool_survives_a_parent_that_ran_parallel_numba(tmp_path):
     script = f"""
 from comparisons.orca.crowd import OrcaCrowd, circle_positions
 import dfcoa_opt
-from dfcoa_opt.bench import store
+from dfcoa_opt.bench.results import store
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
 crowd = OrcaCrowd(circle_positions(50, 40.0))
@@ -386,7 +386,7 @@ def test_runs_never_import_the_sources_left_out_of_the_fingerprint(tmp_path):
                      '[grid]\nt_max = [0.3]\n')
     code = ("import sys, json\n"
             "from dfcoa_opt.bench.runner import execute\n"
-            "from dfcoa_opt.bench.sweep import load_sweep\n"
+            "from dfcoa_opt.bench.sweep.expand import load_sweep\n"
             f"runs = load_sweep({str(sweep)!r}).runs\n"
             "bad = [o.row['error'] for o in map(execute, runs) if o.row['status'] != 'ok']\n"
             "mods = [m.__file__ for m in list(sys.modules.values())\n"
@@ -402,7 +402,7 @@ def test_runs_never_import_the_sources_left_out_of_the_fingerprint(tmp_path):
     assert "dfcoa_opt/sim/simulator.py" in used  # the check sees the run's modules
     assert [u for u in used if store.outside_fingerprint(u)] == []
     assert store.outside_fingerprint("dfcoa_opt/bench/recipes/ladders.py")
-    assert store.outside_fingerprint("dfcoa_opt/bench/store.py")
+    assert store.outside_fingerprint("dfcoa_opt/bench/results/store.py")
     assert not store.outside_fingerprint("dfcoa_opt/bench/runner.py")
 
 

@@ -1,4 +1,4 @@
-"""The result cache keys on each controller's own code (dfcoa_opt.bench.store.code_fingerprint).
+"""The result cache keys on each controller's own code (dfcoa_opt.bench.results.store.code_fingerprint).
 
 Edits are simulated by changing what the fingerprint reads for a source file
 (``store._read_source``); the sources on disk are never touched.
@@ -15,12 +15,12 @@ import pytest
 
 import comparisons
 import dfcoa_opt
-from dfcoa_opt.bench import store
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
-from dfcoa_opt.bench.sweep import load_sweep
+from dfcoa_opt.bench.results import store
+from dfcoa_opt.bench.sweep.expand import load_sweep
 from dfcoa_opt.control import registry
-from dfcoa_opt.kernel_cache import module_files
+from dfcoa_opt.core.runtime.kernel_cache import module_files
 
 TINY = Path(__file__).parent / "data" / "bench" / "tiny.toml"
 IDS = ("goto_slot", "lf_vo", "dfcoa", "orca_nav", "goto_slot+cbf", "reshape")
@@ -115,14 +115,14 @@ def test_the_sources_of_each_fingerprint():
     # the simulator, the run path of the harness, scenario loading, planners and
     # localization, the registry and the controller interfaces: every run
     assert {BATCH, "dfcoa_opt/sim/simulator.py", "dfcoa_opt/bench/runner.py",
-            "dfcoa_opt/sim/loader.py", "dfcoa_opt/planning/astar.py",
-            "dfcoa_opt/localization/mcl.py",
+            "dfcoa_opt/scenario/loader.py", "dfcoa_opt/planning/astar.py",
+            "dfcoa_opt/sim/localization/mcl.py",
             "dfcoa_opt/control/registry.py", "dfcoa_opt/control/base.py"} <= core
     assert not any(s.startswith("comparisons/") for s in core)
     # the rest of dfcoa_opt is core too: only controller modules of dfcoa_opt/control/ differ
-    controls = {"dfcoa_opt/control/goto_slot.py", "dfcoa_opt/control/dfcoa.py",
-                "dfcoa_opt/control/vfh.py", "dfcoa_opt/control/vfh_star.py",
-                "dfcoa_opt/control/formation_law.py"}
+    controls = {"dfcoa_opt/control/goto_slot.py", "dfcoa_opt/control/dfcoa/controller.py",
+                "dfcoa_opt/control/dfcoa/histogram.py", "dfcoa_opt/control/dfcoa/vfh_star.py",
+                "dfcoa_opt/control/dfcoa/formation_law.py"}
     own = {s for s in everything if s.startswith("dfcoa_opt/")}
     assert controls <= own - core and all(s.startswith("dfcoa_opt/control/") for s in own - core)
     assert not any(store.outside_fingerprint(s) for s in everything)
@@ -168,7 +168,7 @@ def test_editing_the_cbf_filter_changes_its_users_only(edit):
 
 def test_editing_a_dfcoa_opt_control_module(edit):
     before = fingerprints()
-    edit("dfcoa_opt/control/vfh.py", code_edit)
+    edit("dfcoa_opt/control/dfcoa/histogram.py", code_edit)
     assert changed(before, fingerprints()) == {"dfcoa"}
     edit(GOTO_SLOT, code_edit)
     assert changed(before, fingerprints()) == {"dfcoa", "goto_slot", "goto_slot+cbf"}
@@ -183,14 +183,14 @@ def test_editing_the_simulator_changes_every_fingerprint(edit):
 def test_docstring_and_comment_edits_change_nothing(edit):
     before = fingerprints()
     everything = store.code_fingerprint()
-    for rel in (LF_VO_KERNEL, CBF_FILTER, BATCH, GOTO_SLOT, "dfcoa_opt/control/dfcoa.py"):
+    for rel in (LF_VO_KERNEL, CBF_FILTER, BATCH, GOTO_SLOT, "dfcoa_opt/control/dfcoa/controller.py"):
         edit(rel, docstring_edit)
     assert fingerprints() == before
     assert store.code_fingerprint() == everything
 
 
 def test_an_import_by_an_old_module_name_is_followed(edit):
-    """``comparisons.lf_vo_core`` moved to ``comparisons.lf_vo.equations`` (dfcoa_opt.moved)."""
+    """``comparisons.lf_vo_core`` moved to ``comparisons.lf_vo.equations`` (dfcoa_opt.core.moved)."""
     edit(GOTO_SLOT, lambda t: t + "\n\ndef _old():\n    from comparisons.lf_vo_core import x\n")
     assert "comparisons/lf_vo/equations.py" in store.fingerprint_sources("goto_slot")
     before = fingerprints()

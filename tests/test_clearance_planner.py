@@ -65,8 +65,8 @@ def test_shortcuts_keep_the_clearance_of_what_they_replace() -> None:
 
 
 def test_bad_options() -> None:
-    from dfcoa_opt.errors import ScenarioError
-    from dfcoa_opt.params import build
+    from dfcoa_opt.core.errors import ScenarioError
+    from dfcoa_opt.core.params import build
 
     with pytest.raises(ScenarioError, match=r"clearance: \(0\.2 m\) must exceed inflate"):
         build(ClearanceParams, {"clearance": 0.2}, "f.toml", "leader.planner_options")

@@ -56,7 +56,7 @@ def test_plot_and_animate(tmp_path, capsys):
 
 
 def test_run_summary_names_the_contact_time():
-    from dfcoa_opt.cli_text import run_summary
+    from dfcoa_opt.cli.text import run_summary
 
     summary = {"outcome": "collision", "reached": False, "first_contact_time": 12.3,
                "deadlock_time": float("nan"), "fce_rms": 0.25, "time_to_goal": float("nan"),

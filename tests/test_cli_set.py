@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dfcoa_opt.cli import _overrides, main, parse_set_value
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.sim.log import RunLog
 
 ROOT = Path(__file__).resolve().parents[1]

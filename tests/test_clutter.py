@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from dfcoa_opt.control.registry import make_controller
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.scenario.loader import scenario_from_dict
 from dfcoa_opt.sim.simulator import Simulator
 from dfcoa_opt.world.clutter import random_discs
 from dfcoa_opt.world.shapes import Circle

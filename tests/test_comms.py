@@ -10,7 +10,7 @@ import pytest
 
 import dfcoa_opt as d
 from dfcoa_opt.control.base import BatchedController, as_batch
-from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.scenario.loader import scenario_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Digests of 3 controllers x the 7 common scenarios (seed 0, t_max 15 s), computed by the

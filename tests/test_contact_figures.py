@@ -13,9 +13,11 @@ from matplotlib.patches import Circle as CirclePatch
 from PIL import Image
 from test_plotting import make_grid, make_log
 
-from dfcoa_opt import animation, contacts, figure_layout, outcome, plotting
+from dfcoa_opt.metrics import contacts, outcome
+from dfcoa_opt.scenario.schema import MetricSpec
 from dfcoa_opt.sim.log import RunLog
-from dfcoa_opt.sim.schema import MetricSpec
+from dfcoa_opt.viz import animation, plotting
+from dfcoa_opt.viz import layout as figure_layout
 from dfcoa_opt.world.grid import OccupancyGrid
 
 K = 10  # the step of the first contact

@@ -7,7 +7,7 @@ import pytest
 
 from dfcoa_opt import metrics
 from dfcoa_opt.control.registry import make_controller
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.simulator import Simulator, run_scenario
 from tests.helpers import Capture
 
@@ -31,7 +31,7 @@ def test_rows_depend_only_on_their_own_observation():
 
 
 def test_without_avoidance_it_is_the_formation_law():
-    from dfcoa_opt.control.formation_law import formation_tracking_law
+    from dfcoa_opt.control.dfcoa.formation_law import formation_tracking_law
 
     sc = load_scenario(SCENARIOS / "dfcoa_s2.toml", overrides={"t_max": 3.0})
     cap = Capture(make_controller("dfcoa", {"avoidance": False}))

@@ -20,13 +20,13 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 from pettingzoo.test.state_test import test_parallel_env as parallel_state_test
 
 from dfcoa_opt.control.adapters import convert
+from dfcoa_opt.control.features import ObservationSpec
 from dfcoa_opt.control.registry import make_controller
+from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.envs import OUTCOME_CODES, OUTCOME_NAMES, RewardSpec, parallel_env, vector_env
-from dfcoa_opt.envs.observation import ObservationSpec
 from dfcoa_opt.envs.rewards import path_arc_length
-from dfcoa_opt.errors import DfcoaError
 from dfcoa_opt.metrics import formation_centroid_error, formation_shape_error, summary
-from dfcoa_opt.outcome import formation_progress, leader_path
+from dfcoa_opt.metrics.outcome import formation_progress, leader_path
 from dfcoa_opt.planning.pure_pursuit import PurePursuit
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -19,9 +19,9 @@ from tensordict import TensorDict  # noqa: E402
 from torchrl.envs import GymWrapper, PettingZooWrapper  # noqa: E402
 from torchrl.envs.utils import check_env_specs  # noqa: E402
 
+from dfcoa_opt.control.features import ObservationSpec  # noqa: E402
+from dfcoa_opt.core.errors import DfcoaError  # noqa: E402
 from dfcoa_opt.envs import OUTCOME_CODES, parallel_env, torchrl_env, vector_env  # noqa: E402
-from dfcoa_opt.envs.observation import ObservationSpec  # noqa: E402
-from dfcoa_opt.errors import DfcoaError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OPEN = ROOT / "scenarios" / "envs" / "open_4.toml"

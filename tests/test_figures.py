@@ -5,8 +5,8 @@ from pathlib import Path
 
 from dfcoa_opt.bench import recipes as registry
 from dfcoa_opt.bench.executors import ExecutorConfig
+from dfcoa_opt.bench.figures import make_figures
 from dfcoa_opt.cli import main
-from dfcoa_opt.figures import make_figures
 from dfcoa_opt.sim.log import is_compact, is_pruned
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"

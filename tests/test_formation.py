@@ -2,7 +2,7 @@ import math
 
 import numpy as np
 
-from dfcoa_opt.formation import (
+from dfcoa_opt.scenario.formation import (
     formation_offsets,
     grid_offsets,
     line_offsets,
@@ -11,7 +11,7 @@ from dfcoa_opt.formation import (
     slot_positions,
     v_offsets,
 )
-from dfcoa_opt.sim.schema import FormationSpec
+from dfcoa_opt.scenario.schema import FormationSpec
 
 
 def test_rectangle_eq3():

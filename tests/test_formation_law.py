@@ -3,15 +3,15 @@
 import numpy as np
 import pytest
 
-from dfcoa_opt.control.formation_law import (
+from dfcoa_opt.control.dfcoa.formation_law import (
     formation_errors,
     formation_tracking_law,
     formation_tracking_law_fast,
     pose_error,
     tracking_point_coordinates,
 )
-from dfcoa_opt.formation import polar_offsets, rectangle_offsets
-from dfcoa_opt.robots.models import integrate_unicycle
+from dfcoa_opt.scenario.formation import polar_offsets, rectangle_offsets
+from dfcoa_opt.world.robots.models import integrate_unicycle
 
 
 def _simulate(k1, k2, d, v_l, w_l, t_end, dt=1e-3):

@@ -1,8 +1,8 @@
-"""Hypothesis fuzzing of the scenario loader (:mod:`dfcoa_opt.sim.loader`).
+"""Hypothesis fuzzing of the scenario loader (:mod:`dfcoa_opt.scenario.loader`).
 
 Whatever a scenario dict or file holds, the loader returns a
-:class:`~dfcoa_opt.sim.scenario.Scenario` or raises
-:class:`~dfcoa_opt.errors.ScenarioError` whose text is one line starting with
+:class:`~dfcoa_opt.scenario.scenario.Scenario` or raises
+:class:`~dfcoa_opt.core.errors.ScenarioError` whose text is one line starting with
 ``"<file>: "``; no other exception may escape (the CLI prints a ScenarioError
 as it is and exits with code 2, anything else is a traceback).
 
@@ -42,8 +42,8 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from dfcoa_opt.sim.loader import load_scenario, scenario_from_dict
-from dfcoa_opt.sim.scenario import Scenario
+from dfcoa_opt.scenario.loader import load_scenario, scenario_from_dict
+from dfcoa_opt.scenario.scenario import Scenario
 from tests.fuzz_schema import too_costly
 from tests.fuzz_strategies import (
     BASES,

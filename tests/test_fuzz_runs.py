@@ -15,8 +15,8 @@ is loaded; if it loads, it is run with a controller drawn from
 of its ``dt`` (``t_max`` capped on the loaded spec) and a drawn seed. The run
 returns a log whose time, pose, estimate, velocity, twist, command, leader and
 slot arrays are all finite and whose metrics (:func:`dfcoa_opt.metrics.summary`)
-have an outcome of :data:`dfcoa_opt.outcome.OUTCOMES`; or it raises a
-:class:`~dfcoa_opt.errors.DfcoaError` (a ScenarioError for a bad controller
+have an outcome of :data:`dfcoa_opt.metrics.outcome.OUTCOMES`; or it raises a
+:class:`~dfcoa_opt.core.errors.DfcoaError` (a ScenarioError for a bad controller
 parameter or a seed whose world does not load, ``RunFailed`` /
 ``ControllerError`` for a run that fails cleanly) whose message is one line.
 ``nmpc`` runs with ``compiled = false`` (casadi's interpreter, the same
@@ -56,10 +56,10 @@ from hypothesis import strategies as st
 
 from dfcoa_opt import metrics
 from dfcoa_opt.control.registry import build_controller
-from dfcoa_opt.errors import DfcoaError, ScenarioError
-from dfcoa_opt.outcome import OUTCOMES
-from dfcoa_opt.sim.loader import apply_overrides, scenario_from_dict
-from dfcoa_opt.sim.scenario import Scenario
+from dfcoa_opt.core.errors import DfcoaError, ScenarioError
+from dfcoa_opt.metrics.outcome import OUTCOMES
+from dfcoa_opt.scenario.loader import apply_overrides, scenario_from_dict
+from dfcoa_opt.scenario.scenario import Scenario
 from dfcoa_opt.sim.simulator import Simulator
 from tests.fuzz_schema import num, too_costly
 from tests.fuzz_strategies import (

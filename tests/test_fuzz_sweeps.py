@@ -43,11 +43,11 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from dfcoa_opt.bench import sweep as sweep_mod
-from dfcoa_opt.bench.sweep import KEY_MAX, MAX_RUNS, Sweep, load_sweep, sweep_from_dict
+from dfcoa_opt.bench.sweep import expand as sweep_mod
+from dfcoa_opt.bench.sweep.expand import KEY_MAX, MAX_RUNS, Sweep, load_sweep, sweep_from_dict
 from dfcoa_opt.cli import main
-from dfcoa_opt.errors import DfcoaError, ScenarioError
-from dfcoa_opt.sim.scenario import Scenario
+from dfcoa_opt.core.errors import DfcoaError, ScenarioError
+from dfcoa_opt.scenario.scenario import Scenario
 from tests.fuzz_strategies import event, examples, one_line
 from tests.fuzz_sweeps import SWEEP_BASES, SWEEPS_DIR, TINY, mirror, small_sweeps, snapshot
 from tests.fuzz_sweeps import mutated_sweeps as mutated_sweep_dicts

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 import dfcoa_opt as d
-from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.planning.astar import search
+from dfcoa_opt.scenario.loader import load_scenario, read_toml, scenario_from_dict
 from dfcoa_opt.sim.batch import BatchSimulator
-from dfcoa_opt.sim.loader import load_scenario, read_toml, scenario_from_dict
 from dfcoa_opt.sim.simulator import batch_controllers
 from dfcoa_opt.world import generate as gen
 from dfcoa_opt.world.generate.cellular import CellularParams, neighbours, smooth

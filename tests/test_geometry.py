@@ -3,7 +3,7 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from dfcoa_opt.geometry import (
+from dfcoa_opt.core.geometry import (
     body_to_world,
     clip_segments_to_box,
     pairwise_distances,

@@ -8,13 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.formation import slot_positions
-from dfcoa_opt.sim import checks, loader
-from dfcoa_opt.sim.checks import final_leader_poses
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.scenario import checks, loader
+from dfcoa_opt.scenario.checks import final_leader_poses
+from dfcoa_opt.scenario.formation import slot_positions
+from dfcoa_opt.scenario.loader import load_scenario, read_toml, scenario_from_dict
+from dfcoa_opt.scenario.scenario import Scenario
 from dfcoa_opt.sim.leader import VirtualLeader
-from dfcoa_opt.sim.loader import load_scenario, read_toml, scenario_from_dict
-from dfcoa_opt.sim.scenario import Scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = ROOT / "tests" / "data" / "bad_scenarios"

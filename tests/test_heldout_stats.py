@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from dfcoa_opt.bench import heldout as ho
 from dfcoa_opt.bench.recipes.heldout import _group_tables
+from dfcoa_opt.bench.report import heldout as ho
 
 
 def _row(variant: str, scenario: str, seed: int, outcome: str, t: float | None = None,

@@ -16,7 +16,7 @@ from comparisons.orca.ivo.ellipse import Ellipse, polygon_segments, segment_elli
 from comparisons.orca.lines import agent_lines
 from comparisons.orca.lp import solve_lines
 from dfcoa_opt import metrics
-from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.scenario.loader import scenario_from_dict
 from dfcoa_opt.sim.simulator import run_scenario
 
 RNG_SEED = 20240917

@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.planning import postprocess
 from dfcoa_opt.planning.astar import AStarParams, plan, search
-from dfcoa_opt.planning.astar_improved import random_map, random_tasks
-from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.planning.improved_astar import random_map, random_tasks
+from dfcoa_opt.scenario.loader import scenario_from_dict
 from tests.astar_oracles import (
     SQRT2,
     assert_valid_moves,

@@ -1,4 +1,4 @@
-"""numba's kernel cache follows edits of the modules a kernel imports (dfcoa_opt.kernel_cache)."""
+"""numba's kernel cache follows edits of the modules a kernel imports (dfcoa_opt.core.runtime.kernel_cache)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 import dfcoa_opt
-from dfcoa_opt import kernel_cache
+from dfcoa_opt.core.runtime import kernel_cache
 
 KERNEL = """import numba
 from kcpkg.b import K, g
@@ -37,7 +37,7 @@ import pytest
 sys.path.insert(0, sys.argv[1])
 touched = None
 if sys.argv[2] == "refresh":
-    from dfcoa_opt.kernel_cache import refresh
+    from dfcoa_opt.core.runtime.kernel_cache import refresh
     touched = refresh([Path(sys.argv[1]) / "kcpkg"])
 import kcpkg.a
 print(json.dumps({"touched": touched, "value": kcpkg.a.f(1.0)}))

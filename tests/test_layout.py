@@ -55,8 +55,8 @@ def test_old_public_names_still_import_without_warnings():
         from comparisons.lf_vo import LeaderFollowerVO
         from comparisons.nmpc import Nmpc, solve_time_stats
         from comparisons.virtual_spring import VirtualSpring, VirtualSpringBasic
+        from dfcoa_opt.bench.figures import RECIPE_MODULES, Artefact, recipe, recipes
         from dfcoa_opt.bench.recipes import report_artefacts
-        from dfcoa_opt.figures import RECIPE_MODULES, Artefact, recipe, recipes
     assert {c.name for c in (CbfFilter, LeaderFollowerVO, Nmpc, VirtualSpring,
                              VirtualSpringBasic)} == {"cbf", "lf_vo", "nmpc", "virtual_spring",
                                                       "virtual_spring_basic"}

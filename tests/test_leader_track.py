@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dfcoa_opt.formation import slot_positions
+from dfcoa_opt.scenario.formation import slot_positions
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim import leader as leader_mod
 from dfcoa_opt.sim.leader import VirtualLeader, leader_track
-from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.simulator import run_scenario
 
 SCEN = Path(__file__).resolve().parents[1] / "scenarios"

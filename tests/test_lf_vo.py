@@ -17,8 +17,8 @@ from comparisons.lf_vo.equations import (
 from comparisons.lf_vo.kernel import vo_clearance
 from dfcoa_opt.control.base import MovingObstacles, Neighbours, Observation
 from dfcoa_opt.control.registry import available, make_controller
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.scenario.loader import scenario_from_dict
 from dfcoa_opt.sim.simulator import Simulator, run_scenario
 from tests.helpers import assert_distributed
 
@@ -361,7 +361,7 @@ def test_escape_turn_lets_a_robot_on_a_discs_margin_turn_away():
 def test_escape_turn_frees_robot_3_of_the_papers_minus_90_degree_run():
     from pathlib import Path
 
-    from dfcoa_opt.sim.loader import load_scenario
+    from dfcoa_opt.scenario.loader import load_scenario
 
     path = Path(__file__).resolve().parents[1] / "scenarios" / "paper002" / "lf_vo_m90deg.toml"
     lengths = {}

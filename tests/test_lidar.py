@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import dfcoa_opt.world.lidar as lidar_mod
-from dfcoa_opt.sim.schema import LidarSpec
+from dfcoa_opt.scenario.schema import LidarSpec
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.lidar import LaserScan, Lidar, beam_layout, cast_grid
 from dfcoa_opt.world.shapes import Polygon, Rectangle

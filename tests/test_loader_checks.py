@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.formation import slot_positions
-from dfcoa_opt.sim.loader import load_scenario, scenario_from_dict
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.scenario.formation import slot_positions
+from dfcoa_opt.scenario.loader import load_scenario, scenario_from_dict
 
 BASE = {"world": {"size": [20.0, 10.0]}, "team": {"n": 4},
         "formation": {"shape": "line", "spacing": 1.0},

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dfcoa_opt.bench.logs import (
+from dfcoa_opt.bench.figures import restore_logs
+from dfcoa_opt.bench.results.logs import (
     LogCompacted,
     compact_bytes,
     compact_store,
@@ -17,11 +18,10 @@ from dfcoa_opt.bench.logs import (
     read_log,
     tracing,
 )
+from dfcoa_opt.bench.results.store import ResultsStore
 from dfcoa_opt.bench.runner import execute
-from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.bench.sweep import RunSpec
-from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.figures import restore_logs
+from dfcoa_opt.bench.sweep.expand import RunSpec
+from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.sim.log import RunLog, is_compact, is_pruned
 
 CROSSING = Path(__file__).resolve().parents[1] / "scenarios" / "bench" / "crossing.toml"

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.sim.loader import load_scenario, scenario_from_dict
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.scenario.loader import load_scenario, scenario_from_dict
 from dfcoa_opt.world.flat_yaml import parse_flat_yaml
 from dfcoa_opt.world.map_server import (
     grey_and_alpha,

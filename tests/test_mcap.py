@@ -18,13 +18,13 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
 from dfcoa_opt.cli import main
-from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.outcome import contact_steps
+from dfcoa_opt.core.errors import DfcoaError
+from dfcoa_opt.metrics.outcome import contact_steps
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.batch import BatchSimulator
-from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.log import RunLog
-from dfcoa_opt.sim.mcap import ROS_DISTRO
 from dfcoa_opt.sim.simulator import batch_controllers
+from dfcoa_opt.viz.mcap import ROS_DISTRO
 
 SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "example_obstacles.toml"
 
@@ -223,9 +223,9 @@ def test_cli_writes_the_file_and_checks_the_name(tmp_path, capsys):
 
 
 def test_bench_writes_one_file_per_drawn_run(tmp_path, capsys):
-    from dfcoa_opt.bench.logs import read_log
-    from dfcoa_opt.bench.mcap_runs import drawn_rows
-    from dfcoa_opt.bench.report import load_rows
+    from dfcoa_opt.bench.report.document import load_rows
+    from dfcoa_opt.bench.report.mcap_runs import drawn_rows
+    from dfcoa_opt.bench.results.logs import read_log
 
     tiny = Path(__file__).parent / "data" / "bench" / "tiny.toml"
     sweep = tmp_path / "sweep.toml"
@@ -257,7 +257,7 @@ def test_bench_writes_one_file_per_drawn_run(tmp_path, capsys):
 def test_foxglove_layout_names_every_topic_and_is_committed(bag):
     import json
 
-    from dfcoa_opt.sim.mcap import foxglove_layout
+    from dfcoa_opt.viz.mcap import foxglove_layout
 
     committed = Path(__file__).resolve().parents[1] / "docs" / "foxglove_layout.json"
     assert json.loads(committed.read_text()) == foxglove_layout(10)  # regenerate: docs/ros.md

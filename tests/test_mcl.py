@@ -1,4 +1,4 @@
-"""Monte Carlo localization (dfcoa_opt.localization.mcl)."""
+"""Monte Carlo localization (dfcoa_opt.sim.localization.mcl)."""
 
 from __future__ import annotations
 
@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from benchmarks.bench_mcl import numpy_sensor_update
-from dfcoa_opt.errors import DfcoaError, ScenarioError
-from dfcoa_opt.geometry import wrap_angle_fast
-from dfcoa_opt.localization import estimator_names, make_estimator
-from dfcoa_opt.localization import mcl_models as mm
-from dfcoa_opt.localization.mcl import MonteCarloLocalization
-from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.core.errors import DfcoaError, ScenarioError
+from dfcoa_opt.core.geometry import wrap_angle_fast
+from dfcoa_opt.scenario.loader import scenario_from_dict
+from dfcoa_opt.sim.localization import estimator_names, make_estimator
+from dfcoa_opt.sim.localization import mcl_models as mm
+from dfcoa_opt.sim.localization.mcl import MonteCarloLocalization
 from dfcoa_opt.sim.simulator import run_scenario
 from dfcoa_opt.world.lidar import Lidar
 

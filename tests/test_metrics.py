@@ -12,12 +12,14 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from dfcoa_opt import metrics as m
-from dfcoa_opt import metrics_risk, metrics_units, metrics_world
-from dfcoa_opt import metrics_robots as mr
 from dfcoa_opt.bench.runner import jsonable
-from dfcoa_opt.outcome import OUTCOMES
+from dfcoa_opt.metrics import risk as metrics_risk
+from dfcoa_opt.metrics import robots as mr
+from dfcoa_opt.metrics import units as metrics_units
+from dfcoa_opt.metrics import world as metrics_world
+from dfcoa_opt.metrics.outcome import OUTCOMES
+from dfcoa_opt.scenario.schema import MetricSpec
 from dfcoa_opt.sim.log import RunLog
-from dfcoa_opt.sim.schema import MetricSpec
 
 SQUARE = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]])
 

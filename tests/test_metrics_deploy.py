@@ -1,4 +1,4 @@
-"""The deployability report (dfcoa_opt.metrics_deploy) on logs made by hand, and on a run."""
+"""The deployability report (dfcoa_opt.metrics.deploy) on logs made by hand, and on a run."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import dfcoa_opt as d
-from dfcoa_opt.metrics_deploy import DEPLOY_KEYS, deployability
-from dfcoa_opt.robots.profiles import PROFILES, ROBOTARIUM
-from dfcoa_opt.sim.loader import load_scenario
-from dfcoa_opt.sim.schema import RobotSpec
+from dfcoa_opt.metrics.deploy import DEPLOY_KEYS, deployability
+from dfcoa_opt.scenario.loader import load_scenario
+from dfcoa_opt.scenario.schema import RobotSpec
+from dfcoa_opt.world.robots.profiles import PROFILES, ROBOTARIUM
 from tests.test_metrics import make_log
 
 R, D = 0.05, 0.3

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from dfcoa_opt import metrics_world as mw
+from dfcoa_opt.bench.report.stats import cvar
 from dfcoa_opt.bench.runner import execute
-from dfcoa_opt.bench.stats import cvar
-from dfcoa_opt.bench.sweep import RunSpec
-from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.bench.sweep.expand import RunSpec
+from dfcoa_opt.metrics import world as mw
+from dfcoa_opt.scenario.loader import scenario_from_dict
 from dfcoa_opt.world.dynamic import DynamicObstacles, MovingDisc
 
 #: A 20 x 10 m map with a 2 m wide corridor between two walls, x in [5, 15], y in [4, 6];

@@ -19,13 +19,13 @@ from comparisons.nmpc.geometry import (
 from comparisons.nmpc.problem import arc_step, rollout
 from dfcoa_opt.control.base import MovingObstacles, slot_velocity
 from dfcoa_opt.control.registry import available, build_controller
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.formation import slot_positions
+from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.metrics import filter_counts
-from dfcoa_opt.robots.models import integrate_unicycle
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.scenario.formation import slot_positions
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.log import STATUS_OK, STATUS_SOLVER_FAIL
 from dfcoa_opt.sim.simulator import Simulator, run_scenario
+from dfcoa_opt.world.robots.models import integrate_unicycle
 from dfcoa_opt.world.shapes import Circle, Rectangle
 from tests.helpers import neighbours_from_lists
 from tests.nmpc_support import ROOT, R, break_every_solver, controller, observation, scenario

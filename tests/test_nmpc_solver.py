@@ -12,7 +12,7 @@ import comparisons.nmpc.compiled as compiled_mod
 from comparisons.nmpc.controller import Nmpc
 from comparisons.nmpc.problem import NmpcProblem, map_multipliers
 from dfcoa_opt.control.registry import build_controller
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.simulator import Simulator
 
 ROOT = Path(__file__).resolve().parents[1]

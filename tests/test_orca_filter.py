@@ -7,8 +7,8 @@ from comparisons.orca.filter import OrcaFilter, concat_lines
 from dfcoa_opt import metrics
 from dfcoa_opt.control.base import Filtered
 from dfcoa_opt.control.registry import available_filters, build_controller, check_overrides
-from dfcoa_opt.errors import ScenarioError, UnknownNameError
-from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.core.errors import ScenarioError, UnknownNameError
+from dfcoa_opt.scenario.loader import scenario_from_dict
 from dfcoa_opt.sim.log import STATUS_FALLBACK
 from dfcoa_opt.sim.simulator import run_scenario
 
@@ -101,7 +101,7 @@ def test_concat_lines_keeps_each_rows_lines_in_order():
 
 
 def test_filter_params_reject_unknown_policy():
-    from dfcoa_opt.params import build
+    from dfcoa_opt.core.params import build
 
     with pytest.raises(ScenarioError, match="infeasible"):
         build(OrcaFilter.Params, {"infeasible": "ignore"}, "f.toml", "controllers.orca")
@@ -123,7 +123,7 @@ def test_table1_orca_stalls_and_ivo_gets_round(mode):
     """
     from pathlib import Path
 
-    from dfcoa_opt.sim.loader import load_scenario
+    from dfcoa_opt.scenario.loader import load_scenario
 
     path = Path(__file__).resolve().parents[1] / "scenarios/paper001/table1_crossing.toml"
     sc = load_scenario(path, overrides={"controllers.orca_nav.obstacles": mode})

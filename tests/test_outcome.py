@@ -8,9 +8,9 @@ import pytest
 from test_metrics import make_log
 
 from dfcoa_opt import metrics
-from dfcoa_opt.outcome import OUTCOMES, classify, stalled
-from dfcoa_opt.sim.loader import load_scenario
-from dfcoa_opt.sim.schema import MetricSpec
+from dfcoa_opt.metrics.outcome import OUTCOMES, classify, stalled
+from dfcoa_opt.scenario.loader import load_scenario
+from dfcoa_opt.scenario.schema import MetricSpec
 from dfcoa_opt.sim.simulator import run_scenario
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from dfcoa_opt.bench.recipes.paper002 import TARGET_TOL, time_to_target
-from dfcoa_opt.metrics_robots import collisions_per_robot, path_length_per_robot
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.metrics.robots import collisions_per_robot, path_length_per_robot
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.simulator import run_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"

@@ -16,7 +16,7 @@ import pytest
 
 from comparisons.orca import lp
 from comparisons.orca.crowd import OrcaCrowd, circle_positions
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.simulator import run_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
@@ -68,7 +68,7 @@ def test_large_team_runs_do_not_depend_on_the_thread_count(all_numba_threads, co
 
 
 def test_small_calls_and_a_busy_machine_get_one_thread(monkeypatch):
-    from dfcoa_opt import threads
+    from dfcoa_opt.core.runtime import threads
 
     monkeypatch.setattr(threads, "PARALLEL_MIN_ROWS", 1000)
     monkeypatch.setattr(threads, "free_cores", lambda: 8)
@@ -87,7 +87,7 @@ def test_small_calls_and_a_busy_machine_get_one_thread(monkeypatch):
 def test_the_load_average_leaves_the_free_cores(monkeypatch):
     import os
 
-    from dfcoa_opt import threads
+    from dfcoa_opt.core.runtime import threads
 
     monkeypatch.setattr(threads, "_load", (-np.inf, 0))
     monkeypatch.setattr(os, "cpu_count", lambda: 4)

@@ -16,8 +16,9 @@ from matplotlib.colors import to_rgb
 from matplotlib.figure import Figure
 from PIL import Image
 
-from dfcoa_opt import animation, figure_layout, plotting
 from dfcoa_opt.sim.log import RunLog
+from dfcoa_opt.viz import animation, plotting
+from dfcoa_opt.viz import layout as figure_layout
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.shapes import Circle, Rectangle
 
@@ -242,7 +243,7 @@ _SCRIPT = textwrap.dedent("""
     import sys
     sys.path.insert(0, {tests!r})
     from test_plotting import make_grid, make_log
-    from dfcoa_opt import animation, plotting
+    from dfcoa_opt.viz import animation, plotting
     log, grid = make_log(n_steps=5), make_grid()
     plotting.plot_run(log, grid, {png!r}, dpi=30)
     animation.animate_run(log, grid, {gif!r}, max_frames=3, dpi=30)

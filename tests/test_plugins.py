@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from dfcoa_opt.control import registry
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.core.errors import DfcoaError
 
 ROOT = Path(__file__).resolve().parents[1]
 OBSTACLES = (ROOT / "scenarios" / "example_obstacles.toml").as_posix()

@@ -14,15 +14,15 @@ import numpy as np
 import pytest
 
 import dfcoa_opt as d
-from dfcoa_opt.bench import store
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
-from dfcoa_opt.bench.sweep import load_sweep
+from dfcoa_opt.bench.results import store
+from dfcoa_opt.bench.sweep.expand import load_sweep
 from dfcoa_opt.cli import main
 from dfcoa_opt.control import registry
-from dfcoa_opt.envs.observation import ObservationSpec
-from dfcoa_opt.errors import ScenarioError, UnknownNameError
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.control.features import ObservationSpec
+from dfcoa_opt.core.errors import ScenarioError, UnknownNameError
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.simulator import run_batch_logs, run_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -169,7 +169,7 @@ def test_the_facade_sweep_keeps_policy_files_on_worker_processes(tmp_path, monke
 def test_the_code_fingerprint_of_a_policy_covers_the_policy_modules_only(tmp_path):
     core = set(store.fingerprint_sources("goto_slot")) - {"dfcoa_opt/control/goto_slot.py"}
     own = set(store.fingerprint_sources(f"policy:{linear_policy(tmp_path)}")) - core
-    assert own == {"dfcoa_opt/control/policy.py", "dfcoa_opt/control/policy_file.py"}
+    assert own == {"dfcoa_opt/control/policy/controller.py", "dfcoa_opt/control/policy/file.py"}
 
 
 # -- bad files -----------------------------------------------------------------------------------

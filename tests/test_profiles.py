@@ -1,4 +1,4 @@
-"""Internal consistency of the robot profiles (dfcoa_opt/robots/profiles.py, docs/robots.md).
+"""Internal consistency of the robot profiles (dfcoa_opt/world/robots/profiles.py, docs/robots.md).
 
 Each check is one a mistyped value would break: a digit dropped from a wheel radius breaks
 the speed relations, a range_min typed as range_max breaks the LiDAR order, and so on.
@@ -11,8 +11,8 @@ import math
 
 import pytest
 
-from dfcoa_opt.robots.profiles import PROFILES, ROBOTARIUM
-from dfcoa_opt.sim.schema import LidarSpec, RobotSpec
+from dfcoa_opt.scenario.schema import LidarSpec, RobotSpec
+from dfcoa_opt.world.robots.profiles import PROFILES, ROBOTARIUM
 
 ROBOT_KEYS = {"radius", "wheel_radius", "track_width", "wheel_speed_max", "v_max", "w_max",
               "wheel_accel_max", "motor_time_constant"}

@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from dfcoa_opt.planning.astar import search
-from dfcoa_opt.sim.schema import LidarSpec
+from dfcoa_opt.scenario.schema import LidarSpec
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.lidar import Lidar
 from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle

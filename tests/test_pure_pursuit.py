@@ -1,7 +1,7 @@
 import numpy as np
 
 from dfcoa_opt.planning.pure_pursuit import PurePursuit
-from dfcoa_opt.robots.models import integrate_unicycle
+from dfcoa_opt.world.robots.models import integrate_unicycle
 
 
 def drive(pp, pose, steps, dt=0.1):

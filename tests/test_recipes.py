@@ -11,7 +11,7 @@ from dfcoa_opt import metrics
 from dfcoa_opt.bench.recipes import astar as recipes_astar
 from dfcoa_opt.bench.recipes import dfcoa as recipes_dfcoa
 from dfcoa_opt.planning.astar import plan
-from dfcoa_opt.planning.astar_improved import ImprovedAStarParams
+from dfcoa_opt.planning.improved_astar import ImprovedAStarParams
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 
@@ -281,8 +281,8 @@ def test_paper004_scenarios_are_table_1_and_the_generators_output(tmp_path):
     spec = importlib.util.spec_from_file_location("gen004", SCENARIOS / "paper004/generate.py")
     gen = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(gen)
-    from dfcoa_opt.geometry import rotate
-    from dfcoa_opt.sim.loader import load_scenario
+    from dfcoa_opt.core.geometry import rotate
+    from dfcoa_opt.scenario.loader import load_scenario
 
     for n in (5, 10, 15, 20):
         for k in range(4):

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from dfcoa_opt.control import registry
-from dfcoa_opt.errors import ScenarioError, UnknownNameError, did_you_mean
-from dfcoa_opt.params import param
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.core.errors import ScenarioError, UnknownNameError, did_you_mean
+from dfcoa_opt.core.params import param
+from dfcoa_opt.scenario.loader import load_scenario
 
 
 def test_builtin_listed_and_unknown_id_has_hint():

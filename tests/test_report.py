@@ -16,11 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dfcoa_opt import environment
 from dfcoa_opt import metrics as run_metrics
-from dfcoa_opt.bench import plots, report, stats, tables, trajectories
-from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.sim.loader import read_toml, scenario_from_dict
+from dfcoa_opt.bench.report import document as report
+from dfcoa_opt.bench.report import plots, stats, tables, trajectories
+from dfcoa_opt.core.errors import DfcoaError
+from dfcoa_opt.core.runtime import provenance as environment
+from dfcoa_opt.scenario.loader import read_toml, scenario_from_dict
 from dfcoa_opt.sim.simulator import run_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -161,7 +162,7 @@ def test_csv_has_the_four_outcome_rates_with_intervals():
 
 def test_paired_risk_leaves_out_and_counts_the_runs_with_a_contact():
     """A raw risk after a contact is inf, null in the row: no +1e9 median, a stated count."""
-    from dfcoa_opt.bench import paired
+    from dfcoa_opt.bench.report import paired
 
     risk_a = [5.0, None, 6.0, None, 6.0]  # seeds 1 and 3 touched something (null in JSON)
     risk_b = [4.0, 3.0, 5.0, 2.0, 5.0]
@@ -206,8 +207,8 @@ def test_numpy_simd_follows_numpy_dispatch():
     assert here in [*umath.__cpu_dispatch__, *umath.__cpu_baseline__]
     assert umath.__cpu_features__[here]
     env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": " ".join(umath.__cpu_dispatch__)}
-    out = subprocess.run([sys.executable, "-c", "from dfcoa_opt import environment; "
-                          "print(environment.numpy_simd())"],
+    out = subprocess.run([sys.executable, "-c", "from dfcoa_opt.core.runtime import provenance; "
+                          "print(provenance.numpy_simd())"],
                          env=env, capture_output=True, text=True, check=True).stdout.strip()
     assert out == umath.__cpu_baseline__[-1]
 

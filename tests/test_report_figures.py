@@ -11,12 +11,15 @@ from matplotlib.colors import to_rgb
 from matplotlib.patches import Circle as CirclePatch
 from test_metrics import make_log
 
-from dfcoa_opt import contacts, figure_layout, plotting
-from dfcoa_opt.bench import plots, report, trajectories
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
-from dfcoa_opt.bench.logs import read_log
-from dfcoa_opt.bench.sweep import load_sweep
+from dfcoa_opt.bench.report import document as report
+from dfcoa_opt.bench.report import plots, trajectories
+from dfcoa_opt.bench.results.logs import read_log
+from dfcoa_opt.bench.sweep.expand import load_sweep
+from dfcoa_opt.metrics import contacts
+from dfcoa_opt.viz import layout as figure_layout
+from dfcoa_opt.viz import plotting
 
 ROOT = Path(__file__).resolve().parents[1]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

@@ -9,8 +9,8 @@ import shapely
 from shapely.geometry import Point
 
 from comparisons.reshape.routes import ConfigurationSpace, bin_heading, heading_bin
-from dfcoa_opt.formation import v_offsets
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.scenario.formation import v_offsets
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.simulator import run_scenario
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.shapes import Circle, Rectangle

@@ -3,7 +3,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from dfcoa_opt.robots.models import (
+from dfcoa_opt.scenario.schema import RobotSpec
+from dfcoa_opt.world.robots.models import (
     DoubleIntegrator,
     RobotState,
     SingleIntegrator,
@@ -12,7 +13,6 @@ from dfcoa_opt.robots.models import (
     twist_from_wheels,
     wheel_speeds,
 )
-from dfcoa_opt.sim.schema import RobotSpec
 
 
 def fine_euler(pose, v, w, dt, n=20000):

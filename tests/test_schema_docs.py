@@ -1,8 +1,8 @@
 from pathlib import Path
 
-from dfcoa_opt.params import describe
-from dfcoa_opt.sim.docs import schema_markdown
-from dfcoa_opt.sim.schema import ScenarioSpec
+from dfcoa_opt.core.params import describe
+from dfcoa_opt.scenario.reference import schema_markdown
+from dfcoa_opt.scenario.schema import ScenarioSpec
 
 README = Path(__file__).resolve().parents[1] / "scenarios" / "README.md"
 

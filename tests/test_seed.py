@@ -8,7 +8,7 @@ import pytest
 
 import dfcoa_opt as d
 from dfcoa_opt.cli import main
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.sim.log import RunLog
 
 ROOT = Path(__file__).resolve().parents[1]

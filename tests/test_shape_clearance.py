@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dfcoa_opt.sim.loader import load_scenario, scenario_from_dict
+from dfcoa_opt.scenario.loader import load_scenario, scenario_from_dict
 
 SCEN = Path(__file__).resolve().parents[1] / "scenarios"
 
@@ -46,7 +46,7 @@ def test_clutter_world_of_circles_and_nonconvex_polygon():
 
 
 def test_stacked_worlds_measure_each_point_in_its_own_world_bit_for_bit():
-    from dfcoa_opt.sim.scenario import World
+    from dfcoa_opt.scenario.scenario import World
     from dfcoa_opt.world.shape_clearance import shape_clearance_worlds
 
     names = ["dfcoa_s1.toml", "bench/clutter.toml", "example_empty.toml", "dfcoa_s2.toml"]
@@ -62,7 +62,7 @@ def test_stacked_worlds_measure_each_point_in_its_own_world_bit_for_bit():
 
 
 def test_a_world_with_a_map_raster_is_not_stacked():
-    from dfcoa_opt.sim.scenario import World
+    from dfcoa_opt.scenario.scenario import World
 
     base = {"name": "t", "dt": 0.1, "t_max": 1.0, "team": {"n": 1},
             "formation": {"shape": "line", "spacing": 1.0},

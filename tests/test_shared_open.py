@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import dfcoa_opt as d
-from dfcoa_opt.bench.shared_open import shared_open_errors, shared_open_table
+from dfcoa_opt.bench.report.shared_open import shared_open_errors, shared_open_table
 from dfcoa_opt.metrics import open_steps, summary
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -5,7 +5,7 @@ import pytest
 import shapely
 
 from dfcoa_opt.control.goto_slot import GotoSlot
-from dfcoa_opt.sim.loader import load_scenario, scenario_from_dict
+from dfcoa_opt.scenario.loader import load_scenario, scenario_from_dict
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.sim.simulator import ControllerError, Simulator, run_scenario
 from tests.helpers import Capture, assert_distributed
@@ -155,7 +155,7 @@ def test_stop_on_collision_and_double_integrator():
 
 
 def test_localization_shorthand_and_unknown_mode():
-    from dfcoa_opt.errors import ScenarioError
+    from dfcoa_opt.core.errors import ScenarioError
 
     assert small(localization="truth").spec.localization.mode == "truth"
     with pytest.raises(ScenarioError, match="localization.mode: unknown mode 'gps'"):

@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 import shapely
 
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.sim.loader import scenario_from_dict
-from dfcoa_opt.simple_polygons import (
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.core.polygons import (
     is_simple_polygon,
     polygon_defect,
     segments_cross,
     segments_intersect,
 )
+from dfcoa_opt.scenario.loader import scenario_from_dict
 from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle
 
 SRC = "<start-geometry>"

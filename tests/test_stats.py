@@ -9,7 +9,7 @@ import pytest
 from scipy import optimize
 from scipy import stats as sps
 
-from dfcoa_opt.bench import stats
+from dfcoa_opt.bench.report import stats
 
 
 # ------------------------------------------------------------------------- Wilson

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from dfcoa_opt.control.registry import make_controller
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.core.errors import DfcoaError
+from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.batch import BatchSimulator
-from dfcoa_opt.sim.loader import load_scenario
 from dfcoa_opt.sim.simulator import run_scenario
 from dfcoa_opt.sim.stepper import Stepper
 

@@ -17,11 +17,11 @@ from pathlib import Path
 import pytest
 
 from dfcoa_opt.bench import harness
-from dfcoa_opt.bench import sweep as sweep_mod
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.lifecycle import SweepInterrupted
-from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.bench.sweep import (
+from dfcoa_opt.bench.results.store import ResultsStore
+from dfcoa_opt.bench.sweep import expand as sweep_mod
+from dfcoa_opt.bench.sweep.expand import (
     KEY_MAX,
     MAX_RUNS,
     MAX_SEEDS,
@@ -32,8 +32,8 @@ from dfcoa_opt.bench.sweep import (
     shorten,
 )
 from dfcoa_opt.cli import main
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.scenario.loader import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = Path(__file__).parent / "data" / "bench" / "tiny.toml"

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from dfcoa_opt.bench import sweep as sweep_mod
-from dfcoa_opt.bench.sweep import load_sweep, sweep_from_dict
-from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.bench.sweep import expand as sweep_mod
+from dfcoa_opt.bench.sweep.expand import load_sweep, sweep_from_dict
+from dfcoa_opt.core.errors import ScenarioError
 
 TINY = Path(__file__).parent / "data" / "bench" / "tiny.toml"
 HEAD = f'scenarios = ["{TINY.as_posix()}"]\ncontrollers = ["goto_slot"]\nseeds = 1\n'
@@ -93,7 +93,7 @@ PUBLIC = ("DICT_SOURCE", "KEY_MAX", "MAX_RUNS", "MAX_SEEDS", "NAME_MAX", "RunSpe
 
 
 def test_the_sweep_module_exports_every_public_name_of_its_parts() -> None:
-    from dfcoa_opt.bench import specs
+    from dfcoa_opt.bench.sweep import specs
 
     assert set(PUBLIC) <= set(sweep_mod.__all__)
     for name in sweep_mod.__all__:
@@ -104,7 +104,7 @@ def test_the_sweep_module_exports_every_public_name_of_its_parts() -> None:
 
 def test_patching_load_run_scenario_of_the_sweep_module_reaches_the_expansion(
         tmp_path: Path, monkeypatch) -> None:
-    """The tests that cache scenario loads patch ``dfcoa_opt.bench.sweep.load_run_scenario``."""
+    """The tests that cache scenario loads patch ``dfcoa_opt.bench.sweep.expand.load_run_scenario``."""
     seen = []
     real = sweep_mod.load_run_scenario
 

@@ -9,12 +9,12 @@ from pathlib import Path
 import pytest
 
 from dfcoa_opt.bench.executors import ExecutorConfig
-from dfcoa_opt.bench.sweep import load_sweep, sweep_from_dict
+from dfcoa_opt.bench.sweep.expand import load_sweep, sweep_from_dict
 from dfcoa_opt.bench.tune import objective, tune_variant, tuning_sweep
 from dfcoa_opt.cli import main
 from dfcoa_opt.control.registry import available, check_overrides, controller_tunables
-from dfcoa_opt.errors import DfcoaError, ScenarioError
-from dfcoa_opt.sim.loader import apply_overrides, read_toml, scenario_from_dict
+from dfcoa_opt.core.errors import DfcoaError, ScenarioError
+from dfcoa_opt.scenario.loader import apply_overrides, read_toml, scenario_from_dict
 
 HELDOUT = Path(__file__).resolve().parents[1] / "scenarios" / "heldout"
 

@@ -6,8 +6,8 @@ from pathlib import Path
 import pytest
 
 from dfcoa_opt.bench import precision
-from dfcoa_opt.bench.sweep import load_sweep
-from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.bench.sweep.expand import load_sweep
+from dfcoa_opt.core.errors import ScenarioError
 
 ROOT = Path(__file__).resolve().parents[1]
 SCEN = (ROOT / "scenarios" / "example_obstacles.toml").as_posix()

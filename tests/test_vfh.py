@@ -1,4 +1,4 @@
-"""Tests for the improved VFH* module (dfcoa_opt.control.vfh), paper 000 Algorithm 1."""
+"""Tests for the improved VFH* module (dfcoa_opt.control.dfcoa.histogram), paper 000 Algorithm 1."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dfcoa_opt.control.base import Neighbours
-from dfcoa_opt.control.vfh import (
+from dfcoa_opt.control.dfcoa.histogram import (
     VFHParams,
     binary_histogram,
     polar_histogram,
@@ -18,10 +18,10 @@ from dfcoa_opt.control.vfh import (
     select_direction,
     turning_mask,
 )
-from dfcoa_opt.control.vfh_star import VFHStar, blend, danger_level, vfh_step
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.params import build
-from dfcoa_opt.sim.schema import LidarSpec
+from dfcoa_opt.control.dfcoa.vfh_star import VFHStar, blend, danger_level, vfh_step
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.core.params import build
+from dfcoa_opt.scenario.schema import LidarSpec
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.lidar import LaserScan, Lidar
 

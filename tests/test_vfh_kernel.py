@@ -1,8 +1,8 @@
 """The numba path of the improved VFH* gives the NumPy reference's exact bits.
 
 ``VFHStar(kernel=True)``, :func:`blend_fast`, :func:`wrap_angles` and the
-scalar helpers of :mod:`dfcoa_opt.control.vfh` against :func:`vfh_step`,
-:func:`blend`, :func:`dfcoa_opt.geometry.wrap_angle` and ``np.clip``.
+scalar helpers of :mod:`dfcoa_opt.control.dfcoa.histogram` against :func:`vfh_step`,
+:func:`blend`, :func:`dfcoa_opt.core.geometry.wrap_angle` and ``np.clip``.
 """
 
 from __future__ import annotations
@@ -14,15 +14,15 @@ import numpy as np
 import pytest
 
 from dfcoa_opt.control.base import Neighbours
-from dfcoa_opt.control.vfh import (
+from dfcoa_opt.control.dfcoa.histogram import (
     VFHParams,
     sector1,
     sector_index,
     wrap_angles,
 )
-from dfcoa_opt.control.vfh_star import VFHStar, blend, blend_fast
-from dfcoa_opt.geometry import wrap_angle
-from dfcoa_opt.scalar_kernels import clip1, wrap1
+from dfcoa_opt.control.dfcoa.vfh_star import VFHStar, blend, blend_fast
+from dfcoa_opt.core.geometry import wrap_angle
+from dfcoa_opt.core.scalar_kernels import clip1, wrap1
 from dfcoa_opt.world.lidar import LaserScan
 
 PI = math.pi

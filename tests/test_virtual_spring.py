@@ -26,9 +26,9 @@ from comparisons.virtual_spring.equations import (
 )
 from dfcoa_opt.control.base import MovingObstacles, Observation
 from dfcoa_opt.control.registry import available, build_controller, make_controller
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.geometry import rotate
-from dfcoa_opt.sim.loader import scenario_from_dict
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.core.geometry import rotate
+from dfcoa_opt.scenario.loader import scenario_from_dict
 from dfcoa_opt.sim.simulator import Simulator, run_scenario
 from tests.helpers import Capture, assert_distributed, neighbours_from_lists
 

@@ -1,6 +1,6 @@
 """The fast paths of comparisons/virtual_spring*.py give bit for bit the reference formulas.
 
-Oracles: :mod:`dfcoa_opt.geometry` (nearest points on segments, even-odd rule),
+Oracles: :mod:`dfcoa_opt.core.geometry` (nearest points on segments, even-odd rule),
 ``np.linalg.norm``, the per-kind composition of eq 7 from the pure functions
 (:func:`disc_normals`, :func:`polygon_normals`, :func:`spring_force`) and the
 plain numpy forms of eq 15-17 (``(a * b).sum(-1)``, ``norm(...) == 0``).
@@ -18,7 +18,7 @@ from comparisons.virtual_spring.equations import (
     spring_force,
     unit_vectors,
 )
-from dfcoa_opt.geometry import closest_point_on_segment, points_in_polygons, polygon_edges
+from dfcoa_opt.core.geometry import closest_point_on_segment, points_in_polygons, polygon_edges
 from tests.test_virtual_spring import R, course, ctrl, observation
 
 
@@ -53,7 +53,7 @@ def random_points(rng, polygons, n):
 
 
 def reference_polygon_normals(p, polygons):
-    """Polygon normals straight from :mod:`dfcoa_opt.geometry` (the first version)."""
+    """Polygon normals straight from :mod:`dfcoa_opt.core.geometry` (the first version)."""
     a, b = polygon_edges(polygons)
     closest = closest_point_on_segment(p[:, None, None, :], a, b)
     k = np.argmin(np.linalg.norm(p[:, None, None, :] - closest, axis=-1), axis=-1)

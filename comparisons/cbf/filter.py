@@ -67,8 +67,8 @@ from comparisons.constraints.solvers import check_solver
 from comparisons.constraints.world_shapes import WorldShapes
 from dfcoa_opt.control.base import BatchedController, FilterResult, Observation
 from dfcoa_opt.control.registry import register_filter
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.params import param
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.core.params import param
 
 #: Distances below this are taken as this in the row normalisation, m.
 MIN_DELTA = 1e-9

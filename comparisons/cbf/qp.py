@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from comparisons.constraints.solvers import Solver
 from comparisons.orca import lp
-from dfcoa_opt.geometry import take_rows
+from dfcoa_opt.core.geometry import take_rows
 from dfcoa_opt.sim.log import (
     STATUS_FALLBACK,
     STATUS_MODIFIED,

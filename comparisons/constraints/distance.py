@@ -21,8 +21,8 @@ Geometries:
 - **discs** (circles of the map, moving obstacles): ``q = c + r n``,
   ``delta = ||p - c|| - r``;
 - **polygons** (rectangles and polygons of the map): the nearest point of the
-  boundary (:func:`dfcoa_opt.geometry.closest_point_on_segment`), negative
-  ``delta`` inside (even-odd rule of :func:`dfcoa_opt.geometry.points_in_polygons`).
+  boundary (:func:`dfcoa_opt.core.geometry.closest_point_on_segment`), negative
+  ``delta`` inside (even-odd rule of :func:`dfcoa_opt.core.geometry.points_in_polygons`).
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from comparisons.constraints.geometry_kernels import (
     pairs_kernel,
     polygons_kernel,
 )
-from dfcoa_opt.geometry import polygon_edges
+from dfcoa_opt.core.geometry import polygon_edges
 from dfcoa_opt.world.shapes import Circle
 
 FloatArray = NDArray[np.float64]

@@ -18,7 +18,7 @@ import math
 import numba
 import numpy as np
 
-from dfcoa_opt.scalar_kernels import clip1
+from dfcoa_opt.core.scalar_kernels import clip1
 
 
 @numba.njit(cache=True, inline="always")
@@ -45,7 +45,7 @@ def disc1(px, py, cx, cy, r):  # pragma: no cover - numba
 def segment_point1(px, py, ax, ay, abx, aby, den):  # pragma: no cover - numba
     """The point of the segment ``a + t ab``, ``t`` in [0, 1], nearest to ``(px, py)``.
 
-    :func:`dfcoa_opt.geometry.closest_point_on_segment` in scalars: ``den`` is
+    :func:`dfcoa_opt.core.geometry.closest_point_on_segment` in scalars: ``den`` is
     ``|ab|^2``, or 1 for a zero-length segment. Returns ``(x, y)``, m.
     """
     t = clip1(((px - ax) * abx + (py - ay) * aby) / den, 0.0, 1.0)
@@ -56,7 +56,7 @@ def segment_point1(px, py, ax, ay, abx, aby, den):  # pragma: no cover - numba
 def crossing1(px, py, ax, ay, abx, by):  # pragma: no cover - numba
     """Whether the edge from ``(ax, ay)`` to ``(ax + abx, by)`` flips the even-odd test.
 
-    :func:`dfcoa_opt.geometry.points_in_polygons`' rule: a non-horizontal edge
+    :func:`dfcoa_opt.core.geometry.points_in_polygons`' rule: a non-horizontal edge
     that straddles ``py`` and crosses it right of ``px``.
     """
     return (ay != by and (ay <= py) != (by <= py)
@@ -68,7 +68,7 @@ def polygon_walk1(px, py, a, b, by_norm):  # pragma: no cover - numba
     """Nearest boundary point of one polygon, its edge, and whether the point is inside.
 
     ``a``, ``b``: ``(V, 2)`` edge starts and ends (padded edges have ``a = b``,
-    :func:`dfcoa_opt.geometry.polygon_edges`). Each edge's nearest point is
+    :func:`dfcoa_opt.core.geometry.polygon_edges`). Each edge's nearest point is
     :func:`segment_point1`'s; the first edge with the smallest squared distance
     (``by_norm``: distance) wins, as ``np.argmin`` picks (a NaN counting as the
     minimum); inside by the even-odd rule of :func:`crossing1`. Returns

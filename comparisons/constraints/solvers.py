@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.errors import ScenarioError, did_you_mean
+from dfcoa_opt.core.errors import ScenarioError, did_you_mean
 
 FloatArray = NDArray[np.float64]
 

@@ -46,7 +46,7 @@ class WorldShapes:
         disc_ptr: ``(W + 1,)`` map ``w``'s discs are ``discs[disc_ptr[w]:disc_ptr[w + 1]]``.
         edge_a: ``(Q, V, 2)`` every map's polygon edge starts, m (padded to the
             longest polygon with zero-length edges at the last vertex, as
-            :func:`dfcoa_opt.geometry.polygon_edges` pads).
+            :func:`dfcoa_opt.core.geometry.polygon_edges` pads).
         edge_b: ``(Q, V, 2)`` the edge ends, m.
         poly_ptr: ``(W + 1,)`` map ``w``'s polygons are ``edge_a[poly_ptr[w]:poly_ptr[w + 1]]``.
     """
@@ -92,7 +92,7 @@ def _pad(a: FloatArray, b: FloatArray, width: int) -> tuple[FloatArray, FloatArr
     """Polygon edges ``(Q, V, 2)`` padded to ``width`` with zero-length edges at the last vertex.
 
     The last vertex is the start of each polygon's last edge (its closing edge,
-    or a padding edge already); :func:`dfcoa_opt.geometry.polygon_edges` pads so.
+    or a padding edge already); :func:`dfcoa_opt.core.geometry.polygon_edges` pads so.
     """
     v = a.shape[1]
     if v == width:

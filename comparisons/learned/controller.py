@@ -1,12 +1,12 @@
 """``learned``: a small MLP policy cloned from ``goto_slot+cbf`` (BC + DAgger).
 
 The network reads each robot's observation vector
-(:func:`dfcoa_opt.envs.observation.flatten`: slot, heading, velocities, 40
+(:func:`dfcoa_opt.control.features.flatten`: slot, heading, velocities, 40
 LiDAR beams, 4 neighbours, 2 moving obstacles, in the robot's frame) and gives
 a body-frame velocity command (m/s), converted for unicycles by the
 simulator's near-identity map like every velocity controller. It runs the
 shipped policy file ``learned.json`` (+ ``learned.npz``) through the machinery
-of ``policy:PATH`` (:mod:`dfcoa_opt.control.policy`): the same checks, the
+of ``policy:PATH`` (:mod:`dfcoa_opt.control.policy.controller`): the same checks, the
 same compiled kernel, batched runs equal single runs bit for bit.
 
 ``python -m comparisons.learned.train --seed 0 --out comparisons/learned/``
@@ -23,8 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.atomic import file_exists
-from dfcoa_opt.control.policy import (
+from dfcoa_opt.control.policy.controller import (
     PREFIX,
     LoadedPolicy,
     PolicyController,
@@ -32,12 +31,13 @@ from dfcoa_opt.control.policy import (
     policy_digest,
 )
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.params import param
+from dfcoa_opt.core.atomic import file_exists
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.core.params import param
 
 #: The shipped policy file (its weights: ``learned.npz`` beside it).
 SHIPPED = Path(__file__).resolve().parent / "learned.json"
-#: SHA-256 of the shipped spec and weights (:func:`~dfcoa_opt.control.policy.policy_digest`).
+#: SHA-256 of the shipped spec and weights (:func:`~dfcoa_opt.control.policy.controller.policy_digest`).
 #: The results cache fingerprints code, not data: a retrained file must change this line,
 #: which re-simulates the stored runs of ``learned``.
 SHIPPED_DIGEST = "2ee25b1eca127db2f12a362583e033f7e9742ca0f2e331664ddc643eb2c9be19"

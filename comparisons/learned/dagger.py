@@ -3,7 +3,7 @@
 :class:`Mixture` is a batched controller. At every step it computes, from the
 same :class:`~dfcoa_opt.control.base.Observation`, the teacher's command
 (``goto_slot+cbf``, a world-frame velocity) and the student's (a policy
-network, :class:`~dfcoa_opt.control.policy.LoadedPolicy`, in its own frame),
+network, :class:`~dfcoa_opt.control.policy.controller.LoadedPolicy`, in its own frame),
 records ``(flatten(obs), teacher command in the policy's frame / action_scale)``
 and applies ``beta * teacher + (1 - beta) * student``. With ``beta = 1`` it is
 the teacher (plain behaviour cloning), and the student is not evaluated.
@@ -22,10 +22,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.control.base import BatchedController, Observation
-from dfcoa_opt.control.policy import LoadedPolicy
+from dfcoa_opt.control.features import ObservationSpec, flatten
+from dfcoa_opt.control.policy.controller import LoadedPolicy
 from dfcoa_opt.control.registry import build_controller
-from dfcoa_opt.envs.observation import ObservationSpec, flatten
-from dfcoa_opt.geometry import rotate
+from dfcoa_opt.core.geometry import rotate
 
 FloatArray = NDArray[np.float64]
 #: The teacher's controller id.

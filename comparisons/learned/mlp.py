@@ -2,7 +2,7 @@
 
 Deterministic: the initial weights and the minibatch order come from one
 ``numpy.random.Generator``, and every step is plain numpy (OpenBLAS under
-``@``, whose kernels ``import dfcoa_opt`` pins, ``dfcoa_opt/dispatch.py``), so
+``@``, whose kernels ``import dfcoa_opt`` pins, ``dfcoa_opt/core/runtime/dispatch.py``), so
 the same data and seed give the same weights, bit for bit. OpenBLAS rounds
 differently on different thread counts (measured: 1 and 2 threads differ in the
 last bits after a few epochs), so :func:`one_blas_thread` runs the training on

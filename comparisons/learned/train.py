@@ -36,9 +36,9 @@ import numpy as np
 
 from comparisons.learned import mlp
 from comparisons.learned.dagger import Mixture, collect
-from dfcoa_opt.control.policy import ACTIVATIONS, LoadedPolicy, PolicySpec
-from dfcoa_opt.envs.observation import ObservationSpec
-from dfcoa_opt.params import build
+from dfcoa_opt.control.features import ObservationSpec
+from dfcoa_opt.control.policy.controller import ACTIVATIONS, LoadedPolicy, PolicySpec
+from dfcoa_opt.core.params import build
 
 ROOT = Path(__file__).resolve().parents[2]
 #: The observation vector: 40 LiDAR beams, 4 neighbours, 2 moving obstacles.
@@ -134,7 +134,7 @@ def train(seed: int, budget: Budget = FULL, quiet: bool = False
     """Run DAgger and return the policy file's spec and arrays (OpenBLAS on one thread).
 
     The same seed and budget give the same arrays, bit for bit, on machines
-    with the same OpenBLAS kernels (``dfcoa_opt/dispatch.py``); the training's
+    with the same OpenBLAS kernels (``dfcoa_opt/core/runtime/dispatch.py``); the training's
     matrix products run on one OpenBLAS thread (:func:`mlp.one_blas_thread`),
     as their rounding depends on the thread count.
 

@@ -1,12 +1,12 @@
 """``learned_ppo``: a small MLP policy trained by PPO from the environments' reward.
 
 The network reads each robot's observation vector
-(:func:`dfcoa_opt.envs.observation.flatten`: slot, heading, velocities, 40
+(:func:`dfcoa_opt.control.features.flatten`: slot, heading, velocities, 40
 LiDAR beams, 4 neighbours, 2 moving obstacles, in the robot's frame) and gives
 a body-frame velocity command (m/s, at most 0.5 per axis), converted for
 unicycles by the simulator's near-identity map, as in the training. It runs
 the shipped policy file ``learned_ppo.json`` (+ ``learned_ppo.npz``) through
-the machinery of ``policy:PATH`` (:mod:`dfcoa_opt.control.policy`): no torch
+the machinery of ``policy:PATH`` (:mod:`dfcoa_opt.control.policy.controller`): no torch
 at run time, the same checks, the same compiled kernel, batched runs equal
 single runs bit for bit.
 
@@ -20,13 +20,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from comparisons.learned.controller import ShippedPolicyController, body_gain, shipped_policy
-from dfcoa_opt.control.policy import LoadedPolicy
+from dfcoa_opt.control.policy.controller import LoadedPolicy
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.params import param
+from dfcoa_opt.core.params import param
 
 #: The shipped policy file (its weights: ``learned_ppo.npz`` beside it).
 SHIPPED = Path(__file__).resolve().parent / "learned_ppo.json"
-#: SHA-256 of the shipped spec and weights (:func:`~dfcoa_opt.control.policy.policy_digest`).
+#: SHA-256 of the shipped spec and weights (:func:`~dfcoa_opt.control.policy.controller.policy_digest`).
 #: The results cache fingerprints code, not data: a retrained file must change this line,
 #: which re-simulates the stored runs of ``learned_ppo``.
 SHIPPED_DIGEST = "6674f0d2df7038d23ecef7ea3c69c761c388aa0b162f8f862b9671613610aaad"

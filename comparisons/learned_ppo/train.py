@@ -35,8 +35,8 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from dfcoa_opt.control.features import ObservationSpec
 from dfcoa_opt.envs.core import OUTCOME_CODES
-from dfcoa_opt.envs.observation import ObservationSpec
 from dfcoa_opt.envs.rewards import RewardSpec
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -150,7 +150,7 @@ class BodyVelocity(VecEnvWrapper):
 
     What a ``velocity`` controller with ``frame = "body"`` gets at run time:
     the row is rotated into the world by the robot's heading
-    (:func:`dfcoa_opt.geometry.rotate`, as :class:`~dfcoa_opt.control.policy.PolicyController`
+    (:func:`dfcoa_opt.core.geometry.rotate`, as :class:`~dfcoa_opt.control.policy.controller.PolicyController`
     does) and converted to the robots' ``(v, omega)`` by the simulator's
     near-identity map (:func:`dfcoa_opt.control.adapters.convert`), so the
     exported policy file runs the trained policy exactly.
@@ -170,7 +170,7 @@ class BodyVelocity(VecEnvWrapper):
     def step_async(self, actions: np.ndarray) -> None:
         """Rotate, convert and pass on the actions."""
         from dfcoa_opt.control.adapters import convert
-        from dfcoa_opt.geometry import rotate
+        from dfcoa_opt.core.geometry import rotate
 
         obs = self.venv.venv.toolkit_observation
         y = self.scale * np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)

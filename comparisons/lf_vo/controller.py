@@ -99,10 +99,10 @@ from comparisons.lf_vo.equations import (
 from comparisons.lf_vo.kernel import vo_clearance
 from dfcoa_opt.control.base import BatchedController, Observation, as_batch
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.params import param
+from dfcoa_opt.core.params import param
 
 if TYPE_CHECKING:
-    from dfcoa_opt.sim.scenario import Scenario
+    from dfcoa_opt.scenario.scenario import Scenario
 
 #: Below this broadcast speed the leader robot's heading is taken from the virtual leader, m/s.
 _STILL = 1e-3

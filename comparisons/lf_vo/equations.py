@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dfcoa_opt.geometry import body_to_world, wrap_angle
+from dfcoa_opt.core.geometry import body_to_world, wrap_angle
 
 FloatArray = NDArray[np.float64]
 
@@ -28,7 +28,7 @@ def formation_target(leader_pose: ArrayLike, offset: ArrayLike) -> FloatArray:
     The toolkit stores a slot as a Cartesian offset in the leader frame; an
     offset ``o`` is eq 5-6's ``(d, phi)`` with ``o = -d (cos phi, sin phi)``,
     i.e. ``d = |o|`` and ``phi = atan2(-o_y, -o_x)``. The V of
-    :func:`dfcoa_opt.formation.v_offsets` has ``d = rank * spacing`` and
+    :func:`dfcoa_opt.scenario.formation.v_offsets` has ``d = rank * spacing`` and
     ``phi = -angle`` (left wing) or ``+angle`` (right wing).
 
     Args:

@@ -53,7 +53,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from comparisons.lf_vo.choose import _roots, vo_choose
-from dfcoa_opt.threads import kernel_threads
+from dfcoa_opt.core.runtime.threads import kernel_threads
 
 __all__ = ["CHUNK", "SLACK", "vo_choose", "vo_clearance"]
 

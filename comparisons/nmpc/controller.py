@@ -63,13 +63,13 @@ from comparisons.nmpc.outputs import BatchOutput, SolveOutput
 from comparisons.nmpc.plans import PlanBuffers
 from dfcoa_opt.control.base import BatchedController, FilterResult, Observation
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.params import param
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.core.params import param
 from dfcoa_opt.sim.log import STATUS_OK, STATUS_SOLVER_FAIL
 
 if TYPE_CHECKING:
     from comparisons.nmpc.problem import NmpcProblem, ProblemSpec
-    from dfcoa_opt.sim.scenario import Scenario
+    from dfcoa_opt.scenario.scenario import Scenario
 
 FloatArray = NDArray[np.float64]
 __all__ = ["SQP_MAX_ITER", "IPOPT_MAX_ITER", "Nmpc", "goto_command", "solve_time_stats"]

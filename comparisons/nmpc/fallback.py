@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.geometry import wrap_angle
+from dfcoa_opt.core.geometry import wrap_angle
 from dfcoa_opt.sim.log import STATUS_SOLVER_FAIL, RunLog
 
 if TYPE_CHECKING:

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from comparisons.constraints.distance import StaticObstacles, disc_nearest, pair_geometry
 from comparisons.constraints.world_shapes import WorldShapes
 from dfcoa_opt.control.base import MovingObstacles, Neighbours
-from dfcoa_opt.geometry import take_rows
+from dfcoa_opt.core.geometry import take_rows
 
 FloatArray = NDArray[np.float64]
 #: Below this slot speed (m/s) the heading reference is the leader's heading.

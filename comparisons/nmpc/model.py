@@ -2,7 +2,7 @@
 
 Under a constant twist ``(v, omega)`` for ``tau`` s the unicycle moves along an arc;
 its chord ``v tau sinc(omega tau / 2)`` points along ``theta + omega tau / 2``
-(the simulator's model, :func:`dfcoa_opt.robots.models.integrate_unicycle`,
+(the simulator's model, :func:`dfcoa_opt.world.robots.models.integrate_unicycle`,
 without wrapping the heading).
 """
 
@@ -34,7 +34,7 @@ def arc_step(x: ca.SX, u: ca.SX, tau: float) -> ca.SX:
     """Exact unicycle motion under constant (v, omega) for ``tau`` s (the simulator's model).
 
     The chord ``v tau sinc(omega tau / 2)`` points along ``theta + omega tau / 2``
-    (:func:`dfcoa_opt.robots.models.integrate_unicycle`, without wrapping the heading).
+    (:func:`dfcoa_opt.world.robots.models.integrate_unicycle`, without wrapping the heading).
     """
     import casadi as ca  # here: the rollout below runs without casadi
 
@@ -68,7 +68,7 @@ def _rollout(controls, tau, out):  # pragma: no cover - numba
 
     The same IEEE operations, in the same order, as the vectorised numpy
     expressions it replaced (4x less time on the ``nmpc`` runs; numba's ``sin``
-    and ``cos`` equal numpy's on this machine, :mod:`dfcoa_opt.scalar_kernels`).
+    and ``cos`` equal numpy's on this machine, :mod:`dfcoa_opt.core.scalar_kernels`).
     """
     for i in range(controls.shape[0]):
         for k in range(controls.shape[1]):

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from comparisons.nmpc.geometry import entry_predictions, neighbour_predictions
 from comparisons.nmpc.model import rollout
-from dfcoa_opt.geometry import take_rows
+from dfcoa_opt.core.geometry import take_rows
 
 if TYPE_CHECKING:
     from comparisons.nmpc.problem import ProblemSpec

@@ -28,7 +28,7 @@ from comparisons.orca.lp import solve_one
 from comparisons.orca.neighbours import bin_points, buckets, knn_one, knn_within
 from comparisons.orca.obstacles import ObstacleSet, obstacle_lines, prepare_obstacles
 from comparisons.orca.velocities import orca_velocities
-from dfcoa_opt.threads import kernel_threads
+from dfcoa_opt.core.runtime.threads import kernel_threads
 
 FloatArray = NDArray[np.float64]
 

@@ -43,9 +43,9 @@ from dfcoa_opt.control.base import (
     as_batch,
 )
 from dfcoa_opt.control.registry import register, register_filter
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.geometry import take_rows
-from dfcoa_opt.params import param
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.core.geometry import take_rows
+from dfcoa_opt.core.params import param
 from dfcoa_opt.sim.log import (
     STATUS_FALLBACK,
     STATUS_MODIFIED,

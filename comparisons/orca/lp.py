@@ -31,7 +31,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.threads import kernel_threads
+from dfcoa_opt.core.runtime.threads import kernel_threads
 
 #: Parallel-line test of the 1D step (RVO2's ``RVO_EPSILON``), dimensionless.
 EPSILON = 1e-5

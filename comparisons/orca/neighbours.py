@@ -21,7 +21,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.threads import kernel_threads
+from dfcoa_opt.core.runtime.threads import kernel_threads
 
 
 @numba.njit(cache=True, inline="always")

@@ -42,7 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from comparisons.orca.lp import EPSILON, det
 from comparisons.orca.obstacle_set import ObstacleSet, merge_obstacles, prepare_obstacles
-from dfcoa_opt.threads import kernel_threads
+from dfcoa_opt.core.runtime.threads import kernel_threads
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]

@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from comparisons.orca.neighbours import knn_within
-from dfcoa_opt.geometry import closest_point_on_segment, take_rows
+from dfcoa_opt.core.geometry import closest_point_on_segment, take_rows
 
 FloatArray = NDArray[np.float64]
 #: Most robots within one step's reach of a robot; disc packing allows at most

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from comparisons.orca.lines import agent_lines
 from comparisons.orca.lp import solve_one
-from dfcoa_opt.threads import kernel_threads
+from dfcoa_opt.core.runtime.threads import kernel_threads
 
 FloatArray = NDArray[np.float64]
 

@@ -34,7 +34,7 @@ from comparisons.orca.obstacle_set import ObstacleSet, merge_obstacles, prepare_
 from dfcoa_opt.world.shapes import Circle, polygon_arrays
 
 if TYPE_CHECKING:
-    from dfcoa_opt.sim.scenario import Scenario
+    from dfcoa_opt.scenario.scenario import Scenario
 
 FloatArray = NDArray[np.float64]
 

@@ -26,13 +26,13 @@ from comparisons.reshape.route_mode import RouteMode
 from comparisons.reshape.routes import ConfigurationSpace, RoutePlanner, heading_bin
 from comparisons.reshape.tracking import Guidance, StuckMonitor
 from dfcoa_opt.control.base import Observation
-from dfcoa_opt.formation import line_offsets
-from dfcoa_opt.geometry import point_segment_distance, rotate
+from dfcoa_opt.core.geometry import point_segment_distance, rotate
 from dfcoa_opt.planning.pure_pursuit import PurePursuit
+from dfcoa_opt.scenario.formation import line_offsets
 
 if TYPE_CHECKING:
     from comparisons.reshape.controller import Reshape
-    from dfcoa_opt.sim.scenario import Scenario, World
+    from dfcoa_opt.scenario.scenario import Scenario, World
 
 FloatArray = NDArray[np.float64]
 #: The nominal formation must also fit this far along the leader's path, m.

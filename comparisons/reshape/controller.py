@@ -72,11 +72,11 @@ from dfcoa_opt.control.base import (
     slot_velocity,
 )
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.geometry import rotate
-from dfcoa_opt.params import param
+from dfcoa_opt.core.geometry import rotate
+from dfcoa_opt.core.params import param
 
 if TYPE_CHECKING:
-    from dfcoa_opt.sim.scenario import Scenario
+    from dfcoa_opt.scenario.scenario import Scenario
 
 FloatArray = NDArray[np.float64]
 #: How a run's robots track, by its latest plan: their own slots on the leader ...

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.geometry import closest_point_on_segment
+from dfcoa_opt.core.geometry import closest_point_on_segment
 from dfcoa_opt.world.shapes import Circle, Shape
 
 FloatArray = NDArray[np.float64]

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from comparisons.reshape.routes import Route, bin_heading, heading_bin
 from dfcoa_opt.control.base import Observation
-from dfcoa_opt.geometry import rotate
+from dfcoa_opt.core.geometry import rotate
 
 FloatArray = NDArray[np.float64]
 

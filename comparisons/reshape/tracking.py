@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from comparisons.reshape.routes import cell_of
-from dfcoa_opt.geometry import clip_segments_to_box, point_segment_distance, rotate
+from dfcoa_opt.core.geometry import clip_segments_to_box, point_segment_distance, rotate
 from dfcoa_opt.planning.astar import search
 from dfcoa_opt.world.grid import OccupancyGrid
 

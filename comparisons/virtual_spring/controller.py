@@ -61,7 +61,7 @@ Decisions (the paper's words, the choice and the reason:
    ``obstacle_share`` times its half.
 10. Eq 14's ideal position is the robot's slot around the virtual leader,
     which runs the obstacle-free route (``log.slots``):
-    :func:`dfcoa_opt.metrics_robots.mse_per_robot`.
+    :func:`dfcoa_opt.metrics.robots.mse_per_robot`.
 
 Batched (:class:`~dfcoa_opt.control.base.BatchedController`): one object
 steps every run of a batch in one pass, per-run values in rows ``env * N +
@@ -101,8 +101,8 @@ from comparisons.virtual_spring.kernels import (
 )
 from dfcoa_opt.control.base import BatchedController, Observation, as_batch, slot_velocity
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.geometry import body_to_world, rotate
-from dfcoa_opt.params import param
+from dfcoa_opt.core.geometry import body_to_world, rotate
+from dfcoa_opt.core.params import param
 
 #: Below this broadcast speed the leader robot's heading is the virtual leader's, m/s.
 _STILL = 1e-3

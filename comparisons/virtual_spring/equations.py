@@ -14,7 +14,7 @@ inputs only. Equation numbers are the paper's (``docs/methods/virtual_spring.md`
 * :func:`leader_avoidance_velocity`, :func:`follower_avoidance_velocity` -- eq 8, eq 9.
 * :func:`consistency_velocity` -- eq 10-11.
 * :func:`error_trend` and :func:`dynamic_speed_limit` -- eq 12-13.
-* eq 14 (the error to the ideal position): :func:`dfcoa_opt.metrics_robots.mse_per_robot`.
+* eq 14 (the error to the ideal position): :func:`dfcoa_opt.metrics.robots.mse_per_robot`.
 * eq 15-17 (conflict resolution): :mod:`comparisons.virtual_spring.conflict`.
 """
 
@@ -25,7 +25,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dfcoa_opt.geometry import polygon_edges
+from dfcoa_opt.core.geometry import polygon_edges
 
 FloatArray = NDArray[np.float64]
 
@@ -189,7 +189,7 @@ def disc_normals(p: ArrayLike, centres: ArrayLike,
 class PolygonEdges(NamedTuple):
     """Padded edges of ``Q`` static polygons (:func:`polygon_edge_table`), m.
 
-    ``a``, ``b``: ``(Q, V, 2)`` starts and ends (:func:`dfcoa_opt.geometry.polygon_edges`);
+    ``a``, ``b``: ``(Q, V, 2)`` starts and ends (:func:`dfcoa_opt.core.geometry.polygon_edges`);
     ``ab = b - a``; ``den``: ``(Q, V)`` ``|ab|^2`` (1 for zero-length edges, m^2);
     ``flat``: horizontal (and padding) edges; ``dy``: ``y_b - y_a`` (1 for flat edges).
     """
@@ -205,8 +205,8 @@ class PolygonEdges(NamedTuple):
 def polygon_edge_table(polygons: list[ArrayLike]) -> PolygonEdges:
     """Edges of ``Q`` polygons (vertex arrays ``(V_q, 2)``, m), built once per scenario.
 
-    The constants are those :func:`dfcoa_opt.geometry.closest_point_on_segment`
-    and :func:`dfcoa_opt.geometry.points_in_polygons` compute on every call.
+    The constants are those :func:`dfcoa_opt.core.geometry.closest_point_on_segment`
+    and :func:`dfcoa_opt.core.geometry.points_in_polygons` compute on every call.
     """
     a, b = polygon_edges(polygons)
     ab = b - a
@@ -222,8 +222,8 @@ def polygon_normals(p: ArrayLike,
 
     The normal points from the polygon's nearest boundary point to the robot
     (away from the polygon when the robot is inside). Nearest points and the
-    inside test are bit for bit :func:`dfcoa_opt.geometry.closest_point_on_segment`
-    (the first nearest edge wins) and :func:`dfcoa_opt.geometry.points_in_polygons`.
+    inside test are bit for bit :func:`dfcoa_opt.core.geometry.closest_point_on_segment`
+    (the first nearest edge wins) and :func:`dfcoa_opt.core.geometry.points_in_polygons`.
 
     Args:
         p: ``(N, 2)`` robot positions, m.

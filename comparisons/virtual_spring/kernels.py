@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from comparisons.constraints.geometry_kernels import polygon_walk1
 from comparisons.virtual_spring.equations import PolygonEdges, polygon_edge_table
-from dfcoa_opt.scalar_kernels import clip1
+from dfcoa_opt.core.scalar_kernels import clip1
 
 #: Below this norm a vector has no direction (m), as in :mod:`.equations`.
 TINY = 1e-12

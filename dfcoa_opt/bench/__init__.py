@@ -6,7 +6,7 @@ or group. Their module paths of release 0.1 (``dfcoa_opt.bench.recipes_astar``,
 until 0.3.
 """
 
-from dfcoa_opt.moved import keep_old_paths
+from dfcoa_opt.core.moved import keep_old_paths
 
 keep_old_paths({f"dfcoa_opt.bench.recipes_{m}": f"dfcoa_opt.bench.recipes.{m}"
                 for m in ("astar", "beyond", "dfcoa", "paper001", "paper002", "paper004")},

@@ -34,11 +34,11 @@ from typing import Any
 
 from dfcoa_opt.bench.lifecycle import deferred, forkserver_context, init_worker, terminate
 from dfcoa_opt.bench.runner import Outcome, execute_batch
-from dfcoa_opt.bench.sweep import RunSpec
-from dfcoa_opt.control.plugins import load_plugins
-from dfcoa_opt.control.plugins import loaded as loaded_plugins
+from dfcoa_opt.bench.sweep.expand import RunSpec
 from dfcoa_opt.control.registry import BUILTIN_MODULES
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.core.errors import DfcoaError
+from dfcoa_opt.core.plugins import load_plugins
+from dfcoa_opt.core.plugins import loaded as loaded_plugins
 
 EXECUTORS = ("serial", "process", "dask")
 
@@ -111,8 +111,8 @@ def _size(run: RunSpec) -> tuple[int, float]:
 
     What cannot be read counts as one robot and one step (the run itself reports it).
     """
-    from dfcoa_opt.sim.loader import read_toml
-    from dfcoa_opt.sim.schema import ScenarioSpec
+    from dfcoa_opt.scenario.loader import read_toml
+    from dfcoa_opt.scenario.schema import ScenarioSpec
 
     try:
         data = read_toml(run.scenario_file)
@@ -262,7 +262,7 @@ def _init_batch_worker(results: Any) -> None:
 def _execute_streaming(batch: int, runs: Sequence[RunSpec], plugins: Sequence[str]) -> int:
     """In a worker: execute one batch, sending ``(batch, outcome)`` as each run ends.
 
-    ``plugins``: the caller's loaded plugins (:mod:`dfcoa_opt.control.plugins`),
+    ``plugins``: the caller's loaded plugins (:mod:`dfcoa_opt.core.plugins`),
     imported first (once per worker).
     """
     load_plugins(plugins)
@@ -307,7 +307,7 @@ def _submit(pool: ProcessPoolExecutor, work: Iterable[tuple[int, Sequence[RunSpe
 #: worker and pool (``make figures`` starts a pool per recipe). Importing runs no
 #: numba kernel, so no OpenMP thread exists yet when the server forks.
 WORKER_PRELOAD = ("dfcoa_opt.bench.runner", "dfcoa_opt.sim.simulator", "dfcoa_opt.metrics",
-                  "dfcoa_opt.localization.mcl", *BUILTIN_MODULES)
+                  "dfcoa_opt.sim.localization.mcl", *BUILTIN_MODULES)
 
 
 def _dask(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome]:

@@ -18,8 +18,8 @@ from typing import Any
 from dfcoa_opt.bench import precision
 from dfcoa_opt.bench.executors import ExecutorConfig, run_all
 from dfcoa_opt.bench.lifecycle import Interrupted, SweepInterrupted, deferred, interruptible
-from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.bench.sweep import (
+from dfcoa_opt.bench.results.store import ResultsStore
+from dfcoa_opt.bench.sweep.expand import (
     DICT_SOURCE,
     RunSpec,
     Sweep,
@@ -72,8 +72,8 @@ def default_folder(sweep: Sweep, seeds: int | None = None,
     """The results folder of a sweep when none is given.
 
     A sweep file: ``results/<sweep name>`` (``dfcoa bench``; a name longer than
-    :data:`~dfcoa_opt.bench.sweep.NAME_MAX` characters shortened with a hash,
-    :func:`~dfcoa_opt.bench.sweep.shorten`). A sweep given as a
+    :data:`~dfcoa_opt.bench.sweep.expand.NAME_MAX` characters shortened with a hash,
+    :func:`~dfcoa_opt.bench.sweep.expand.shorten`). A sweep given as a
     dict (the Python facade's): ``results/<name>-<8 hex digits>``, the digits
     the start of the SHA-256 over the dict's canonical JSON (``sweep.sha256``,
     as the manifest records it) with the ``seeds`` and ``overrides`` it runs
@@ -104,7 +104,7 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
     enough get more seeds after each round (:mod:`dfcoa_opt.bench.precision`),
     and the manifest lists them.
 
-    The whole sweep is validated first (:func:`~dfcoa_opt.bench.sweep.load_sweep`),
+    The whole sweep is validated first (:func:`~dfcoa_opt.bench.sweep.expand.load_sweep`),
     and ``manifest.json``, ``sweep.toml`` and ``results.csv`` are written only
     once a run has finished (or none is left to run), and list finished rows
     only: a sweep that fails before that leaves an existing results folder as it

@@ -23,9 +23,9 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
-from dfcoa_opt.bench import stats
+from dfcoa_opt.bench.report import stats
 from dfcoa_opt.bench.runner import is_success
-from dfcoa_opt.bench.sweep import RunSpec
+from dfcoa_opt.bench.sweep.expand import RunSpec
 
 Cell = tuple[str, str, str, float | None]
 

@@ -1,7 +1,7 @@
 """Execute one run of a sweep and turn it into a result row.
 
 :func:`execute` is what every executor ships to its workers: a pure function
-of the :class:`~dfcoa_opt.bench.sweep.RunSpec` (plus the code), so serial,
+of the :class:`~dfcoa_opt.bench.sweep.expand.RunSpec` (plus the code), so serial,
 process and Dask executors produce the same row. A run that fails -- the
 scenario does not load for this seed, the controller raises or returns
 NaN/inf, a solver error escapes the controller's policy -- becomes a row with
@@ -17,9 +17,9 @@ Row fields (JSON):
 - ``status`` (``ok`` | ``failed``), ``error`` (one line or null);
 - ``metrics``: :func:`dfcoa_opt.metrics.summary` with NaN/inf as null; among
   them ``outcome`` (success, collision, deadlock or timeout,
-  :mod:`dfcoa_opt.outcome`) and ``reached`` (the goal condition, whatever the
+  :mod:`dfcoa_opt.metrics.outcome`) and ``reached`` (the goal condition, whatever the
   contacts); and the world's difficulty along the leader's path, the
-  ``world_*`` keys of :func:`dfcoa_opt.metrics_world.world_difficulty`;
+  ``world_*`` keys of :func:`dfcoa_opt.metrics.world.world_difficulty`;
 - ``digest``: SHA-256 over the log arrays (bit-identical runs <=> equal);
 - ``log``: the ``.npz`` path relative to the results folder, or null;
 - ``provenance``: wall time, finish time, host, numpy's SIMD level, pid,
@@ -40,13 +40,14 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from dfcoa_opt import dispatch, environment
-from dfcoa_opt.bench.sweep import RunSpec, load_run_scenario
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.bench.sweep.expand import RunSpec, load_run_scenario
+from dfcoa_opt.core.errors import DfcoaError
+from dfcoa_opt.core.runtime import dispatch
+from dfcoa_opt.core.runtime import provenance as environment
 
 if TYPE_CHECKING:
+    from dfcoa_opt.scenario.scenario import Scenario
     from dfcoa_opt.sim.log import RunLog
-    from dfcoa_opt.sim.scenario import Scenario
 
 #: Keys of a row that must be identical whichever executor ran it.
 DETERMINISTIC_KEYS = ("key", "scenario", "scenario_file", "controller", "seed", "overrides",
@@ -97,7 +98,7 @@ def _row(run: RunSpec) -> dict[str, Any]:
 def _outcome(run: RunSpec, log: RunLog, scenario: Scenario, wall: float) -> Outcome:
     """The row of a run that ran to its end (metrics, digest, log bytes)."""
     from dfcoa_opt import metrics
-    from dfcoa_opt.metrics_world import world_difficulty
+    from dfcoa_opt.metrics.world import world_difficulty
 
     t0 = time.perf_counter()
     row = _row(run)

@@ -38,18 +38,18 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.executors import ExecutorConfig, kept_workers
 from dfcoa_opt.bench.harness import run_sweep
-from dfcoa_opt.bench.logs import compact_log
-from dfcoa_opt.bench.plots import as_number
+from dfcoa_opt.bench.report.plots import as_number
+from dfcoa_opt.bench.report.stats import cvar
+from dfcoa_opt.bench.results.logs import compact_log
+from dfcoa_opt.bench.results.store import ResultsStore, display_path
 from dfcoa_opt.bench.runner import is_success
-from dfcoa_opt.bench.stats import cvar
-from dfcoa_opt.bench.store import ResultsStore, display_path
-from dfcoa_opt.bench.sweep import RunSpec, Sweep, canonical, load_sweep, safe_name
-from dfcoa_opt.bench.variants import Variant
-from dfcoa_opt.errors import DfcoaError, ScenarioError, did_you_mean
-from dfcoa_opt.params import Tunable, build, param
+from dfcoa_opt.bench.sweep.expand import RunSpec, Sweep, canonical, load_sweep, safe_name
+from dfcoa_opt.bench.sweep.variants import Variant
+from dfcoa_opt.core.atomic import atomic_write
+from dfcoa_opt.core.errors import DfcoaError, ScenarioError, did_you_mean
+from dfcoa_opt.core.params import Tunable, build, param
 
 #: The metric of the tie breaker and its scale: the CVaR of the formation centroid error
 #: (m) over a trial's runs; a CVaR of this many metres or more costs the most.

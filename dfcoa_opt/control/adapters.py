@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.robots.models import CommandKind
+from dfcoa_opt.world.robots.models import CommandKind
 
 FloatArray = NDArray[np.float64]
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from dfcoa_opt.control.base import BatchedController, Observation, slot_velocity
 from dfcoa_opt.control.registry import register
-from dfcoa_opt.params import param
+from dfcoa_opt.core.params import param
 
 
 @register("goto_slot")

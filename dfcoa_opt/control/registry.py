@@ -1,7 +1,7 @@
 """Controller registry: ids -> controller classes, plus entry-point discovery.
 
 A controller class has a ``Params`` frozen dataclass (fields made with
-:func:`dfcoa_opt.params.param`) and is constructed as ``cls(params)``. Register
+:func:`dfcoa_opt.core.params.param`) and is constructed as ``cls(params)``. Register
 it with ``@register("my_id")`` in an imported module, or -- from another
 package -- through the entry-point group ``dfcoa_opt.controllers``::
 
@@ -19,7 +19,7 @@ names a controller whose output passes through the filter
 from its own ``[controllers.<id>]`` table.
 
 ``"policy:PATH"`` (``+filter`` too) names a policy file, a network in a JSON
-spec and an ``.npz`` (:mod:`dfcoa_opt.control.policy`, ``docs/policies.md``):
+spec and an ``.npz`` (:mod:`dfcoa_opt.control.policy.controller`, ``docs/policies.md``):
 any process builds it from the file, so it is not listed by :func:`available`
 and takes no ``[controllers.*]`` table; a relative PATH is relative to the
 working folder. :func:`data_digest` hashes its files, which the results store
@@ -34,16 +34,16 @@ from dataclasses import replace
 from importlib.metadata import entry_points
 from typing import Any, TypeVar
 
-from dfcoa_opt.control import plugins
-from dfcoa_opt.errors import DfcoaError, ScenarioError, UnknownNameError, did_you_mean
-from dfcoa_opt.params import Tunable, build, check_robot_indices, tunables
+from dfcoa_opt.core import plugins
+from dfcoa_opt.core.errors import DfcoaError, ScenarioError, UnknownNameError, did_you_mean
+from dfcoa_opt.core.params import Tunable, build, check_robot_indices, tunables
 
 ENTRY_POINT_GROUP = "dfcoa_opt.controllers"
 #: Controller ids ``policy:PATH`` name a policy file; its classes come from this module.
-POLICY_PREFIX, POLICY_MODULE = "policy:", "dfcoa_opt.control.policy"
+POLICY_PREFIX, POLICY_MODULE = "policy:", "dfcoa_opt.control.policy.controller"
 #: Modules of this distribution that register controllers when imported (or, the policy
 #: module, build them from files).
-BUILTIN_MODULES = ("dfcoa_opt.control.goto_slot", "dfcoa_opt.control.dfcoa",
+BUILTIN_MODULES = ("dfcoa_opt.control.goto_slot", "dfcoa_opt.control.dfcoa.controller",
                    "comparisons.orca.filter", "comparisons.consensus", "comparisons.lf_vo",
                    "comparisons.virtual_spring", "comparisons.cbf", "comparisons.nmpc",
                    "comparisons.reshape", "comparisons.learned", "comparisons.learned_ppo",
@@ -80,7 +80,7 @@ def register(controller_id: str, *, command: str | None = None, spec: Any = None
 
     A class (README, "Add your own controller") is registered as it is. A
     function is a *policy* (``docs/policies.md``): ``fn(x)`` gets ``x`` ``(R, D)``,
-    one observation vector per row (:func:`dfcoa_opt.envs.observation.flatten`
+    one observation vector per row (:func:`dfcoa_opt.control.features.flatten`
     with ``spec``), every row of every run of a batch, and returns ``(R, 2)``
     actions of kind ``command``. The decorator returns what it was given::
 
@@ -101,7 +101,7 @@ def register(controller_id: str, *, command: str | None = None, spec: Any = None
         controller_id: The id (no ``+``, not ``policy:...``).
         command: A function's action kind, required for one: ``unicycle``
             (v m/s, omega rad/s), ``velocity`` (m/s) or ``acceleration`` (m/s^2).
-        spec: A function's :class:`~dfcoa_opt.envs.observation.ObservationSpec`
+        spec: A function's :class:`~dfcoa_opt.control.features.ObservationSpec`
             (default ``ObservationSpec()``).
         frame: A velocity or acceleration action in the ``world`` frame (as the
             learning environments apply actions) or in the robot's ``body``
@@ -146,7 +146,7 @@ def _parts(controller_id: str) -> tuple[str, str | None]:
 
 
 def _policy() -> Any:
-    """The policy module (:mod:`dfcoa_opt.control.policy`), imported by name like the built-ins.
+    """The policy module (:mod:`dfcoa_opt.control.policy.controller`), imported by name like the built-ins.
 
     Named, not imported by an ``import`` statement, so that the registry (which
     every run executes) does not make it part of every run's code fingerprint.
@@ -163,10 +163,10 @@ def data_digest(controller_id: str) -> str:
     """SHA-256 of the data a run of ``controller_id`` reads: a policy's spec and weights.
 
     For a controller or filter from a plugin file, that file's bytes
-    (:func:`dfcoa_opt.control.plugins.plugin_digest`); empty for every other id.
+    (:func:`dfcoa_opt.core.plugins.plugin_digest`); empty for every other id.
     The results store adds it to the run's identity, so a changed policy or
     plugin file re-simulates its runs
-    (:func:`dfcoa_opt.control.policy.policy_digest`).
+    (:func:`dfcoa_opt.control.policy.controller.policy_digest`).
     """
     if not is_policy(controller_id):
         _load_all()
@@ -208,7 +208,7 @@ def known_to_workers(controller_id: str) -> bool:
     """Whether a fresh process finds ``controller_id`` (and its filter) in the registry.
 
     True for classes of :data:`BUILTIN_MODULES`, of the entry-point group and
-    of plugins (:mod:`dfcoa_opt.control.plugins`, which workers load too), and
+    of plugins (:mod:`dfcoa_opt.core.plugins`, which workers load too), and
     for policy files (``policy:PATH``; workers share the working folder); a
     class registered with :func:`register` in a notebook or a script (a
     callable policy too) is known only to the process that ran it, so a sweep's
@@ -240,7 +240,7 @@ def controller_class(controller_id: str) -> type:
     """The class registered under ``controller_id`` (the controller part of ``a+filter``).
 
     For ``policy:PATH``, a class made for that file, which is read and checked
-    (:func:`dfcoa_opt.control.policy.file_policy_class`).
+    (:func:`dfcoa_opt.control.policy.controller.file_policy_class`).
 
     Raises:
         UnknownNameError: Unknown controller or filter, with a "did you mean" hint.

@@ -15,8 +15,8 @@
 - :class:`RewardSpec` (:mod:`dfcoa_opt.envs.rewards`): the reward's weights;
   the reward comes from the toolkit's metrics (paper 000 eq 6-7, progress
   along the leader's path) and outcomes (collision, success, deadlock).
-- :mod:`dfcoa_opt.envs.observation`: one robot's observation as a flat vector
-  (:class:`~dfcoa_opt.envs.observation.ObservationSpec`, ``flatten``), shared by
+- :mod:`dfcoa_opt.control.features`: one robot's observation as a flat vector
+  (:class:`~dfcoa_opt.control.features.ObservationSpec`, ``flatten``), shared by
   the environments and the ``policy:PATH`` controllers.
 - :mod:`dfcoa_opt.envs.core`: the engine both environments share (numpy only),
   and :data:`~dfcoa_opt.envs.core.OUTCOME_CODES`, the integer code of each

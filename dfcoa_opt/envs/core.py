@@ -4,7 +4,7 @@
 slots are the E episodes: one :meth:`~dfcoa_opt.sim.stepper.Stepper.sense` and
 one :meth:`~dfcoa_opt.sim.stepper.Stepper.apply` per step for all of them, the
 observation of every robot of every slot flattened in one compiled call
-(:func:`~dfcoa_opt.envs.observation.flatten`) and every run scored (formation
+(:func:`~dfcoa_opt.control.features.flatten`) and every run scored (formation
 errors, arc length, contacts, reward, stall test) in another
 (:func:`~dfcoa_opt.envs.kernels.score_runs`; :mod:`dfcoa_opt.envs.rewards` has
 the definitions and numpy references). Python loops run only over the runs
@@ -17,7 +17,7 @@ The environments change three settings of the scenario they are given
 episode), ``leader.wait_for_formation = true`` (success needs the formation
 settled at the goal) and ``stop_on_deadlock`` (the environment's option,
 default true: a stalled run ends as a deadlock). The stall test is
-:class:`~dfcoa_opt.outcome.StallMonitor`'s, computed for every run at once
+:class:`~dfcoa_opt.metrics.outcome.StallMonitor`'s, computed for every run at once
 (:class:`~dfcoa_opt.envs.rewards.BatchStall`, whose flags are the Stepper's
 ``stall_flags``): the per-run monitors would cost a Python loop over the runs
 at every step (about half of a step at E = 1024).
@@ -34,25 +34,25 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt import dispatch
 from dfcoa_opt.control.base import Observation
+from dfcoa_opt.control.features import ObservationSpec, flatten
+from dfcoa_opt.core.errors import DfcoaError
+from dfcoa_opt.core.runtime import dispatch
 from dfcoa_opt.envs.kernels import score_runs
-from dfcoa_opt.envs.observation import ObservationSpec, flatten
 from dfcoa_opt.envs.rewards import BatchStall, PathTable, RewardSpec, end_bonus, end_of_episode
 from dfcoa_opt.envs.spaces import action_bounds, observation_bounds
-from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.outcome import OUTCOMES
-from dfcoa_opt.robots.models import CommandKind, make_model
+from dfcoa_opt.metrics.outcome import OUTCOMES
+from dfcoa_opt.scenario.scenario import Scenario
+from dfcoa_opt.scenario.schema import MetricSpec
 from dfcoa_opt.sim.batch import BatchSimulator
 from dfcoa_opt.sim.log import RunLog
-from dfcoa_opt.sim.scenario import Scenario
-from dfcoa_opt.sim.schema import MetricSpec
 from dfcoa_opt.sim.stepper import Ended, Stepper, is_batched
+from dfcoa_opt.world.robots.models import CommandKind, make_model
 
 FloatArray = NDArray[np.float64]
 
 #: An episode's outcome as the environments' infos give it, by code: ``OUTCOME_NAMES[code]``.
-#: Code 0 (``running``) while the episode goes on, then :data:`dfcoa_opt.outcome.OUTCOMES`
+#: Code 0 (``running``) while the episode goes on, then :data:`dfcoa_opt.metrics.outcome.OUTCOMES`
 #: in their order: 1 success, 2 collision, 3 deadlock, 4 timeout.
 OUTCOME_NAMES: tuple[str, ...] = ("running", *OUTCOMES)
 #: The code of each outcome name (:data:`OUTCOME_NAMES` inverted).
@@ -101,7 +101,7 @@ def env_scenario(scenario: Scenario | str | Path, stop_on_deadlock: bool = True,
         ScenarioError: A bad file or key.
         DfcoaError: Overrides for a scenario built without its file's data.
     """
-    from dfcoa_opt.sim.loader import apply_overrides, load_scenario, scenario_from_dict
+    from dfcoa_opt.scenario.loader import apply_overrides, load_scenario, scenario_from_dict
 
     keys = {k.replace("__", "."): v for k, v in (overrides or {}).items()}
     keys.update({"stop_on_collision": True, "leader.wait_for_formation": True,

@@ -5,7 +5,7 @@ kernels replace most of them with one call each, and give the bits of the
 numpy references they stand for (``tests/test_envs.py`` compares them on
 random inputs):
 
-- :func:`flatten_rows`: :func:`dfcoa_opt.envs.observation.flatten_reference`,
+- :func:`flatten_rows`: :func:`dfcoa_opt.control.features.flatten_reference`,
   every row of an :class:`~dfcoa_opt.control.base.Observation` as its vector;
 - :func:`score_runs`: the formation errors
   (:func:`~dfcoa_opt.envs.rewards.formation_errors`), the centroid's arc
@@ -21,7 +21,7 @@ numpy's reductions (a mean over the robots of a strided or non-inner axis is
 a sequential sum from 0; over a contiguous inner axis numpy's pairwise sum,
 :func:`_pairwise`; a norm of two components ``sqrt(x x + y y)``) and numpy's
 ``argsort(kind="stable")`` and ``argmin`` (NaN last, resp. first). numba's
-``sin``, ``cos`` and ``hypot`` are numpy's here (``dfcoa_opt.scalar_kernels``);
+``sin``, ``cos`` and ``hypot`` are numpy's here (``dfcoa_opt.core.scalar_kernels``);
 no ``arctan2`` is needed.
 """
 
@@ -114,7 +114,7 @@ def _earlier(d, q, best):  # pragma: no cover - numba
 def flatten_rows(pose, velocity, leader, env, slot, ranges, scanned, range_max, nb_index,
                  nb_pos, nb_vel, mv_pos, mv_vel, mv_radius, mv_mask, beams, k_keep, m_keep,
                  scale, v_scale):  # pragma: no cover - numba
-    """Every row's observation vector, :func:`~dfcoa_opt.envs.observation.flatten_reference`'s bits.
+    """Every row's observation vector, :func:`~dfcoa_opt.control.features.flatten_reference`'s bits.
 
     Args:
         pose: ``(R, 3)`` own poses.

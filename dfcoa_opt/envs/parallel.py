@@ -3,7 +3,7 @@
 ``parallel_env(scenario, seed)`` steps one run through the batched simulator's
 :class:`~dfcoa_opt.sim.stepper.Stepper` (a batch of one): the agents
 ``robot_0 .. robot_{N-1}`` observe their own
-:func:`~dfcoa_opt.envs.observation.flatten` vector and act with the robot
+:func:`~dfcoa_opt.control.features.flatten` vector and act with the robot
 model's command; every agent gets the team's reward
 (:mod:`dfcoa_opt.envs.rewards`), and the episode ends for all agents at once.
 Layout, reward, ends and seeds: ``docs/envs.md``.
@@ -20,12 +20,12 @@ from numpy.typing import NDArray
 from pettingzoo import ParallelEnv
 
 from dfcoa_opt.control.base import Observation
+from dfcoa_opt.control.features import ObservationSpec
+from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.envs.core import OUTCOME_CODES, TeamBatch
-from dfcoa_opt.envs.observation import ObservationSpec
 from dfcoa_opt.envs.rewards import RewardSpec
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.scenario.scenario import Scenario
 from dfcoa_opt.sim.log import RunLog
-from dfcoa_opt.sim.scenario import Scenario
 
 FloatArray = NDArray[np.float64]
 
@@ -168,7 +168,7 @@ class FormationParallelEnv(ParallelEnv[str, FloatArray, FloatArray]):
         return self.core.episode_log(0)
 
     def render(self) -> None:
-        """No rendering: plot an episode with ``dfcoa_opt.plotting`` from :meth:`episode_log`."""
+        """No rendering: plot an episode with ``dfcoa_opt.viz.plotting`` from :meth:`episode_log`."""
         return None
 
     def close(self) -> None:

@@ -16,9 +16,9 @@ the command they then applied), so its terms are the run log's own numbers::
 - ``E_s``: the formation shape error, paper 000 eq 7
   (:func:`dfcoa_opt.metrics.formation_shape_error`), m;
 - ``s``: the arc length along the leader's planned path of the point nearest
-  the robots' centroid (:func:`dfcoa_opt.outcome.formation_progress`), m, with
+  the robots' centroid (:func:`dfcoa_opt.metrics.outcome.formation_progress`), m, with
   ``s(t_{-1}) = s(t_0)``;
-- a contact is any of :func:`dfcoa_opt.outcome.contact_steps` (robot-robot,
+- a contact is any of :func:`dfcoa_opt.metrics.outcome.contact_steps` (robot-robot,
   robot-static, robot-moving), the outcome ``collision``.
 
 Summed over an episode, the first term is ``-formation * dt * sum_k E_c(t_k)``:
@@ -37,16 +37,16 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 from numpy.typing import NDArray
 
+from dfcoa_opt.core.params import param
 from dfcoa_opt.metrics import formation_centroid_error, formation_shape_error
-from dfcoa_opt.params import param
-from dfcoa_opt.sim.schema import MetricSpec
+from dfcoa_opt.scenario.schema import MetricSpec
 
 if TYPE_CHECKING:
     from dfcoa_opt.sim.log import RunLog
 
 FloatArray = NDArray[np.float64]
 
-#: How an episode ended: the outcome classes of :mod:`dfcoa_opt.outcome`.
+#: How an episode ended: the outcome classes of :mod:`dfcoa_opt.metrics.outcome`.
 TERMINAL_OUTCOMES = ("success", "collision", "deadlock")
 
 
@@ -127,7 +127,7 @@ def path_arc_length(path: FloatArray, points: FloatArray) -> FloatArray:
     """Arc length of the nearest point of ``path`` to each point, vectorised over the points.
 
     The arithmetic of ``PurePursuit.arc_length`` (the measure of
-    :func:`dfcoa_opt.outcome.formation_progress`) in numpy, for every point in
+    :func:`dfcoa_opt.metrics.outcome.formation_progress`) in numpy, for every point in
     one call: for each segment the clipped projection ``t``, its distance, and
     the first nearest segment wins. (The environments' step computes it in
     :func:`~dfcoa_opt.envs.kernels.score_runs`, with these bits.)
@@ -173,7 +173,7 @@ def dense_reward(spec: RewardSpec, dt: float, e_c: FloatArray, e_s: FloatArray,
 def end_of_episode(contact: bool, reached: bool, last_instant: bool) -> tuple[str, bool]:
     """The outcome of a run that ended at this instant, and whether that is a termination.
 
-    The order of :func:`dfcoa_opt.outcome.classify`: a contact is a ``collision``
+    The order of :func:`dfcoa_opt.metrics.outcome.classify`: a contact is a ``collision``
     (the run stops at its first contact), else reaching the goal with the
     formation settled a ``success``; a run that stopped for neither before its
     last instant was stopped by the stall monitor (``stop_on_deadlock``), a
@@ -186,7 +186,7 @@ def end_of_episode(contact: bool, reached: bool, last_instant: bool) -> tuple[st
         last_instant: It was the last instant ``t_max`` allows.
 
     Returns:
-        The outcome (one of :data:`dfcoa_opt.outcome.OUTCOMES`) and True when
+        The outcome (one of :data:`dfcoa_opt.metrics.outcome.OUTCOMES`) and True when
         the episode terminated (False: truncated).
     """
     if contact:
@@ -203,7 +203,7 @@ def end_bonus(spec: RewardSpec, outcome: str) -> float:
 
     Args:
         spec: The weights.
-        outcome: One of :data:`dfcoa_opt.outcome.OUTCOMES`.
+        outcome: One of :data:`dfcoa_opt.metrics.outcome.OUTCOMES`.
     """
     if outcome == "success":
         return spec.success
@@ -213,7 +213,7 @@ def end_bonus(spec: RewardSpec, outcome: str) -> float:
 
 
 class BatchStall:
-    """:class:`~dfcoa_opt.outcome.StallMonitor`'s test for every run of a batch at once.
+    """:class:`~dfcoa_opt.metrics.outcome.StallMonitor`'s test for every run of a batch at once.
 
     The Stepper asks each run's monitor ``update(k, positions, slots)`` in a
     Python loop; this object holds the answer of every run (:attr:`flags`,
@@ -224,7 +224,7 @@ class BatchStall:
     instant, bit for bit: instant ``k >= lag`` is stalled when the centroid advanced less
     than ``metrics.deadlock_advance`` along the path since ``k - lag`` and every
     robot farther than ``settle_tolerance`` from its slot moved less than
-    ``metrics.deadlock_displacement`` (:func:`dfcoa_opt.outcome.stalled`).
+    ``metrics.deadlock_displacement`` (:func:`dfcoa_opt.metrics.outcome.stalled`).
 
     Args:
         slots: E, the batch's slots.

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from dfcoa_opt.envs.vector import FormationVectorEnv
-from dfcoa_opt.sim.scenario import Scenario
+from dfcoa_opt.scenario.scenario import Scenario
 
 FloatArray = NDArray[np.float64]
 

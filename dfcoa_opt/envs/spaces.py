@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.envs.observation import ObservationSpec
-from dfcoa_opt.robots.models import CommandKind
-from dfcoa_opt.sim.schema import RobotSpec
+from dfcoa_opt.control.features import ObservationSpec
+from dfcoa_opt.scenario.schema import RobotSpec
+from dfcoa_opt.world.robots.models import CommandKind
 
 FloatArray = NDArray[np.float64]
 

@@ -50,9 +50,9 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
+from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.envs.vector import FormationVectorEnv
-from dfcoa_opt.errors import DfcoaError
-from dfcoa_opt.sim.scenario import Scenario
+from dfcoa_opt.scenario.scenario import Scenario
 
 GROUP = "robot"
 """The group of the robots' entries (``("robot", "observation")`` ...)."""

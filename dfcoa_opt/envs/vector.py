@@ -1,7 +1,7 @@
 """gymnasium ``VectorEnv``: E runs of a scenario as the E slots of one batched Stepper.
 
 Each sub-environment is one team: its observation is ``(N, D)`` (row i =
-robot i's :func:`~dfcoa_opt.envs.observation.flatten` vector), its action
+robot i's :func:`~dfcoa_opt.control.features.flatten` vector), its action
 ``(N, 2)`` (row i = robot i's command), its reward the team's scalar
 (:mod:`dfcoa_opt.envs.rewards`). A step is one ``sense`` and one ``apply`` of
 the Stepper for every sub-environment, and Python loops only over the runs
@@ -28,12 +28,12 @@ from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
 from dfcoa_opt.control.base import Observation
+from dfcoa_opt.control.features import ObservationSpec
+from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.envs.core import OUTCOME_CODES, TeamBatch
-from dfcoa_opt.envs.observation import ObservationSpec
 from dfcoa_opt.envs.rewards import RewardSpec
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.scenario.scenario import Scenario
 from dfcoa_opt.sim.log import RunLog
-from dfcoa_opt.sim.scenario import Scenario
 
 FloatArray = NDArray[np.float64]
 

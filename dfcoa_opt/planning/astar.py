@@ -3,7 +3,7 @@
 The search is one numba kernel (:mod:`dfcoa_opt.planning.astar_kernel`) with
 an array-based, indexed 4-ary min-heap (decrease-key; each node is in the heap
 at most once). The same kernel runs
-the improved A* of eq 13 (:mod:`dfcoa_opt.planning.astar_improved`) when its
+the improved A* of eq 13 (:mod:`dfcoa_opt.planning.improved_astar`) when its
 extra terms are non-zero, so both planners share every line of the search.
 
 Moves: 4 straight moves cost 1 cell, 4 diagonal moves cost sqrt(2) cells. Without
@@ -39,8 +39,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dfcoa_opt.errors import ScenarioError
-from dfcoa_opt.params import param
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.core.params import param
 from dfcoa_opt.planning import postprocess
 from dfcoa_opt.planning.astar_kernel import astar_kernel, workspace
 from dfcoa_opt.planning.jps_kernel import jps_kernel
@@ -232,7 +232,7 @@ def search(occupied: ArrayLike, start: ArrayLike, goal: ArrayLike, *, method: st
         h_gain: alpha / const_2 of eq 13 (dimensionless); 0 = traditional.
         o_gain: Weight of the obstacle term: o(n) = o_gain * sum 1 / d_i in cells,
             d_i in cells (``beta / const_1`` with the area weighting of
-            :class:`~dfcoa_opt.planning.astar_improved.ImprovedAStarParams`);
+            :class:`~dfcoa_opt.planning.improved_astar.ImprovedAStarParams`);
             0 = traditional.
         window: Radius (cells) of the disc of obstacle cells summed in eq 13.
         goal_shortcut: Join the goal by line of sight from the closest node so far.
@@ -297,7 +297,7 @@ def plan(grid: OccupancyGrid, start: ArrayLike, goal: ArrayLike,
     (:func:`~dfcoa_opt.planning.postprocess.planning_grid`, which releases the
     surroundings of a start or goal that only inflation blocks); search
     (:func:`search` with the options of ``params``, so an
-    :class:`~dfcoa_opt.planning.astar_improved.ImprovedAStarParams` runs eq 13);
+    :class:`~dfcoa_opt.planning.improved_astar.ImprovedAStarParams` runs eq 13);
     shorten by line of sight; smooth; convert to m. The path
     starts at ``start`` and ends at ``goal`` exactly: they are joined to the
     centres of their own cells (a hop inside one free cell).

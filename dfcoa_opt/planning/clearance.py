@@ -28,7 +28,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.params import param
+from dfcoa_opt.core.params import param
 from dfcoa_opt.planning.astar_kernel import trace_path
 from dfcoa_opt.planning.postprocess import planning_grid
 from dfcoa_opt.planning.registry import register_planner
@@ -55,7 +55,7 @@ class ClearanceParams:
     def check(self, src: str, key: str) -> None:
         """``clearance`` beyond ``inflate``."""
         if self.clearance <= self.inflate:
-            from dfcoa_opt.errors import ScenarioError
+            from dfcoa_opt.core.errors import ScenarioError
 
             raise ScenarioError(src, f"{key}.clearance", f"({self.clearance:g} m) must exceed "
                                                          f"inflate ({self.inflate:g} m)")

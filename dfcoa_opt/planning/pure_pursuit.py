@@ -15,7 +15,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.scalar_kernels import wrap1
+from dfcoa_opt.core.scalar_kernels import wrap1
 
 FloatArray = NDArray[np.float64]
 

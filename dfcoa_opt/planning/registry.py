@@ -19,16 +19,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.errors import UnknownNameError, did_you_mean
-from dfcoa_opt.params import build_options
-from dfcoa_opt.sim.schema import LeaderSpec
+from dfcoa_opt.core.errors import UnknownNameError, did_you_mean
+from dfcoa_opt.core.params import build_options
+from dfcoa_opt.scenario.schema import LeaderSpec
 from dfcoa_opt.world.grid import OccupancyGrid
 
 Planner = Callable[[OccupancyGrid, NDArray[np.float64], NDArray[np.float64], LeaderSpec, Any],
                    NDArray[np.float64]]
 #: Modules of this distribution that register planners when imported.
 PLANNER_MODULES: tuple[str, ...] = ("dfcoa_opt.planning.astar", "dfcoa_opt.planning.clearance",
-                                     "dfcoa_opt.planning.astar_improved")
+                                     "dfcoa_opt.planning.improved_astar")
 _PLANNERS: dict[str, Planner] = {}
 _PARAMS: dict[str, type | None] = {}
 

@@ -31,15 +31,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt import __version__, dispatch
+from dfcoa_opt import __version__
 from dfcoa_opt.control.base import Controller, Limits
-from dfcoa_opt.errors import DfcoaError, RunFailed
-from dfcoa_opt.robots.models import make_model
-from dfcoa_opt.sim.budget import check_budget
+from dfcoa_opt.core.errors import DfcoaError, RunFailed
+from dfcoa_opt.core.runtime import dispatch
+from dfcoa_opt.scenario.budget import check_budget
+from dfcoa_opt.scenario.scenario import Scenario, World
 from dfcoa_opt.sim.log import BatchLog, RunLog
-from dfcoa_opt.sim.scenario import Scenario, World
 from dfcoa_opt.sim.stepper import Ended, Stepper, is_batched
 from dfcoa_opt.world.lidar import Lidar
+from dfcoa_opt.world.robots.models import make_model
 
 FloatArray = NDArray[np.float64]
 
@@ -52,7 +53,7 @@ __all__ = ["BatchSimulator", "ControllerError", "is_batched"]
 
 
 #: The ``[robots]`` keys a log's meta keeps (``meta["robots"]``): what the deployability
-#: report (:mod:`dfcoa_opt.metrics_deploy`) reads.
+#: report (:mod:`dfcoa_opt.metrics.deploy`) reads.
 DEPLOY_ROBOT_KEYS = ("model", "profile", "dynamics", "v_max", "v_min", "w_max", "wheel_radius",
                      "track_width", "wheel_speed_max", "wheel_accel_max", "nid_distance")
 

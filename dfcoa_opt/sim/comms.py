@@ -44,8 +44,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.geometry import wrap_angle_fast
-from dfcoa_opt.sim.schema import ScenarioSpec
+from dfcoa_opt.core.geometry import wrap_angle_fast
+from dfcoa_opt.scenario.schema import ScenarioSpec
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]

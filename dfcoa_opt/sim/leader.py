@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.formation import slot_positions
 from dfcoa_opt.planning.pure_pursuit import PurePursuit
-from dfcoa_opt.robots.unicycle_kernel import unicycle_arc
-from dfcoa_opt.sim.scenario import Scenario
+from dfcoa_opt.scenario.formation import slot_positions
+from dfcoa_opt.scenario.scenario import Scenario
+from dfcoa_opt.world.robots.unicycle_kernel import unicycle_arc
 
 FloatArray = NDArray[np.float64]
 #: Bytes of leader tracks kept per process (:func:`leader_track`); the least recently

@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.core.atomic import atomic_write
+from dfcoa_opt.core.errors import DfcoaError
 
 FloatArray = NDArray[np.float64]
 
@@ -35,9 +35,9 @@ UNCHANGED_TOL = 1e-9
 TIMING_FIELDS = ("filter_time",)
 #: Log fields that are None unless a run asks for them (not in a log without them).
 OPTIONAL_FIELDS = ("scan",)
-#: The ``format`` member of a compact log (:mod:`dfcoa_opt.bench.logs`): trajectories only.
+#: The ``format`` member of a compact log (:mod:`dfcoa_opt.bench.results.logs`): trajectories only.
 COMPACT_FORMAT = "dfcoa-compact-log/2"  # /2: meta as UTF-8 bytes (/1: a numpy string)
-#: The member of a pruned log (:mod:`dfcoa_opt.bench.logs`) naming the fields it keeps.
+#: The member of a pruned log (:mod:`dfcoa_opt.bench.results.logs`) naming the fields it keeps.
 PRUNED_MEMBER = "pruned"
 
 
@@ -208,14 +208,14 @@ class RunLog:
 
         Args:
             path: The ``.mcap`` file to write (replaced atomically).
-            world: The run's :class:`~dfcoa_opt.sim.scenario.World`
+            world: The run's :class:`~dfcoa_opt.scenario.scenario.World`
                 (``Scenario.world``): gives ``/map`` and the static obstacles;
                 without it the file has neither.
 
         Returns:
             ``path``.
         """
-        from dfcoa_opt.sim.mcap import write_mcap
+        from dfcoa_opt.viz.mcap import write_mcap
 
         return write_mcap(self, path, world)
 
@@ -261,17 +261,17 @@ class RunLog:
 
         Raises:
             DfcoaError: ``path`` is a compact log (``make figures`` compacts the logs
-                no figure reads; :func:`dfcoa_opt.bench.logs.load_compact` reads them).
+                no figure reads; :func:`dfcoa_opt.bench.results.logs.load_compact` reads them).
         """
         with np.load(path, allow_pickle=False) as z:
             if "format" in z.files:
                 raise DfcoaError(f"{path}: a compact log (trajectories only, "
                                  f"{str(z['format'])}); read it with "
-                                 "dfcoa_opt.bench.logs.load_compact")
+                                 "dfcoa_opt.bench.results.logs.load_compact")
             if PRUNED_MEMBER in z.files:
                 raise DfcoaError(f"{path}: a pruned log (only the fields figures read: "
                                  f"{', '.join(map(str, z[PRUNED_MEMBER]))}); read it with "
-                                 "dfcoa_opt.bench.logs.read_log")
+                                 "dfcoa_opt.bench.results.logs.read_log")
             return cls.from_members({k: z[k] for k in z.files})
 
     @classmethod

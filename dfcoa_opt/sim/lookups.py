@@ -16,9 +16,9 @@ from numpy.typing import NDArray
 from dfcoa_opt.world.shape_clearance import shape_clearance_worlds
 
 if TYPE_CHECKING:
+    from dfcoa_opt.scenario.schema import ScenarioSpec
     from dfcoa_opt.sim.batch import BatchSimulator
     from dfcoa_opt.sim.leader import LeaderTrack
-    from dfcoa_opt.sim.schema import ScenarioSpec
 
 FloatArray = NDArray[np.float64]
 

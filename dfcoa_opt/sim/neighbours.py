@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from dfcoa_opt.geometry import pairwise_distances
+from dfcoa_opt.core.geometry import pairwise_distances
 
 #: Teams up to this size use the dense distance matrix in :func:`neighbour_table`.
 DENSE_MAX = 48
@@ -146,7 +146,7 @@ def _proximity_block(points, start, n, radius, k, contact, idx, dist, keys,
     """Rows ``start .. start + n`` of ``points`` as one team: :func:`proximity`'s loop.
 
     Distances are ``sqrt(dx * dx + dy * dy)`` as in
-    :func:`~dfcoa_opt.geometry.pairwise_distances`; each row keeps its ``k``
+    :func:`~dfcoa_opt.core.geometry.pairwise_distances`; each row keeps its ``k``
     nearest by insertion (ties by index, as a stable argsort). Indices and
     contact keys ``i * n + j`` are within the team; ``idx``/``dist`` (filled
     with -1 / inf) get the team's rows, ``keys`` its keys from ``n_keys`` on.

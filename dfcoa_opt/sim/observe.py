@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from dfcoa_opt.control.base import Neighbours, Observation
-from dfcoa_opt.errors import DfcoaError
+from dfcoa_opt.core.errors import DfcoaError
 
 
 class Observing:

@@ -27,18 +27,18 @@ from numpy.typing import NDArray
 
 from dfcoa_opt.control.adapters import convert
 from dfcoa_opt.control.base import MovingObstacles
-from dfcoa_opt.errors import DfcoaError, RunFailed
-from dfcoa_opt.localization import TruthEstimator, make_estimators
-from dfcoa_opt.outcome import StallMonitor
-from dfcoa_opt.robots.models import CommandKind, RobotState
+from dfcoa_opt.core.errors import DfcoaError, RunFailed
+from dfcoa_opt.metrics.outcome import StallMonitor
 from dfcoa_opt.sim.comms import Comms, wanted
 from dfcoa_opt.sim.leader import leader_track
+from dfcoa_opt.sim.localization import TruthEstimator, make_estimators
 from dfcoa_opt.sim.log import BatchLog
 from dfcoa_opt.sim.lookups import RunLookups
 from dfcoa_opt.sim.neighbours import batch_proximity, gather, new_contacts
 from dfcoa_opt.sim.observe import Observing
 from dfcoa_opt.sim.scans import ScanBook
 from dfcoa_opt.world.lidar import LaserScan
+from dfcoa_opt.world.robots.models import CommandKind, RobotState
 
 if TYPE_CHECKING:
     from dfcoa_opt.sim.batch import BatchSimulator

@@ -2,7 +2,7 @@
 
 map_server's YAML files (nav2's ``map_saver`` writes them) are flat: scalars and
 lists of numbers, one key a line. This reader accepts that subset and refuses
-everything else with a one-line :class:`~dfcoa_opt.errors.ScenarioError` that
+everything else with a one-line :class:`~dfcoa_opt.core.errors.ScenarioError` that
 names the file and the key (or the line), so no YAML library is needed.
 """
 
@@ -12,7 +12,7 @@ import math
 import re
 from typing import Any
 
-from dfcoa_opt.errors import ScenarioError
+from dfcoa_opt.core.errors import ScenarioError
 
 _KEY = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)[ \t]*:(?:[ \t]+(.*))?$")
 _INT = re.compile(r"^[-+]?[0-9]+$")

@@ -43,7 +43,7 @@ __all__ = ["SKIP_MIN_CELLS", "LaserScan", "Lidar", "beam_layout", "cast_grid",
            "disc_candidates"]
 
 if TYPE_CHECKING:
-    from dfcoa_opt.sim.schema import LidarSpec
+    from dfcoa_opt.scenario.schema import LidarSpec
     from dfcoa_opt.world.grid import OccupancyGrid
 
 #: Disc candidates come from a bucket grid (:func:`disc_candidates`) only above this many

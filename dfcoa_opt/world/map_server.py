@@ -21,7 +21,7 @@ it. Unknown (-1) and every value 1..100 count as occupied: robots stay out of
 space that nobody has seen, and out of every cell with some chance of an
 obstacle.
 
-Not supported (a one-line :class:`~dfcoa_opt.errors.ScenarioError`): a rotated
+Not supported (a one-line :class:`~dfcoa_opt.core.errors.ScenarioError`): a rotated
 map (``yaw != 0``), 16-bit images, and YAML beyond flat ``key: value`` lines
 (:func:`parse_flat_yaml`). Every error names the YAML file and the key.
 """
@@ -37,8 +37,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.atomic import file_exists
-from dfcoa_opt.errors import ScenarioError, did_you_mean
+from dfcoa_opt.core.atomic import file_exists
+from dfcoa_opt.core.errors import ScenarioError, did_you_mean
 from dfcoa_opt.world.flat_yaml import parse_flat_yaml
 from dfcoa_opt.world.grid import OccupancyGrid
 

@@ -4,8 +4,8 @@
 polygon edge or circle, zero inside a polygon (even-odd rule) or a circle, and
 ``cap`` beyond ``cap``. It is one numba loop over points, edges and circles,
 written with the same floating-point operations, in the same order, as the
-vectorised numpy formulas it replaces (:func:`dfcoa_opt.geometry.point_segment_distance`,
-:func:`dfcoa_opt.geometry.points_in_polygons`), so both give bit-identical
+vectorised numpy formulas it replaces (:func:`dfcoa_opt.core.geometry.point_segment_distance`,
+:func:`dfcoa_opt.core.geometry.points_in_polygons`), so both give bit-identical
 results; ``tests/test_shape_clearance.py`` checks that, and shapely checks the
 geometry (``tests/test_simulator.py``). The simulator calls it every step to
 count contacts, where the numpy version cost ~150 us for 4 robots in paper

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.geometry import circle_polygon, points_in_polygon, polygon_signed_area
-from dfcoa_opt.simple_polygons import polygon_defect
+from dfcoa_opt.core.geometry import circle_polygon, points_in_polygon, polygon_signed_area
+from dfcoa_opt.core.polygons import polygon_defect
 
 
 @dataclass(frozen=True)
@@ -23,7 +23,7 @@ class Polygon:
     """A simple polygon.
 
     Refused (``ValueError``): fewer than 3 vertices, a polygon that is not
-    simple (:func:`~dfcoa_opt.simple_polygons.polygon_defect`: edges that cross or
+    simple (:func:`~dfcoa_opt.core.polygons.polygon_defect`: edges that cross or
     touch, a repeated vertex, a zero-length edge; the even-odd inside test
     and the clearance would disagree on it), clockwise order or zero area.
 
@@ -132,11 +132,11 @@ Shape = Polygon | Rectangle | Circle
 
 
 def describe_defect(vertices: Sequence[Sequence[float]], defect: tuple[int, int]) -> str:
-    """A :func:`~dfcoa_opt.simple_polygons.polygon_defect` in words, with the vertices' numbers.
+    """A :func:`~dfcoa_opt.core.polygons.polygon_defect` in words, with the vertices' numbers.
 
     Args:
         vertices: ``(V, 2)`` polygon vertices in m.
-        defect: ``(i, j)`` edge indices from :func:`~dfcoa_opt.simple_polygons.polygon_defect`.
+        defect: ``(i, j)`` edge indices from :func:`~dfcoa_opt.core.polygons.polygon_defect`.
     """
     v = [tuple(float(c) for c in p) for p in vertices]
     n = len(v)

@@ -113,8 +113,8 @@ from comparisons.orca.ivo.kernel import (
     lines_kernel,
     pair_line,
 )
-from dfcoa_opt.geometry import point_segment_distance
-from dfcoa_opt.threads import kernel_threads
+from dfcoa_opt.core.geometry import point_segment_distance
+from dfcoa_opt.core.runtime.threads import kernel_threads
 
 FloatArray = NDArray[np.float64]
 

@@ -33,7 +33,7 @@ Adding a recipe::
         ...                                    # read store.rows(), write into dest
         return [Artefact("table5.md", "paper 000 Table 5", "metrics of S1 and S2")]
 
-and list the module in :data:`RECIPE_MODULES`. :func:`dfcoa_opt.figures.make_figures`
+and list the module in :data:`RECIPE_MODULES`. :func:`dfcoa_opt.bench.figures.make_figures`
 runs the sweeps and the renderers.
 """
 

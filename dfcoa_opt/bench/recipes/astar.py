@@ -17,12 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from dfcoa_opt import plotting
-from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench.plots import save_png
 from dfcoa_opt.bench.recipes import Artefact, recipe
+from dfcoa_opt.bench.report.plots import save_png
+from dfcoa_opt.core.atomic import atomic_write
 from dfcoa_opt.planning.astar import AStarParams, plan
-from dfcoa_opt.planning.astar_improved import (
+from dfcoa_opt.planning.improved_astar import (
     ImprovedAStarParams,
     Task,
     compare_planners,
@@ -30,7 +29,8 @@ from dfcoa_opt.planning.astar_improved import (
     default_planners,
     random_tasks,
 )
-from dfcoa_opt.sim.loader import load_scenario
+from dfcoa_opt.scenario.loader import load_scenario
+from dfcoa_opt.viz import plotting
 
 #: The DFCOA scenario files whose maps, starts and goals are planned on.
 DFCOA_SCENARIOS = ("dfcoa_s1.toml", "dfcoa_s2.toml")

@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 
 from dfcoa_opt import metrics
-from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench.logs import read_log
 from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.recipes.comparison import report_artefacts
-from dfcoa_opt.bench.store import ResultsStore
+from dfcoa_opt.bench.results.logs import read_log
+from dfcoa_opt.bench.results.store import ResultsStore
+from dfcoa_opt.core.atomic import atomic_write
 
 
 def solve_time_table(store: ResultsStore) -> list[str]:

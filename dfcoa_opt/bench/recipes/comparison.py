@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from dfcoa_opt.atomic import atomic_write
 from dfcoa_opt.bench.recipes import Artefact, recipe
-from dfcoa_opt.bench.report import make_report
-from dfcoa_opt.bench.shared_open import shared_open_table
-from dfcoa_opt.bench.store import ResultsStore
+from dfcoa_opt.bench.report.document import make_report
+from dfcoa_opt.bench.report.shared_open import shared_open_table
+from dfcoa_opt.bench.results.store import ResultsStore
+from dfcoa_opt.core.atomic import atomic_write
 
 #: The two variants compared on shared open stretches (docs/methods/reshape.md).
 SHARED_OPEN = ("reshape", "goto_slot+cbf")

@@ -5,12 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from dfcoa_opt import plotting
-from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench.logs import read_log
-from dfcoa_opt.bench.plots import scenario_for_row
 from dfcoa_opt.bench.recipes import Artefact, recipe
-from dfcoa_opt.bench.store import ResultsStore
+from dfcoa_opt.bench.report.plots import scenario_for_row
+from dfcoa_opt.bench.results.logs import read_log
+from dfcoa_opt.bench.results.store import ResultsStore
+from dfcoa_opt.core.atomic import atomic_write
+from dfcoa_opt.viz import plotting
 
 #: Columns of the example table.
 EXAMPLE_COLUMNS = ("outcome", "reached", "time_to_goal", "fce_rms", "fse_rms", "stability_pct",

@@ -28,20 +28,20 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench import heldout as ho
-from dfcoa_opt.bench import paired, stats
-from dfcoa_opt.bench.failures import run_outcome
-from dfcoa_opt.bench.plots import ladder_figure, variant_name
 from dfcoa_opt.bench.recipes import Artefact, recipe
-from dfcoa_opt.bench.report import aggregate, environment_header
+from dfcoa_opt.bench.report import heldout as ho
+from dfcoa_opt.bench.report import paired, stats
+from dfcoa_opt.bench.report.document import aggregate, environment_header
+from dfcoa_opt.bench.report.failures import run_outcome
+from dfcoa_opt.bench.report.plots import ladder_figure, variant_name
+from dfcoa_opt.bench.report.tables import md_escape, ranking_table, rate_cell
+from dfcoa_opt.bench.report.trajectories import panels_figure
+from dfcoa_opt.bench.results.store import ResultsStore
 from dfcoa_opt.bench.runner import is_success
-from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.bench.sweep import safe_name
-from dfcoa_opt.bench.tables import md_escape, ranking_table, rate_cell
-from dfcoa_opt.bench.trajectories import panels_figure
-from dfcoa_opt.figure_layout import save_png
-from dfcoa_opt.outcome import OUTCOMES
+from dfcoa_opt.bench.sweep.expand import safe_name
+from dfcoa_opt.core.atomic import atomic_write
+from dfcoa_opt.metrics.outcome import OUTCOMES
+from dfcoa_opt.viz.layout import save_png
 
 
 def _pct(k: int, n: int) -> str:
@@ -156,7 +156,7 @@ def _gap_and_defaults(methods: Sequence[str], rows: Sequence[Mapping[str, Any]],
 
 def _variant_files(store: ResultsStore) -> list[Path]:
     """The sweep's variants files (``variant_files``, relative to the sweep file)."""
-    from dfcoa_opt.sim.loader import read_toml
+    from dfcoa_opt.scenario.loader import read_toml
 
     sweep_file = Path(str(store.manifest().get("sweep_file", "")))
     patterns = read_toml(store.root / "sweep.toml").get("variant_files", [])

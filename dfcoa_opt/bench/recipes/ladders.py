@@ -17,7 +17,7 @@ from pathlib import Path
 
 from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.recipes.comparison import report_artefacts
-from dfcoa_opt.bench.store import ResultsStore
+from dfcoa_opt.bench.results.store import ResultsStore
 
 
 @recipe("ladders", sweep="sweeps/ladders.toml",

@@ -16,19 +16,19 @@ from typing import Any
 import numpy as np
 from matplotlib.patches import Circle as CirclePatch
 
-from dfcoa_opt import plotting
-from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench import failures, trajectories
-from dfcoa_opt.bench.plots import ok_runs, save_png, scenario_for_row
 from dfcoa_opt.bench.recipes import Artefact, recipe
-from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.metrics_robots import (
+from dfcoa_opt.bench.report import failures, trajectories
+from dfcoa_opt.bench.report.plots import ok_runs, save_png, scenario_for_row
+from dfcoa_opt.bench.results.store import ResultsStore
+from dfcoa_opt.core.atomic import atomic_write
+from dfcoa_opt.metrics.robots import (
     average_velocities_per_robot,
     collisions_per_robot,
     distance_travelled,
     leader_robot_target_error,
 )
 from dfcoa_opt.sim.log import RunLog
+from dfcoa_opt.viz import plotting
 
 #: The leader robot (the paper's Robot 1) has reached its target within this distance, m:
 #: the scenarios' virtual leader stops 0.05 m from the goal and ``lf_vo`` holds a robot

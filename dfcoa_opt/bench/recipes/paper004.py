@@ -25,18 +25,18 @@ from typing import Any
 import numpy as np
 from matplotlib.patches import Circle as CirclePatch
 
-from dfcoa_opt import plotting
-from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench.plots import ok_runs, save_png, scenario_for_row
 from dfcoa_opt.bench.recipes import Artefact, recipe
-from dfcoa_opt.bench.store import ResultsStore
-from dfcoa_opt.metrics_robots import (
+from dfcoa_opt.bench.report.plots import ok_runs, save_png, scenario_for_row
+from dfcoa_opt.bench.results.store import ResultsStore
+from dfcoa_opt.core.atomic import atomic_write
+from dfcoa_opt.metrics.robots import (
     collisions_per_robot,
     leader_follower_position_error,
     leader_robot_target_error,
     path_length_per_robot,
 )
 from dfcoa_opt.sim.log import RunLog
+from dfcoa_opt.viz import plotting
 
 #: Formation sizes and dynamic-obstacle counts of the sweep.
 SIZES = (5, 10, 15, 20)

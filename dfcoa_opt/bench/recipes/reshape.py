@@ -10,12 +10,12 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from dfcoa_opt import animation, plotting
-from dfcoa_opt.atomic import atomic_write
-from dfcoa_opt.bench.logs import read_log
-from dfcoa_opt.bench.plots import scenario_for_row
 from dfcoa_opt.bench.recipes import Artefact, recipe
-from dfcoa_opt.bench.store import ResultsStore
+from dfcoa_opt.bench.report.plots import scenario_for_row
+from dfcoa_opt.bench.results.logs import read_log
+from dfcoa_opt.bench.results.store import ResultsStore
+from dfcoa_opt.core.atomic import atomic_write
+from dfcoa_opt.viz import animation, plotting
 
 #: The scenario whose run is animated.
 ANIMATED = "corridor"

@@ -1,7 +1,7 @@
 """Worlds drawn from a seed: registered families of generated maps (``[world.generate]``).
 
 A *family* is a function ``family(params, rng, layout) -> Generated`` with a
-``Params`` dataclass (typed keys with units and ranges, :func:`dfcoa_opt.params.param`)
+``Params`` dataclass (typed keys with units and ranges, :func:`dfcoa_opt.core.params.param`)
 registered with :func:`register_family`. Given the run's world generator and
 the :class:`Layout` (map, mission, team), it returns exact static shapes,
 moving discs and the realised statistics of the draw (``facts``: what a test
@@ -14,7 +14,7 @@ compares with the parameters). Families:
 - ``crowd`` (:mod:`~dfcoa_opt.world.generate.crowd`): an open field crossed by
   moving discs.
 
-The scenario loader (:mod:`dfcoa_opt.sim.loader`) draws the world, checks that a
+The scenario loader (:mod:`dfcoa_opt.scenario.loader`) draws the world, checks that a
 passage one robot wide joins the leader's start and goal (:func:`passage_exists`)
 and that the leader's planner finds its path, and otherwise draws again with the
 same generator, up to ``world.generate.tries`` times. Every draw is a pure
@@ -33,8 +33,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.errors import ScenarioError, UnknownNameError, did_you_mean
-from dfcoa_opt.params import build_options
+from dfcoa_opt.core.errors import ScenarioError, UnknownNameError, did_you_mean
+from dfcoa_opt.core.params import build_options
 from dfcoa_opt.world.dynamic import MovingDisc
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.shapes import Shape

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.params import param
+from dfcoa_opt.core.params import param
 from dfcoa_opt.world.generate import Generated, Layout, check_range, register_family
 from dfcoa_opt.world.generate.rects import mask_rectangles
 

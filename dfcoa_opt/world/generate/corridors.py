@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dfcoa_opt.params import param
+from dfcoa_opt.core.params import param
 from dfcoa_opt.world.generate import Generated, Layout, check_range, register_family
 from dfcoa_opt.world.generate.rects import mask_rectangles
 from dfcoa_opt.world.shapes import Rectangle
@@ -54,7 +54,7 @@ class CorridorsParams:
         check_range(self.width, src, f"{key}.width")
         check_range(self.turns, src, f"{key}.turns")
         if self.turns[0] % 2 and self.turns[0] == self.turns[1]:
-            from dfcoa_opt.errors import ScenarioError
+            from dfcoa_opt.core.errors import ScenarioError
 
             raise ScenarioError(src, f"{key}.turns", f"[{self.turns[0]}, {self.turns[1]}] holds "
                                                      "no even number of turns")

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dfcoa_opt.params import param
+from dfcoa_opt.core.params import param
 from dfcoa_opt.world.clutter import random_discs
 from dfcoa_opt.world.dynamic import MovingDisc
 from dfcoa_opt.world.generate import Generated, Layout, check_range, register_family

@@ -1,0 +1,298 @@
+"""Markdown and CSV tables of a report: outcomes, metrics, paired comparisons, rankings.
+
+Inputs are the groups of :func:`dfcoa_opt.bench.report.document.aggregate` and the
+comparisons of :func:`dfcoa_opt.bench.report.paired.compare`; nothing here reads files.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+from dfcoa_opt.bench.report import plots
+from dfcoa_opt.bench.report.paired import HIGHER_IS_BETTER, Comparison
+from dfcoa_opt.metrics.outcome import OUTCOMES
+
+_MAX_ERRORS = 5  # distinct error messages listed under a table
+_ERROR_CHARS = 160  # an error message is cut to this length in report.md
+#: Outcome column titles.
+OUTCOME_TITLES = {"success": "success", "collision": "collision", "deadlock": "deadlock",
+                  "timeout": "timeout"}
+
+
+def md_escape(text: Any) -> str:
+    """Text safe inside a Markdown table cell (one line, no bare pipes)."""
+    return " ".join(str(text).split()).replace("|", "\\|")
+
+
+def rate_cell(rate: float, interval: Sequence[float], count: int, total: int) -> str:
+    """``"45% [26, 66] (9/20)"``: a rate with its Wilson 95 % interval, in percent."""
+    if not math.isfinite(rate):
+        return "—"
+    lo, hi = interval
+    return f"{100 * rate:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}] ({count}/{total})"
+
+
+def number(x: float) -> str:
+    """Three decimals, or three significant digits in exponent form from 1e4 on (risk)."""
+    return f"{x:.3e}" if abs(x) >= 1e4 else f"{x:.3f}"
+
+
+def metric_cell(stat: Mapping[str, Any], ok: int) -> str:
+    """``"mean ± ci"``; ``"(n=k)"`` when fewer than ``ok`` values were finite.
+
+    When every finite value is the same (``distinct == 1`` over two or more
+    values) the cell says so instead of showing a zero-width interval.
+    """
+    mean, half, n = float(stat["mean"]), float(stat["ci95"]), int(stat["n"])
+    if not math.isfinite(mean):
+        text = "—"
+    elif n > 1 and int(stat.get("distinct", 2)) == 1:
+        text = f"{number(mean)} (1 distinct run)"
+    else:
+        text = f"{number(mean)} ± {number(half)}" if math.isfinite(half) else number(mean)
+    return f"{text} (n={n})" if n < ok else text
+
+
+def id_columns(groups: Sequence[Mapping[str, Any]], hide: Iterable[str]) -> list[str]:
+    """The ``by`` fields of the groups, without ``hide``."""
+    by = groups[0].get("by", ()) if groups else ()
+    return [b for b in by if b not in set(hide)]
+
+
+def uninformative(groups: Sequence[Mapping[str, Any]], metrics: Sequence[str]) -> list[str]:
+    """Metrics with one and the same value in every run of every group (with two or more groups).
+
+    Such a column cannot separate the variants (e.g. a risk clipped at 1 for all).
+    """
+    if len(groups) < 2:
+        return []
+    out = []
+    for m in metrics:
+        values = {g["stats"][m].get("value") for g in groups}
+        if all(int(g["stats"][m].get("distinct", 0)) == 1 for g in groups) and len(values) == 1:
+            out.append(m)
+    return out
+
+
+def markdown_table(groups: Sequence[Mapping[str, Any]], metrics: Sequence[str],
+                   hide: Iterable[str] = ()) -> str:
+    """Markdown table of aggregated groups, with notes below it.
+
+    Columns: the grouping fields, runs, failed runs, the four outcome rates
+    (% of all runs, Wilson 95 % interval, counts), then one column per metric:
+    ``mean ± 95 % CI half-width`` over the runs that did not fail. Notes name the
+    metrics identical for every variant, and up to five distinct run errors.
+
+    Args:
+        groups: Output of :func:`dfcoa_opt.bench.report.document.aggregate`.
+        metrics: Summary keys, one column each (must have been aggregated).
+        hide: Grouping fields not to show as columns (e.g. ``("scenario",)``).
+
+    Returns:
+        The Markdown text, ending with a newline.
+    """
+    ids = id_columns(groups, hide)
+    flat = uninformative(groups, metrics)
+    head = [*ids, "runs", "failed", *OUTCOME_TITLES.values()]
+    head += [plots.metric_header(m) + (" ⚠" if m in flat else "") for m in metrics]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for g in groups:
+        cells = [md_escape(g[b]) for b in ids] + [str(g["runs"]), str(g["failed"])]
+        cells += [rate_cell(g[f"{o}_rate"], g[f"{o}_ci"], g["outcomes"][o], g["runs"])
+                  for o in OUTCOMES]
+        cells += [metric_cell(g["stats"][m], int(g["ok"])) for m in metrics]
+        lines.append("| " + " | ".join(cells) + " |")
+    if flat:
+        lines += ["", "⚠ Identical in every run of every variant, so it separates nothing here: "
+                  + ", ".join(plots.metric_header(m) for m in flat) + "."]
+    failed = [(g, e) for g in groups for e in g.get("errors", [])]
+    if failed:
+        lines += ["", "Errors of failed runs:"]
+        for g, err in failed[:_MAX_ERRORS]:
+            who = " / ".join(md_escape(g[b]) for b in ids)
+            short = md_escape(err)
+            short = short if len(short) <= _ERROR_CHARS else short[:_ERROR_CHARS - 1] + "…"
+            lines.append(f"- {who}: {short}")
+        if len(failed) > _MAX_ERRORS:
+            lines.append(f"- … and {len(failed) - _MAX_ERRORS} more distinct error(s)")
+    return "\n".join(lines) + "\n"
+
+
+def deploy_table(groups: Sequence[Mapping[str, Any]], metrics: Sequence[str],
+                 hide: Iterable[str] = ()) -> str:
+    """Markdown table of the deployability keys (``mean ± 95 % CI`` over the ok runs).
+
+    A key no run has (the Robotarium's checks of robots other than the gritsbot,
+    the wheels of holonomic robots) is left out; with none left the text is empty.
+    """
+    shown = [m for m in metrics if any(g["stats"][m]["n"] for g in groups)]
+    if not shown:
+        return ""
+    ids = id_columns(groups, hide)
+    head = [*ids, "runs", *(plots.metric_header(m) for m in shown)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for g in groups:
+        cells = [md_escape(g[b]) for b in ids] + [str(g["runs"])]
+        cells += [metric_cell(g["stats"][m], int(g["ok"])) for m in shown]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _csv_num(value: Any) -> str:
+    """A number as CSV text: shortest round-trip float, empty for NaN/inf and None."""
+    if value is None:
+        return ""
+    if not isinstance(value, float):
+        return str(value)
+    return repr(value) if math.isfinite(value) else ""
+
+
+def csv_table(groups: Sequence[Mapping[str, Any]], metrics: Sequence[str]) -> str:
+    """CSV of aggregated groups, one numeric column per statistic.
+
+    Columns: the grouping fields, ``runs``, ``failed``, ``ok``, then per outcome
+    ``<outcome>_rate`` with ``<outcome>_ci_low`` and ``<outcome>_ci_high`` (Wilson
+    95 %; fractions of all runs), ``reached_rate`` (the goal condition, contacts or
+    not), then ``<metric>_mean``, ``<metric>_ci95``, ``<metric>_n`` and
+    ``<metric>_distinct`` per metric (empty cells for NaN).
+    """
+    ids = id_columns(groups, ())
+    head = [*ids, "runs", "failed", "ok"]
+    head += [f"{o}_{s}" for o in OUTCOMES for s in ("rate", "ci_low", "ci_high")]
+    head += ["reached_rate"]
+    head += [f"{m}_{s}" for m in metrics for s in ("mean", "ci95", "n", "distinct")]
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(head)
+    for g in groups:
+        row: list[Any] = [g[b] for b in ids] + [g["runs"], g["failed"], g["ok"]]
+        for o in OUTCOMES:
+            row += [g[f"{o}_rate"], *g[f"{o}_ci"]]
+        row.append(g["reached_rate"])
+        row += [g["stats"][m][s] for m in metrics for s in ("mean", "ci95", "n", "distinct")]
+        writer.writerow([_csv_num(v) for v in row])
+    return buf.getvalue()
+
+
+def _diff_cell(c: Comparison) -> str:
+    """``"-0.120 [-0.200, -0.050] p=0.004 better"`` (success: rate difference in points).
+
+    ``"(k excluded)"`` follows when k seeds had no finite value on either side.
+    """
+    excluded = f" ({c.excluded} excluded)" if c.excluded else ""
+    if c.n == 0 or not math.isfinite(c.estimate):
+        return "—" + excluded
+    if c.metric == "success":
+        text = f"{100 * c.estimate:+.0f} pts"
+    else:
+        text = "+" * (c.estimate >= 0) + number(c.estimate)
+        if math.isfinite(c.ci_low):
+            text += f" [{number(c.ci_low)}, {number(c.ci_high)}]"
+    verdict = {"better": "**better**", "worse": "**worse**"}.get(c.verdict, "")
+    return f"{text} p={c.p_holm:.3g} {verdict}".rstrip() + excluded
+
+
+def paired_table(comparisons: Sequence[Comparison], metrics: Sequence[str],
+                 baseline: str) -> str:
+    """Markdown table of one table's comparisons: one row per variant, one column per metric."""
+    variants = list(dict.fromkeys(c.variant for c in comparisons))
+    cols = ["success", *metrics]
+    cell = {(c.variant, c.metric): c for c in comparisons}
+    head = ["variant − " + md_escape(baseline)] + [
+        "success (rate)" if m == "success" else plots.metric_header(m) for m in cols]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for v in variants:
+        lines.append("| " + " | ".join([md_escape(v)] + [
+            _diff_cell(cell[(v, m)]) if (v, m) in cell else "—" for m in cols]) + " |")
+    better = ", ".join(sorted(m for m in cols if m in HIGHER_IS_BETTER))
+    lines += ["", f"Each cell: the median over seeds of (variant − {md_escape(baseline)}) with "
+              "its bootstrap 95 % CI, and the Wilcoxon signed-rank p-value; success: the "
+              "difference of the success rates in points and McNemar's exact p-value. "
+              "A seed where either run has no finite value (a failed run, no time to goal, "
+              "a raw risk after a contact) is left out of that metric: `(k excluded)`. "
+              "p-values are Holm-corrected across this table; **better**/**worse** at 5 %. "
+              f"Higher is better for {better}; lower for the rest."]
+    return "\n".join(lines) + "\n"
+
+
+def ranking_table(groups: Sequence[Mapping[str, Any]],
+                  comparisons: Sequence[Comparison], baseline: str) -> str:
+    """Markdown ranking of the variants of one table.
+
+    Order: success rate (high first), then collision rate (low first), then mean
+    time to goal (short first; undefined last).
+    """
+    verdict = {c.variant: c for c in comparisons if c.metric == "success"}
+
+    def key(g: Mapping[str, Any]) -> tuple[float, float, float]:
+        ttg = float(g["stats"].get("time_to_goal", {}).get("mean", math.nan))
+        return (-g["success_rate"], g["collision_rate"], ttg if math.isfinite(ttg) else math.inf)
+
+    lines = ["| rank | variant | success | most frequent failure | success vs "
+             f"{md_escape(baseline) or 'baseline'} |", "|---|---|---|---|---|"]
+    for i, g in enumerate(sorted(groups, key=key), start=1):
+        v = str(g["variant"])
+        c = verdict.get(v)
+        vs = "baseline" if v == baseline else (_diff_cell(c) if c else "—")
+        fail = g.get("dominant_failure")
+        fail_text = (f"{fail} ({100 * g[f'{fail}_rate']:.0f}%)" if fail in OUTCOMES
+                     else f"{fail}" if fail else "—")
+        rate = rate_cell(g["success_rate"], g["success_ci"], g["outcomes"]["success"], g["runs"])
+        lines.append(f"| {i} | {md_escape(v)} | {rate} | {fail_text} | {vs} |")
+    return "\n".join(lines) + "\n"
+
+
+def ladder_table(groups: Sequence[Mapping[str, Any]], label: str) -> str:
+    """Success rate per variant (rows) and rung (columns) of one ladder on one scenario."""
+    values = sorted({float(g["ladder_value"]) for g in groups})
+    variants = list(dict.fromkeys(str(g["variant"]) for g in groups))
+    cell = {(str(g["variant"]), float(g["ladder_value"])): g for g in groups}
+    head = [f"variant \\ {md_escape(label)}"] + [f"{v:g}" for v in values]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for v in variants:
+        cells = [md_escape(v)]
+        for x in values:
+            g = cell.get((v, x))
+            cells.append("—" if g is None else rate_cell(g["success_rate"], g["success_ci"],
+                                                           g["outcomes"]["success"], g["runs"]))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def overrides_note(groups: Sequence[Mapping[str, Any]]) -> list[str]:
+    """What the variants set (names, never hashes): the settings all share, then each one's own."""
+    sets = {str(g["variant"]): {k: json.dumps(v, sort_keys=True)
+                                for k, v in (g.get("overrides") or {}).items()}
+            for g in groups}
+    if not sets:
+        return []
+    common = dict(set.intersection(*(set(o.items()) for o in sets.values())))
+    lines = [f"- every variant: `{k} = {v}`" for k, v in sorted(common.items())]
+    for name, ov in sorted(sets.items()):
+        own = {k: v for k, v in ov.items() if k not in common}
+        if own:
+            lines.append(f"- `{md_escape(name)}`: " + ", ".join(f"`{k} = {v}`"
+                                                              for k, v in sorted(own.items())))
+    return lines
+
+
+def paired_csv(comparisons: Sequence[Comparison]) -> str:
+    """CSV of every paired comparison (one row per table, variant and metric).
+
+    ``n`` seeds paired, ``excluded`` seeds left out (a value not finite); an
+    undefined number is an empty cell.
+    """
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["scenario", "ladder", "ladder_value", "variant", "metric", "n", "excluded",
+                "estimate", "ci_low", "ci_high", "p_value", "p_holm", "verdict"])
+    for c in comparisons:
+        w.writerow([*c.table[:2], "" if c.table[2] is None else c.table[2], c.variant, c.metric,
+                    c.n, c.excluded, *(repr(v) if math.isfinite(v) else "" for v in
+                           (c.estimate, c.ci_low, c.ci_high, c.p_value, c.p_holm)), c.verdict])
+    return buf.getvalue()

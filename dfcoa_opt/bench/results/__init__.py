@@ -1,0 +1,1 @@
+"""The results of a sweep: the store of rows and logs, the code fingerprint, log files."""

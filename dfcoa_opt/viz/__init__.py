@@ -1,0 +1,1 @@
+"""Pictures and viewer files of runs: figures, animations and MCAP logs, read from run logs."""
