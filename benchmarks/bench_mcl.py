@@ -23,14 +23,14 @@ from benchmarks.bench_sim import scanning
 from benchmarks.timing import REPS, print_rows, row
 from dfcoa_opt.control.registry import make_controller
 from dfcoa_opt.scenario.loader import load_scenario
-from dfcoa_opt.sim.localization import mcl_models
 from dfcoa_opt.sim.localization.mcl import MonteCarloLocalization
+from dfcoa_opt.sim.localization.mcl import sensor as mcl_sensor
 from dfcoa_opt.sim.simulator import Simulator
 from dfcoa_opt.world.lidar import Lidar
 
 ROOT = Path(__file__).resolve().parents[1] / "scenarios"
 #: The estimator's own numba sensor update (the reference swaps it out).
-NUMBA_SENSOR_UPDATE = mcl_models.sensor_update
+NUMBA_SENSOR_UPDATE = mcl_sensor.sensor_update
 
 
 def s1_path() -> Path:
@@ -43,7 +43,7 @@ def s1_path() -> Path:
 
 def numpy_sensor_update(parts, w, ptr, upd, ex, ey, nvalid, table, outside, ox, oy, inv_h, amcl,
                         est):
-    """Reference: :func:`dfcoa_opt.sim.localization.mcl_models.sensor_update` in vectorised numpy.
+    """Reference: :func:`dfcoa_opt.sim.localization.mcl.sensor.sensor_update` in vectorised numpy.
 
     Same arguments and in-place results (weights and estimates of robots ``upd``).
     """
@@ -105,7 +105,7 @@ def time_estimates(est: MonteCarloLocalization, sc, poses: np.ndarray,
 
 def _numpy_sensor(on: bool) -> None:
     """Swap the numba sensor update for :func:`numpy_sensor_update` (or back)."""
-    mcl_models.sensor_update = numpy_sensor_update if on else NUMBA_SENSOR_UPDATE
+    mcl_sensor.sensor_update = numpy_sensor_update if on else NUMBA_SENSOR_UPDATE
 
 
 def run() -> list[dict]:

@@ -9,7 +9,7 @@ ratios compare like with like:
    to C + IPOPT rescue; the same interpreted; multiple shooting, the default before,
    interpreted and compiled; SQP alone; IPOPT), ``ROUNDS`` interleaved rounds. Per
    option: median and p95 solve time per robot per step
-   (``comparisons.nmpc.solve_time_stats``), mean iterations of the first solver
+   (``dfcoa_opt.metrics.solver.solve_time_stats``), mean iterations of the first solver
    (rescued solves left out; the compiled solver does not count them), failures,
    rescues and the run's wall time; the ratios are the
    medians of the old default and of IPOPT over the option's median.
@@ -33,8 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
-from comparisons.nmpc import Nmpc, solve_time_stats
+from comparisons.nmpc import Nmpc
 from dfcoa_opt.control.registry import build_controller
+from dfcoa_opt.metrics.solver import solve_time_stats
 from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.simulator import Simulator
 
@@ -138,10 +139,11 @@ def warm_start(steps: int = WARM_STEPS) -> None:
 
         def timed_act(obs, act=act, ctrl=ctrl, totals=totals):
             ids = np.asarray(obs.robot_ids)
-            if ctrl._t is not None and obs.t > ctrl._t:  # not the first step: compare
-                ctrl._r = {k: v.copy() for k, v in ctrl._w.items()}
-                ctrl._t = float(obs.t)
-                u0, age = ctrl._shifted(float(obs.t), ids)
+            plans = ctrl.plans
+            if plans._t is not None and obs.t > plans._t:  # not the first step: compare
+                plans._r = {k: v.copy() for k, v in plans._w.items()}
+                plans._t = float(obs.t)
+                u0, age = plans.shifted(float(obs.t), ids)
                 _, params, lbg = ctrl._problems(obs, u0, age >= ctrl.p.horizon)
                 h = ctrl.p.horizon
                 zero = ctrl.problem.guesses(np.zeros((obs.n, h, 2)),

@@ -129,7 +129,7 @@ def _walk_schema(cls: type, prefix: str, keys: set[str], names: set[str],
 def _filter_params() -> dict[str, type]:
     from dfcoa_opt.control import registry
 
-    return {fid: registry._FILTERS[fid].Params for fid in available_filters()}
+    return {fid: registry.FILTERS.get(fid).Params for fid in available_filters()}
 
 
 CONTROLLER_PARAMS: dict[str, type] = {cid: controller_class(cid).Params for cid in available()}

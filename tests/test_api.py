@@ -73,7 +73,7 @@ def hold_registered(monkeypatch):
     from dfcoa_opt.control import registry
 
     registry.available()  # load the built-ins before the copy
-    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    monkeypatch.setattr(registry.CONTROLLERS, "_table", dict(registry.CONTROLLERS._table))
     assert d.register("api_test_hold")(Hold) is Hold
 
 

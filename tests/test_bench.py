@@ -285,7 +285,7 @@ def extra_controllers():
     registry.register("test_nan")(NaNer)
     yield
     for cid in ("test_raiser", "test_nan"):
-        registry._REGISTRY.pop(cid, None)
+        registry.CONTROLLERS._table.pop(cid, None)
 
 
 def test_failed_runs_are_rows_and_the_sweep_goes_on(tmp_path, extra_controllers):

@@ -3,8 +3,8 @@
 import numpy as np
 
 from benchmarks.bench_astar import s1_grid
-from benchmarks.scaling_report import loglog_slope
-from benchmarks.scaling_scenario import model_of, open_scenario
+from benchmarks.scaling.report import loglog_slope
+from benchmarks.scaling.scenario import model_of, open_scenario
 from dfcoa_opt.control.registry import available
 
 

@@ -116,7 +116,7 @@ def test_the_sources_of_each_fingerprint():
     # localization, the registry and the controller interfaces: every run
     assert {BATCH, "dfcoa_opt/sim/simulator.py", "dfcoa_opt/bench/runner.py",
             "dfcoa_opt/scenario/loader.py", "dfcoa_opt/planning/astar.py",
-            "dfcoa_opt/sim/localization/mcl.py",
+            "dfcoa_opt/sim/localization/mcl/filter.py",
             "dfcoa_opt/control/registry.py", "dfcoa_opt/control/base.py"} <= core
     assert not any(s.startswith("comparisons/") for s in core)
     # the rest of dfcoa_opt is core too: only controller modules of dfcoa_opt/control/ differ
@@ -147,7 +147,7 @@ def test_controllers_whose_imports_cannot_be_read_cover_every_source(monkeypatch
         Params = registry.controller_class("goto_slot").Params
 
     registry.available()
-    monkeypatch.setitem(registry._REGISTRY, "test_outside", Outside)
+    monkeypatch.setitem(registry.CONTROLLERS._table, "test_outside", Outside)
     assert store.fingerprint_sources("test_outside") == everything
     assert store.fingerprint_sources("test_outside+cbf") == everything
 

@@ -23,10 +23,10 @@ from comparisons.constraints.distance import (
     polygon_nearest,
 )
 from dfcoa_opt import metrics
+from dfcoa_opt.control.base import STATUS_FALLBACK, STATUS_SOLVER_FAIL
 from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.core.geometry import points_in_polygons
 from dfcoa_opt.scenario.loader import load_scenario, scenario_from_dict
-from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_SOLVER_FAIL
 from dfcoa_opt.sim.simulator import run_scenario
 from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle
 from tests.helpers import assert_distributed

@@ -9,11 +9,10 @@ import numpy as np
 import pytest
 
 from comparisons.consensus import Consensus, ConsensusIvo
-from dfcoa_opt.control.base import MovingObstacles, Observation, slot_velocity
+from dfcoa_opt.control.base import STATUS_OK, MovingObstacles, Observation, slot_velocity
 from dfcoa_opt.control.registry import build_controller, make_controller
 from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.scenario.loader import scenario_from_dict
-from dfcoa_opt.sim.log import STATUS_OK
 from dfcoa_opt.sim.simulator import Simulator, run_scenario
 from dfcoa_opt.world.robots.models import integrate_unicycle
 from tests.helpers import Capture, assert_distributed, neighbours_from_lists

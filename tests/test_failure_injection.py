@@ -15,7 +15,8 @@ import qpsolvers
 
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
-from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_SOLVER_FAIL, RunLog
+from dfcoa_opt.control.base import STATUS_FALLBACK, STATUS_SOLVER_FAIL
+from dfcoa_opt.sim.log import RunLog
 
 
 def ring_swap(path, n: int, ring: float, t_max: float) -> None:

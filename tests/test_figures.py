@@ -74,13 +74,14 @@ def test_renders_overlap_in_a_process_and_local_renderers_run_inline(tmp_path, m
         return [registry.Artefact("hello.md", "-", "test")]
 
     registry.registered()  # register the real recipes first, so that they stay out of the table
-    monkeypatch.setattr(registry, "_RECIPES", {"local": registry.Recipe("local", None, "T", local)})
+    monkeypatch.setattr(registry.RECIPES, "_table",
+                        {"local": registry.Recipe("local", None, "T", local)})
     cfg = ExecutorConfig("process", 2)
     index = make_figures(SCENARIOS, tmp_path / "out", tmp_path / "cache", cfg, progress=False)
     assert (tmp_path / "out" / "local" / "hello.md").read_text() == str(SCENARIOS)
     assert "`local/hello.md`" in index.read_text()
     # operator.sub(Path, Path) raises in the render process; the error reaches the caller
-    monkeypatch.setattr(registry, "_RECIPES",
+    monkeypatch.setattr(registry.RECIPES, "_table",
                         {"bad": registry.Recipe("bad", None, "T", operator.sub)})
     with pytest.raises(TypeError, match="unsupported operand"):
         make_figures(SCENARIOS, tmp_path / "out2", tmp_path / "cache", cfg, progress=False)

@@ -1,10 +1,15 @@
 import numpy as np
 
-from dfcoa_opt.control.base import Filtered, FilterResult
+from dfcoa_opt.control.base import (
+    STATUS_FALLBACK,
+    STATUS_MODIFIED,
+    STATUS_OK,
+    Filtered,
+    FilterResult,
+)
 from dfcoa_opt.control.goto_slot import GotoSlot
 from dfcoa_opt.metrics import summary
 from dfcoa_opt.scenario.loader import scenario_from_dict
-from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_MODIFIED, STATUS_OK
 from dfcoa_opt.sim.simulator import Simulator
 
 

@@ -12,8 +12,14 @@ from dfcoa_opt.core.errors import DfcoaError, ScenarioError
 from dfcoa_opt.core.geometry import wrap_angle_fast
 from dfcoa_opt.scenario.loader import scenario_from_dict
 from dfcoa_opt.sim.localization import estimator_names, make_estimator
-from dfcoa_opt.sim.localization import mcl_models as mm
 from dfcoa_opt.sim.localization.mcl import MonteCarloLocalization
+from dfcoa_opt.sim.localization.mcl.motion import decompose_motion, sample_motion
+from dfcoa_opt.sim.localization.mcl.resampling import (
+    kld_sample_size,
+    low_variance_resample,
+    resample,
+)
+from dfcoa_opt.sim.localization.mcl.sensor import likelihood_table, sensor_update
 from dfcoa_opt.sim.simulator import run_scenario
 from dfcoa_opt.world.lidar import Lidar
 
@@ -122,8 +128,8 @@ def test_kld_resampling_grows_with_spread():
     w = np.full(1000, 1.0 / 500)
     ptr = np.array([0, 500, 1000])
     bins = np.array([0.5, 0.5, math.pi / 18])
-    _, new_w, new_ptr = mm.resample(parts, w, ptr, np.array([True, True]), np.full((2, 2), 0.5),
-                                    20, 3000, bins, 0.05, 0.99)
+    _, new_w, new_ptr = resample(parts, w, ptr, np.array([True, True]), np.full((2, 2), 0.5),
+                                 20, 3000, bins, 0.05, 0.99)
     n_tight, n_wide = np.diff(new_ptr)
     assert n_tight == 20  # one bin: the lower limit
     assert n_wide == 3000  # ~500 distinct bins: the bound (~5000) is over the upper limit
@@ -131,12 +137,12 @@ def test_kld_resampling_grows_with_spread():
 
 
 def test_kld_bound_formula():
-    assert mm.kld_sample_size(1, 0.05, 0.99) == 0
+    assert kld_sample_size(1, 0.05, 0.99) == 0
     k, eps, z = 50, 0.05, 2.326
     b = 2.0 / (9.0 * (k - 1))
     bound = (k - 1) / (2 * eps) * (1 - b + math.sqrt(b) * z) ** 3
-    assert mm.kld_sample_size(k, eps, z) == math.ceil(bound)
-    sizes = np.array([mm.kld_sample_size(k, 0.05, 0.99) for k in range(2, 200)])
+    assert kld_sample_size(k, eps, z) == math.ceil(bound)
+    sizes = np.array([kld_sample_size(k, 0.05, 0.99) for k in range(2, 200)])
     assert np.all(np.diff(sizes) > 0)
 
 
@@ -144,13 +150,13 @@ def test_low_variance_resampling_counts_proportional_to_weights():
     rng = np.random.default_rng(3)
     w = rng.random(37) ** 3
     for n, u in ((1000, 0.0), (1000, 0.999), (250, 0.37)):
-        idx = mm.low_variance_resample(w, n, u)
+        idx = low_variance_resample(w, n, u)
         counts = np.bincount(idx, minlength=w.size)
         expect = n * w / w.sum()
         assert counts.sum() == n and np.all(np.diff(idx) >= 0)
         assert np.all(np.abs(counts - expect) < 1.0 + 1e-9)
     # a single heavy particle takes every draw
-    assert np.all(mm.low_variance_resample([0.0, 1.0, 0.0], 10, 0.5) == 1)
+    assert np.all(low_variance_resample([0.0, 1.0, 0.0], 10, 0.5) == 1)
 
 
 def test_odometry_model_noise_free_is_exact_and_noise_matches_alphas():
@@ -158,15 +164,15 @@ def test_odometry_model_noise_free_is_exact_and_noise_matches_alphas():
     prev = np.column_stack((rng.uniform(-5, 5, (50, 2)), rng.uniform(-3, 3, 50)))
     cur = prev + np.column_stack((rng.normal(0, 0.3, (50, 2)), rng.normal(0, 0.5, 50)))
     for mode in ("heading_change", "decomposition"):
-        m = mm.decompose_motion(prev, cur, mode)
-        out = mm.sample_motion(prev, m, (0, 0, 0, 0), rng.standard_normal((50, 3)))
+        m = decompose_motion(prev, cur, mode)
+        out = sample_motion(prev, m, (0, 0, 0, 0), rng.standard_normal((50, 3)))
         np.testing.assert_allclose(out[:, :2], cur[:, :2], atol=1e-12)
         np.testing.assert_allclose(wrap_angle_fast(out[:, 2] - cur[:, 2]), 0.0, atol=1e-12)
     # straight 1 m drive: translation variance alpha3 * 1, heading variance 2 * alpha2 * 1
     start = np.zeros((200_000, 3))
     end = np.tile([1.0, 0.0, 0.0], (200_000, 1))
-    out = mm.sample_motion(start, mm.decompose_motion(start, end), (0.1, 0.04, 0.09, 0.3),
-                           rng.standard_normal((200_000, 3)))
+    out = sample_motion(start, decompose_motion(start, end), (0.1, 0.04, 0.09, 0.3),
+                        rng.standard_normal((200_000, 3)))
     assert abs(np.hypot(out[:, 0], out[:, 1]).std() - 0.3) < 0.01
     assert abs(out[:, 2].std() - math.sqrt(2 * 0.04)) < 0.01
 
@@ -174,9 +180,9 @@ def test_odometry_model_noise_free_is_exact_and_noise_matches_alphas():
 def test_sideways_push_is_not_a_turn():
     prev = np.zeros((1, 3))
     cur = np.array([[0.0, 0.1, 0.0]])  # pushed 0.1 m to the left, no turn
-    _, _, _, n1, n2 = mm.decompose_motion(prev, cur, "heading_change")
+    _, _, _, n1, n2 = decompose_motion(prev, cur, "heading_change")
     assert n1[0] == n2[0] == 0.0
-    _, _, _, n1, n2 = mm.decompose_motion(prev, cur, "decomposition")
+    _, _, _, n1, n2 = decompose_motion(prev, cur, "decomposition")
     assert n1[0] == pytest.approx(math.pi / 2) and n2[0] == pytest.approx(math.pi / 2)
 
 
@@ -250,8 +256,8 @@ def test_numba_sensor_update_matches_numpy_reference():
     parts[::7, :2] += 20.0  # some end points off the map
     ptr = np.array([0, 300, 500])
     for amcl in (False, True):
-        table, outside = mm.likelihood_table(sc.world.grid, 0.25, 0.97, 0.03, 200.0, 3.5,
-                                             "amcl" if amcl else "product")
+        table, outside = likelihood_table(sc.world.grid, 0.25, 0.97, 0.03, 200.0, 3.5,
+                                          "amcl" if amcl else "product")
         for upd in ([True, True], [False, True]):
             w1 = rng.random(500)
             w1[:300] /= w1[:300].sum()
@@ -259,7 +265,7 @@ def test_numba_sensor_update_matches_numpy_reference():
             w2, e1, e2 = w1.copy(), np.zeros((2, 3)), np.zeros((2, 3))
             args = (ptr, np.array(upd), ex, ey, nv, table, outside, est._ox, est._oy,
                     est._inv_h, amcl)
-            mm.sensor_update(parts, w1, *args, e1)
+            sensor_update(parts, w1, *args, e1)
             numpy_sensor_update(parts, w2, *args, e2)
             np.testing.assert_allclose(w1, w2, rtol=1e-9, atol=1e-300)
             np.testing.assert_allclose(e1, e2, rtol=1e-9, atol=1e-12)
@@ -268,12 +274,12 @@ def test_numba_sensor_update_matches_numpy_reference():
 def test_boundary_field_penalises_end_points_inside_thick_walls():
     sc = room()
     grid = sc.world.grid
-    table, _ = mm.likelihood_table(grid, 0.25, 0.97, 0.03, 200.0, 3.5, "product", "boundary")
+    table, _ = likelihood_table(grid, 0.25, 0.97, 0.03, 200.0, 3.5, "product", "boundary")
     inside = grid.world_to_cell(np.array([6.0, 5.0]))  # centre of the 1.4 m pillar
     face = grid.world_to_cell(np.array([5.35, 5.0]))  # its west face
     assert table[inside] < table[face] - 2.0  # 0.7 m from the boundary
-    occupied, _ = mm.likelihood_table(grid, 0.25, 0.97, 0.03, 200.0, 3.5, "product",
-                                      "occupied")
+    occupied, _ = likelihood_table(grid, 0.25, 0.97, 0.03, 200.0, 3.5, "product",
+                                   "occupied")
     assert occupied[inside] == occupied[face]
 
 

@@ -1,6 +1,8 @@
 """``nmpc``: distributed nonlinear MPC (casadi) tracking the formation slot."""
 
+import importlib
 import math
+import re
 
 import casadi as ca
 import numpy as np
@@ -8,7 +10,7 @@ import pytest
 
 import comparisons.nmpc.problem as nmpc_problem
 from comparisons.constraints.distance import StaticObstacles
-from comparisons.nmpc import Nmpc, goto_command, solve_time_stats
+from comparisons.nmpc import Nmpc, goto_command
 from comparisons.nmpc.geometry import (
     neighbour_predictions,
     obstacle_halfplanes,
@@ -17,13 +19,13 @@ from comparisons.nmpc.geometry import (
     slot_reference,
 )
 from comparisons.nmpc.problem import arc_step, rollout
-from dfcoa_opt.control.base import MovingObstacles, slot_velocity
+from dfcoa_opt.control.base import STATUS_OK, STATUS_SOLVER_FAIL, MovingObstacles, slot_velocity
 from dfcoa_opt.control.registry import available, build_controller
 from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.metrics import filter_counts
+from dfcoa_opt.metrics.solver import solve_time_stats
 from dfcoa_opt.scenario.formation import slot_positions
 from dfcoa_opt.scenario.loader import load_scenario
-from dfcoa_opt.sim.log import STATUS_OK, STATUS_SOLVER_FAIL
 from dfcoa_opt.sim.simulator import Simulator, run_scenario
 from dfcoa_opt.world.robots.models import integrate_unicycle
 from dfcoa_opt.world.shapes import Circle, Rectangle
@@ -52,6 +54,19 @@ def test_scenario_file_overrides_reach_the_controller():
                        overrides={"t_max": 0.1, "controllers.nmpc.horizon": 6})
     ctrl = build_controller("nmpc", sc.spec.controllers, sc.source)
     assert ctrl.p.horizon == 6
+
+
+def test_old_name_of_solve_time_stats_warns_and_is_the_metrics_function():
+    package = importlib.import_module("comparisons.nmpc")
+    moved = "comparisons.nmpc.solve_time_stats moved to dfcoa_opt.metrics.solver.solve_time_stats"
+    with pytest.warns(DeprecationWarning, match=re.escape(moved)):
+        from comparisons.nmpc import solve_time_stats as old
+    assert old is solve_time_stats
+    with pytest.warns(DeprecationWarning, match="dfcoa_opt.metrics.solver"):
+        assert package.solve_time_stats is solve_time_stats
+    assert "solve_time_stats" not in package.__all__
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        package.nothing  # noqa: B018
 
 
 # ----------------------------------------------------------------- model and references
@@ -176,9 +191,9 @@ def test_predicted_plan_respects_the_obstacle_halfplanes():
         obs = observation(pose, [[4.5, 5.0]], t=0.1 * k)
         u = ctrl.act(obs)[0]
         assert ctrl.last_result.status[0] == STATUS_OK
-        plan = ctrl._w["x"][0, 1:, :2]
+        plan = ctrl.plans._w["x"][0, 1:, :2]
         # the linearisation points: the shifted last plan (the current position at first)
-        u0, age = ctrl._shifted(obs.t, np.array([0]))
+        u0, age = ctrl.plans.shifted(obs.t, np.array([0]))
         lin = rollout(pose[None], u0, 0.1)[0, 1:, :2] if age[0] < 10 else \
             np.tile(pose[:2], (10, 1))
         assert (age[0] < 10) == (k > 0)
@@ -225,9 +240,10 @@ def test_warm_start_needs_fewer_iterations(solver):
         obs = observation(pose, slot_positions(leader[:3], off), t=0.1 * k, leader=leader,
                           lists=lists)
         if k:  # the same problems from a cold start: controls 0, no multipliers
-            ctrl._r = {key: v.copy() for key, v in ctrl._w.items()}
-            ctrl._t = obs.t
-            u0, _ = ctrl._shifted(obs.t, np.arange(3))
+            plans = ctrl.plans
+            plans._r = {key: v.copy() for key, v in plans._w.items()}
+            plans._t = obs.t
+            u0, _ = plans.shifted(obs.t, np.arange(3))
             _, params, lbg = ctrl._problems(obs, u0, np.zeros(3, bool))
             zero = ctrl.problem.guesses(np.zeros((3, 10, 2)), np.repeat(pose[:, None], 10, 1))
             cold += sum(ctrl.problem.solve(zero[i], params[i], lbg[i]).iterations
@@ -249,7 +265,7 @@ def test_forced_solver_failure_applies_the_policy_and_is_counted(monkeypatch, po
     leader = (2.0, 5.0, 0.0, 0.3, 0.0)
     obs0 = observation([2.0, 4.0, 0.0], [[2.0, 5.0]], t=0.0, leader=leader)
     ctrl.act(obs0)
-    plan_u = ctrl._w["u"][0].copy()
+    plan_u = ctrl.plans._w["u"][0].copy()
     obs1 = observation([2.02, 4.0, 0.05], [[2.03, 5.0]], t=0.1, leader=leader)
     break_every_solver(monkeypatch)
     u = ctrl.act(obs1)[0]
@@ -269,7 +285,7 @@ def test_shift_runs_out_after_the_horizon(monkeypatch):
     ctrl = controller(sc, on_failure="shift", horizon=3)
     leader = (2.0, 5.0, 0.0, 0.3, 0.0)
     ctrl.act(observation([2.0, 4.0, 0.0], [[2.0, 5.0]], t=0.0, leader=leader))
-    plan_u = ctrl._w["u"][0].copy()
+    plan_u = ctrl.plans._w["u"][0].copy()
     break_every_solver(monkeypatch)
     got = [ctrl.act(observation([2.0, 4.0, 0.0], [[2.0, 5.0]], t=0.1 * k, leader=leader))[0]
            for k in range(1, 5)]
@@ -324,7 +340,7 @@ def test_rows_depend_on_own_row_and_neighbours_plans_only():
     # and the plan of a non-neighbour is never read: robot 3's plan now meets robot 2 (going
     # -x at 0.6 m/s) in 1 s (a constant offset would not do: plans are translated to the
     # broadcast position, and this plan is one stage old)
-    ctrl._r["x"][3, :, :2] = pose[3, :2] + (np.arange(11)[:, None] - 1) / 10 * (
+    ctrl.plans._r["x"][3, :, :2] = pose[3, :2] + (np.arange(11)[:, None] - 1) / 10 * (
         np.array([4.4, 5.0]) - pose[3, :2])
     np.testing.assert_array_equal(ctrl.act(obs)[1], full[1])
     assert not np.array_equal(ctrl.act(obs)[2], full[2])  # robot 2 reads robot 3's plan

@@ -124,7 +124,7 @@ def _recorded(monkeypatch, **keys):
 
     def recorded_act(obs):
         u = act(obs)
-        written.append((ctrl._w["t"].copy(), ctrl._w["x"][..., :2].copy()))
+        written.append((ctrl.plans._w["t"].copy(), ctrl.plans._w["x"][..., :2].copy()))
         return u
 
     monkeypatch.setattr(nmpc_plans, "entry_predictions", entries)

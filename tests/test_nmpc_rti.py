@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from dfcoa_opt.control.base import STATUS_OK, STATUS_SOLVER_FAIL
 from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.scenario.loader import load_scenario
-from dfcoa_opt.sim.log import STATUS_OK, STATUS_SOLVER_FAIL
 from dfcoa_opt.sim.simulator import Simulator, run_batch_logs, run_scenario
 from tests.nmpc_support import ROOT, break_every_solver, controller, observation, scenario
 

@@ -5,11 +5,10 @@ import pytest
 
 from comparisons.orca.filter import OrcaFilter, concat_lines
 from dfcoa_opt import metrics
-from dfcoa_opt.control.base import Filtered
+from dfcoa_opt.control.base import STATUS_FALLBACK, Filtered
 from dfcoa_opt.control.registry import available_filters, build_controller, check_overrides
 from dfcoa_opt.core.errors import ScenarioError, UnknownNameError
 from dfcoa_opt.scenario.loader import scenario_from_dict
-from dfcoa_opt.sim.log import STATUS_FALLBACK
 from dfcoa_opt.sim.simulator import run_scenario
 
 R = 0.3  # robot radius, m

@@ -19,6 +19,7 @@ import pytest
 
 from dfcoa_opt.control import registry
 from dfcoa_opt.core.errors import DfcoaError
+from dfcoa_opt.core.registry import CONTROLLERS
 
 ROOT = Path(__file__).resolve().parents[1]
 OBSTACLES = (ROOT / "scenarios" / "example_obstacles.toml").as_posix()
@@ -143,8 +144,8 @@ def test_the_documented_package_installs_and_registers_its_entry_point(tmp_path:
 
 def test_an_entry_point_named_unlike_its_register_id_is_an_error(monkeypatch) -> None:
     registry.available()  # the built-ins into the real registry first (imported once only)
-    monkeypatch.setattr(registry, "_loaded", False)
-    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    monkeypatch.setattr(CONTROLLERS, "_loaded", False)
+    monkeypatch.setattr(CONTROLLERS, "_table", dict(CONTROLLERS._table))
     @dataclass(frozen=True)
     class Params:
         pass
@@ -153,17 +154,17 @@ def test_an_entry_point_named_unlike_its_register_id_is_an_error(monkeypatch) ->
 
     class EntryPoint:
         name = "other_name"
+        value = "my_pkg:Mine"
+        module = "my_pkg"
 
         def load(self):
             return cls
 
-    monkeypatch.setattr(registry, "entry_points",
-                        lambda group: [EntryPoint()] if group == registry.ENTRY_POINT_GROUP
-                        else [])
+    monkeypatch.setattr(CONTROLLERS, "entry_points", lambda: [EntryPoint()])
     with pytest.raises(DfcoaError, match=r"entry point 'other_name' .* loads Mine, which "
                                          r"@register names 'my_id': name the entry point "
                                          r"'my_id'"):
         registry.available()
     EntryPoint.name = "my_id"  # the same name: one controller, listed once
-    monkeypatch.setattr(registry, "_loaded", False)
+    monkeypatch.setattr(CONTROLLERS, "_loaded", False)
     assert registry.available().count("my_id") == 1

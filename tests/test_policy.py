@@ -297,7 +297,7 @@ def test_policy_ids_take_no_parameter_table_and_are_reserved(tmp_path):
 def fresh_registry(monkeypatch):
     """Registrations of one test only (the registry is restored)."""
     registry.available()  # load the built-ins before the copy
-    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    monkeypatch.setattr(registry.CONTROLLERS, "_table", dict(registry.CONTROLLERS._table))
 
 
 def test_a_registered_callable_policy_runs_by_id(fresh_registry):

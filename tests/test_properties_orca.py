@@ -23,8 +23,8 @@ from comparisons.orca.lp import FEASIBLE, LEAST_VIOLATION, SOLVER_FAIL, solve_li
 from comparisons.orca.neighbours import knn_within
 from comparisons.orca.qp import solve_lines_qp
 from comparisons.orca.velocities import orca_velocities
+from dfcoa_opt.control.base import STATUS_FALLBACK
 from dfcoa_opt.scenario.loader import scenario_from_dict
-from dfcoa_opt.sim.log import STATUS_FALLBACK
 from dfcoa_opt.sim.simulator import run_scenario
 from tests.test_orca_qp import _batch, _unique_minimax, _viol
 

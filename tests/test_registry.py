@@ -7,6 +7,7 @@ import pytest
 from dfcoa_opt.control import registry
 from dfcoa_opt.core.errors import ScenarioError, UnknownNameError, did_you_mean
 from dfcoa_opt.core.params import param
+from dfcoa_opt.core.registry import CONTROLLERS
 from dfcoa_opt.scenario.loader import load_scenario
 
 
@@ -62,18 +63,17 @@ class ThirdParty:
 
 class FakeEntryPoint:
     name = "third_party"
+    value = "third_party_pkg.controllers:ThirdParty"
+    module = "third_party_pkg.controllers"
 
     def load(self):
         return ThirdParty
 
 
 def test_entry_point_group_is_discovered(monkeypatch):
-    monkeypatch.setattr(registry, "_loaded", False)
-    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
-    def fake_entry_points(group):
-        return [FakeEntryPoint()] if group == registry.ENTRY_POINT_GROUP else []
-
-    monkeypatch.setattr(registry, "entry_points", fake_entry_points)
+    monkeypatch.setattr(CONTROLLERS, "_loaded", False)
+    monkeypatch.setattr(CONTROLLERS, "_table", dict(CONTROLLERS._table))
+    monkeypatch.setattr(CONTROLLERS, "entry_points", lambda: [FakeEntryPoint()])
     assert "third_party" in registry.available()
     c = registry.make_controller("third_party", {"gain": 3.0})
     assert isinstance(c, ThirdParty) and c.params.gain == 3.0 and c.name == "third_party"

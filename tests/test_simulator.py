@@ -158,7 +158,7 @@ def test_localization_shorthand_and_unknown_mode():
     from dfcoa_opt.core.errors import ScenarioError
 
     assert small(localization="truth").spec.localization.mode == "truth"
-    with pytest.raises(ScenarioError, match="localization.mode: unknown mode 'gps'"):
+    with pytest.raises(ScenarioError, match="localization.mode: unknown estimator 'gps'"):
         small(localization="gps")
 
 

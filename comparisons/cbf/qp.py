@@ -23,14 +23,14 @@ from numpy.typing import NDArray
 
 from comparisons.constraints.solvers import Solver
 from comparisons.orca import lp
-from dfcoa_opt.core.geometry import take_rows
-from dfcoa_opt.sim.log import (
+from dfcoa_opt.control.base import (
     STATUS_FALLBACK,
     STATUS_MODIFIED,
     STATUS_OK,
     STATUS_SOLVER_FAIL,
     UNCHANGED_TOL,
 )
+from dfcoa_opt.core.geometry import take_rows
 
 FloatArray = NDArray[np.float64]
 

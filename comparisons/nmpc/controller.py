@@ -56,23 +56,29 @@ from numpy.typing import NDArray
 
 from comparisons.constraints.distance import StaticObstacles
 from comparisons.constraints.world_shapes import WorldShapes
-from comparisons.nmpc.fallback import goto_command, solve_time_stats
+from comparisons.nmpc.fallback import goto_command
 from comparisons.nmpc.geometry import obstacle_halfplanes, robot_halfplanes, slot_reference
 from comparisons.nmpc.model import rollout
 from comparisons.nmpc.outputs import BatchOutput, SolveOutput
 from comparisons.nmpc.plans import PlanBuffers
-from dfcoa_opt.control.base import BatchedController, FilterResult, Observation
+from comparisons.nmpc.spec import ProblemSpec
+from dfcoa_opt.control.base import (
+    STATUS_OK,
+    STATUS_SOLVER_FAIL,
+    BatchedController,
+    FilterResult,
+    Observation,
+)
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.core.params import param
-from dfcoa_opt.sim.log import STATUS_OK, STATUS_SOLVER_FAIL
 
 if TYPE_CHECKING:
-    from comparisons.nmpc.problem import NmpcProblem, ProblemSpec
+    from comparisons.nmpc.problem import NmpcProblem
     from dfcoa_opt.scenario.scenario import Scenario
 
 FloatArray = NDArray[np.float64]
-__all__ = ["SQP_MAX_ITER", "IPOPT_MAX_ITER", "Nmpc", "goto_command", "solve_time_stats"]
+__all__ = ["SQP_MAX_ITER", "IPOPT_MAX_ITER", "Nmpc", "goto_command"]
 
 
 @lru_cache(maxsize=8)
@@ -93,14 +99,14 @@ SQP_MAX_ITER, IPOPT_MAX_ITER = 20, 100
 
 
 @register("nmpc")
-class Nmpc(PlanBuffers, BatchedController):
+class Nmpc(BatchedController):
     """Distributed NMPC: each robot tracks its formation slot over a short horizon; batched.
 
     One object steps every run of a batch (:class:`BatchedController`): the
     set-up of every row's problem (references, shifted plans and multipliers,
     neighbour predictions, half-planes) is elementwise over all rows of all
     runs, and one compiled call solves them all; plans are kept by global id
-    ``env * N + robot`` (:class:`~comparisons.nmpc.plans.PlanBuffers`).
+    ``env * N + robot`` in :attr:`plans`.
 
     Attributes:
         last_result: The latest step's commands, status (``STATUS_OK`` or
@@ -111,6 +117,8 @@ class Nmpc(PlanBuffers, BatchedController):
         last_rti: ``(R,)`` which rows made one real-time iteration (``rti``; the others
             ran the full SQP).
         statics: The static shapes of the maps of the batch (``static``: the first map).
+        plans: Every robot's last plan by global id
+            (:class:`~comparisons.nmpc.plans.PlanBuffers`; made by the reset).
     """
 
     command = "unicycle"
@@ -187,6 +195,7 @@ class Nmpc(PlanBuffers, BatchedController):
         self.problem: NmpcProblem | None = None
         self.rescuer: NmpcProblem | None = None
         self.iterate: NmpcProblem | None = None  # the real-time iteration's (rti)
+        self.plans: PlanBuffers | None = None
 
     # ------------------------------------------------------------------ set-up
     def reset_batch(self, scenarios: list[Scenario], rngs: list[np.random.Generator]) -> None:
@@ -197,8 +206,6 @@ class Nmpc(PlanBuffers, BatchedController):
                 seeded clutter field gives each run its own world).
             rngs: One per run (unused: ``nmpc`` draws nothing).
         """
-        from comparisons.nmpc.problem import ProblemSpec  # casadi: at the first reset
-
         scenario = scenarios[0]
         p, rob = self.p, scenario.spec.robots
         self.tau = p.step if p.step is not None else scenario.spec.dt
@@ -233,8 +240,8 @@ class Nmpc(PlanBuffers, BatchedController):
                                     for sc in {id(sc.world): sc for sc in scenarios}.values()])
         self._static_of = np.array([worlds[id(sc.world)] for sc in scenarios], dtype=np.intp)
         self.static = self.statics.maps[0]
-        self._n = scenario.spec.team.n
-        self._alloc(len(scenarios) * self._n)
+        n = scenario.spec.team.n
+        self.plans = PlanBuffers(self.spec, self.tau, n, len(scenarios) * n)
         self.last_result = None
 
     # ------------------------------------------------------------------ step
@@ -247,12 +254,12 @@ class Nmpc(PlanBuffers, BatchedController):
         points: the rollout of the shifted plan, or the current position for
         robots without a plan (``fresh``). Static obstacles of each row's own
         world; neighbours' plans by the global ids ``nb_ids`` (default: from
-        ``obs``, :meth:`_global_ids`). In ``problem``'s layout (default: the
+        ``obs``, :meth:`PlanBuffers.global_ids`). In ``problem``'s layout (default: the
         controller's problem).
         """
         problem = problem or self.problem
         if nb_ids is None:
-            nb_ids = self._global_ids(obs)[1]
+            nb_ids = self.plans.global_ids(obs)[1]
         p, h, n = self.p, self.p.horizon, obs.n
         x0 = rollout(obs.pose, u0, self.tau)
         lin = np.where(fresh[:, None, None], obs.pose[:, None, :2], x0[:, 1:, :2])
@@ -262,7 +269,7 @@ class Nmpc(PlanBuffers, BatchedController):
             self._static_of[obs.env]
         on, oc = obstacle_halfplanes(lin, self.statics, obs.obstacles, self.tau,
                                      p.max_obstacles, self.radius + p.margin, p.reach, world)
-        pred, mask = self._predictions(obs, nb_ids, p.max_neighbours)
+        pred, mask = self.plans.predictions(obs, nb_ids, p.max_neighbours)
         rn, rc = robot_halfplanes(lin, pred, mask, 2.0 * self.radius + p.margin, p.reach)
         normals = np.concatenate((on, rn), axis=2).reshape(n, h, -1)
         stage = np.concatenate((ref, psi[..., None], uref, normals), axis=2).reshape(n, -1)
@@ -313,8 +320,8 @@ class Nmpc(PlanBuffers, BatchedController):
         obs = step["obs"]
         out["cmd"][rows] = u[:, 0]
         out["slack"][rows] = np.maximum(slack.max(axis=1), 0.0)
-        self._store(step["ids"][rows], float(obs.t), obs.pose[rows], u.copy(),
-                    np.concatenate((obs.pose[rows, None], x), axis=1), lam)
+        self.plans.store(step["ids"][rows], float(obs.t), obs.pose[rows], u.copy(),
+                         np.concatenate((obs.pose[rows, None], x), axis=1), lam)
 
     def _prepare(self, obs: Observation) -> tuple[FloatArray, dict]:
         """The packed inputs ``(R, n)`` of this step's problems, and the step's arrays.
@@ -324,15 +331,15 @@ class Nmpc(PlanBuffers, BatchedController):
         made from.
         """
         h, t = self.p.horizon, float(obs.t)
-        self._advance(t, None if obs.neighbours.age is None else float(obs.dt))
-        ids, nb_ids = self._global_ids(obs)
-        u0, age = self._shifted(t, ids)
+        self.plans.advance(t, None if obs.neighbours.age is None else float(obs.dt))
+        ids, nb_ids = self.plans.global_ids(obs)
+        u0, age = self.plans.shifted(t, ids)
         fresh = age >= h  # no plan: guess the goto command
         for i in np.flatnonzero(fresh):  # (the first step of a run, or a fallback run out)
             u0[i] = goto_command(obs.pose[i], obs.slot[i], self.p.goto_gain, self.spec)
         guess, params, lbg = self._problems(obs, u0, fresh, nb_ids=nb_ids)
-        lam_x, lam_g = self._shifted_multipliers(ids, age)
-        rti = self._solved_last_step(ids) & (self.iterate is not None)
+        lam_x, lam_g = self.plans.shifted_multipliers(ids, age)
+        rti = self.plans.solved_last_step(ids) & (self.iterate is not None)
         step = {"obs": obs, "ids": ids, "u0": u0, "age": age, "params": params, "lbg": lbg,
                 "lam_x": lam_x, "lam_g": lam_g, "rti": rti}
         return self.problem.pack(guess, params, lbg, lam_x, lam_g), step
@@ -388,11 +395,11 @@ class Nmpc(PlanBuffers, BatchedController):
         pose, policy = obs.pose[i], self.p.on_failure
         if policy == "shift" and step["age"][i] < h:
             # keep the previous plan (neighbours go on reading it); it runs out after H stages
-            self._keep(int(g[0]))
+            self.plans.keep(int(g[0]))
             return step["u0"][i][0].copy()
         if policy == "goto":
             u = goto_command(pose, obs.slot[i], self.p.goto_gain, self.spec)
         else:
             u = np.zeros(2)
-        self._store(g, float(obs.t), pose[None], np.tile(u, (h, 1))[None])
+        self.plans.store(g, float(obs.t), pose[None], np.tile(u, (h, 1))[None])
         return u

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from comparisons.nmpc.model import arc_step
 
 if TYPE_CHECKING:
-    from comparisons.nmpc.problem import ProblemSpec
+    from comparisons.nmpc.spec import ProblemSpec
 
 FloatArray = NDArray[np.float64]
 

@@ -1,5 +1,7 @@
 """The plan buffers of the ``nmpc`` controller (:mod:`comparisons.nmpc.controller`).
 
+The controller owns one :class:`PlanBuffers` per batch of runs (made by its reset).
+
 Every robot's last plan (made at ``t``: controls, poses, multipliers) is kept in
 arrays indexed by **global id**: ``env * N + robot`` in a batch of runs of ``N``
 robots (one run: the robot index; a hand-made observation without ``env``: its
@@ -28,7 +30,7 @@ from comparisons.nmpc.model import rollout
 from dfcoa_opt.core.geometry import take_rows
 
 if TYPE_CHECKING:
-    from comparisons.nmpc.problem import ProblemSpec
+    from comparisons.nmpc.spec import ProblemSpec
     from dfcoa_opt.control.base import Observation
 
 FloatArray = NDArray[np.float64]
@@ -72,12 +74,20 @@ def relayed_plans(snapshots: Iterable[Snapshot], t: float, dt: float, ids: NDArr
 
 
 class PlanBuffers:
-    """Mixin of :class:`~comparisons.nmpc.controller.Nmpc`: the plans by global id.
+    """Every robot's last plan by global id (module docstring), empty; no step yet.
 
-    Needs ``spec`` (:class:`~comparisons.nmpc.problem.ProblemSpec`), ``tau`` (s)
-    and ``_n`` (robots per run) on the object.
+    Owned by :class:`~comparisons.nmpc.controller.Nmpc`, one per batch of runs.
+
+    Args:
+        spec: The problem's shape (horizon ``H``, constraint rows, variables per stage).
+        tau: Prediction step, s.
+        n: Robots per run ``N`` (a row's global id is ``env * N + robot``).
+        size: Global ids to make room for (runs times ``N``; more are added on demand).
 
     Attributes:
+        spec: The problem's shape.
+        tau: Prediction step, s.
+        n: Robots per run.
         _w: Written plans: ``t`` (s, NaN = none), ``u`` ``(G, H, 2)``, ``x``
             ``(G, H + 1, 3)``, ``lam_x``, ``lam_g`` and ``lam_ok`` (multipliers kept).
         _r: Readable plans (same keys): ``_w`` as it was when the step began.
@@ -87,24 +97,17 @@ class PlanBuffers:
             first (:data:`Snapshot`; None until a step with late or lost messages).
     """
 
-    spec: ProblemSpec
-    tau: float
-    _n: int
-    _w: dict[str, np.ndarray]
-    _r: dict[str, np.ndarray]
-    _t: float | None
-    _t_prev: float
-    _past: deque[Snapshot] | None
-
-    def _alloc(self, n: int) -> None:
-        """Plan buffers for ``n`` global ids, empty; no step yet."""
-        h, rows = self.spec.horizon, self.spec.rows
-        self._w = {"t": np.full(n, np.nan), "u": np.zeros((n, h, 2)),
-                   "x": np.zeros((n, h + 1, 3)), "lam_x": np.zeros((n, self.spec.nw * h)),
-                   "lam_g": np.zeros((n, rows * h)), "lam_ok": np.zeros(n, dtype=bool)}
-        self._r = {k: v.copy() for k, v in self._w.items()}
-        self._t, self._t_prev = None, np.nan
-        self._past = None
+    def __init__(self, spec: ProblemSpec, tau: float, n: int, size: int) -> None:
+        self.spec, self.tau, self.n = spec, tau, n
+        h, rows = spec.horizon, spec.rows
+        self._w: dict[str, np.ndarray] = {
+            "t": np.full(size, np.nan), "u": np.zeros((size, h, 2)),
+            "x": np.zeros((size, h + 1, 3)), "lam_x": np.zeros((size, spec.nw * h)),
+            "lam_g": np.zeros((size, rows * h)), "lam_ok": np.zeros(size, dtype=bool)}
+        self._r: dict[str, np.ndarray] = {k: v.copy() for k, v in self._w.items()}
+        self._t: float | None = None
+        self._t_prev: float = np.nan
+        self._past: deque[Snapshot] | None = None
 
     def _grow(self, n: int) -> None:
         """Make room for global ids below ``n`` (hand-made observations)."""
@@ -116,7 +119,7 @@ class PlanBuffers:
                 fill = np.nan if k == "t" else 0
                 buf[k] = np.concatenate((v, np.full((n - have, *v.shape[1:]), fill, v.dtype)))
 
-    def _advance(self, t: float, dt: float | None = None) -> None:
+    def advance(self, t: float, dt: float | None = None) -> None:
         """At a new step (``t`` later than the last), last step's plans become readable.
 
         Args:
@@ -135,7 +138,7 @@ class PlanBuffers:
             self._t_prev = np.nan if self._t is None else self._t
             self._t = t
 
-    def _solved_last_step(self, ids: NDArray[np.intp]) -> NDArray[np.bool_]:
+    def solved_last_step(self, ids: NDArray[np.intp]) -> NDArray[np.bool_]:
         """Which of ``ids`` have a readable plan solved at the previous step.
 
         Solved: with multipliers (not a ``stop`` or ``goto`` fallback's); at the
@@ -143,7 +146,7 @@ class PlanBuffers:
         """
         return self._r["lam_ok"][ids] & (self._r["t"][ids] == self._t_prev)
 
-    def _global_ids(self, obs: Observation) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    def global_ids(self, obs: Observation) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         """Global ids ``(R,)`` of the rows and ``(R, K)`` of their neighbours (-1 padded).
 
         In a batch (``obs.env`` set) a row is ``env * N + robot_ids`` and a
@@ -156,7 +159,7 @@ class PlanBuffers:
             ids = np.asarray(obs.robot_ids, dtype=np.intp)
             nb = index
         else:
-            ids = np.asarray(obs.env, dtype=np.intp) * self._n + obs.robot_ids
+            ids = np.asarray(obs.env, dtype=np.intp) * self.n + obs.robot_ids
             nb = np.where(index >= 0, ids[np.maximum(index, 0)], -1)
         self._grow(int(max(ids.max(initial=-1), nb.max(initial=-1))) + 1)
         return ids, nb
@@ -170,7 +173,7 @@ class PlanBuffers:
         age = (t - made) / self.tau
         return np.where(np.isfinite(age) & (age >= -1e-9), np.maximum(age, 0.0), np.inf)
 
-    def _predictions(self, obs: Observation, nb_ids: NDArray[np.intp], count: int
+    def predictions(self, obs: Observation, nb_ids: NDArray[np.intp], count: int
                      ) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Predicted centres ``(R, K, H, 2)`` (m) of each row's ``count`` nearest neighbours.
 
@@ -198,7 +201,7 @@ class PlanBuffers:
                                       nb_ids[:, :count], nb.age[:, :count])
         return entry_predictions(nb, count, plans, self._stages(t, plan_t), self.tau, h, nb_ids)
 
-    def _shifted(self, t: float, ids: NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
+    def shifted(self, t: float, ids: NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
         """Own previous controls shifted to ``t`` (zeros without a plan), and their age."""
         h = self.spec.horizon
         age = self._age(t, ids)
@@ -210,7 +213,7 @@ class PlanBuffers:
             u[live] = take_rows(self._r["u"][ids[live]], idx)
         return u, age
 
-    def _shifted_multipliers(self, ids: NDArray[np.intp], age: FloatArray
+    def shifted_multipliers(self, ids: NDArray[np.intp], age: FloatArray
                              ) -> tuple[FloatArray, FloatArray]:
         """The robots' last multipliers shifted by ``age`` stages (zeros without them)."""
         h, n = self.spec.horizon, len(ids)
@@ -224,7 +227,7 @@ class PlanBuffers:
             out.append(lam.reshape(n, -1))
         return out[0], out[1]
 
-    def _store(self, g: NDArray[np.intp], t: float, pose: FloatArray, u: FloatArray,
+    def store(self, g: NDArray[np.intp], t: float, pose: FloatArray, u: FloatArray,
                x: FloatArray | None = None,
                lam: tuple[FloatArray, FloatArray] | None = None) -> None:
         """Write the plans made at ``t`` of global ids ``g`` ``(R,)``.
@@ -239,7 +242,7 @@ class PlanBuffers:
         if lam is not None:
             w["lam_x"][g], w["lam_g"][g] = lam
 
-    def _keep(self, g: int) -> None:
+    def keep(self, g: int) -> None:
         """Global id ``g`` keeps its readable plan (the ``shift`` fallback)."""
         for key, buf in self._w.items():
             buf[g] = self._r[key][g]

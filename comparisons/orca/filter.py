@@ -36,6 +36,11 @@ from comparisons.orca.obstacles import obstacle_lines
 from comparisons.orca.velocities import orca_velocities
 from comparisons.orca.worlds import StaticWorlds
 from dfcoa_opt.control.base import (
+    STATUS_FALLBACK,
+    STATUS_MODIFIED,
+    STATUS_OK,
+    STATUS_SOLVER_FAIL,
+    UNCHANGED_TOL,
     BatchedController,
     Filtered,
     FilterResult,
@@ -46,13 +51,6 @@ from dfcoa_opt.control.registry import register, register_filter
 from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.core.geometry import take_rows
 from dfcoa_opt.core.params import param
-from dfcoa_opt.sim.log import (
-    STATUS_FALLBACK,
-    STATUS_MODIFIED,
-    STATUS_OK,
-    STATUS_SOLVER_FAIL,
-    UNCHANGED_TOL,
-)
 
 
 @register_filter("orca")

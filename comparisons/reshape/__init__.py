@@ -2,6 +2,8 @@
 
 - :mod:`~comparisons.reshape.controller`: the controller ``Reshape`` (registered
   as ``reshape``, batched): distributed CBF tracking of every run's robots;
+- :mod:`~comparisons.reshape.params`: its parameters, ``ReshapeParams``
+  (``Reshape.Params``);
 - :mod:`~comparisons.reshape.central`: the central formation planning of one run;
 - :mod:`~comparisons.reshape.region`: convex obstacle-free regions around the
   leader's look-ahead segment (IRIS style);

@@ -5,9 +5,12 @@ hands each due run's own rows to that run's :class:`CentralPlanner`, which
 picks the route, nominal or region mode (docs/methods/reshape.md, "The
 programs") from the robots' positions as it hears them (:func:`heard_positions`:
 their messages, ``Observation.team``, when messages are late or lost) and
-leaves the run's targets, the assignment and the guidance waypoints. Planning is per run by nature:
-every run of a batch has its own planner, counters and history, and runs of
-one static world share what is derived from that world (:class:`RunMap`).
+leaves the run's targets, the assignment and the guidance waypoints. The three
+modes are methods of the planner (they set its one plan state); the routes
+themselves are :class:`~comparisons.reshape.routes.RoutePlanner`'s. Planning
+is per run by nature: every run of a batch has its own planner, counters and
+history, and runs of one static world share what is derived from that world
+(:class:`RunMap`).
 """
 
 from __future__ import annotations
@@ -22,8 +25,13 @@ from numpy.typing import NDArray
 
 from comparisons.reshape import planner
 from comparisons.reshape.region import grow_region, shape_segments, swept_disc_segments
-from comparisons.reshape.route_mode import RouteMode
-from comparisons.reshape.routes import ConfigurationSpace, RoutePlanner, heading_bin
+from comparisons.reshape.routes import (
+    ConfigurationSpace,
+    Route,
+    RoutePlanner,
+    bin_heading,
+    heading_bin,
+)
 from comparisons.reshape.tracking import Guidance, StuckMonitor
 from dfcoa_opt.control.base import Observation
 from dfcoa_opt.core.geometry import point_segment_distance, rotate
@@ -31,7 +39,7 @@ from dfcoa_opt.planning.pure_pursuit import PurePursuit
 from dfcoa_opt.scenario.formation import line_offsets
 
 if TYPE_CHECKING:
-    from comparisons.reshape.controller import Reshape
+    from comparisons.reshape.params import ReshapeParams
     from dfcoa_opt.scenario.scenario import Scenario, World
 
 FloatArray = NDArray[np.float64]
@@ -103,11 +111,11 @@ class RunMap:
                    ConfigurationSpace(grid, np.zeros((1, 2)), rho, wide) if column else None)
 
 
-class CentralPlanner(RouteMode):
+class CentralPlanner:
     """One run's planner (module docstring); its results are read by the controller.
 
     Args:
-        p: The controller's parameters (``Reshape.Params``).
+        p: The controller's parameters.
         scenario: The run's scenario.
         maps: Cache of :class:`RunMap` by scenario object (shared by a batch's runs).
         stuck: The batch's stuck-robot monitor.
@@ -121,7 +129,7 @@ class CentralPlanner(RouteMode):
         history: ``(t, template, scale)`` of every plan (None when the formation waited).
     """
 
-    def __init__(self, p: Reshape.Params, scenario: Scenario, maps: dict[int, RunMap],
+    def __init__(self, p: ReshapeParams, scenario: Scenario, maps: dict[int, RunMap],
                  stuck: StuckMonitor, rows: slice, pair_distance: float) -> None:
         self.p = p
         spec = scenario.spec
@@ -191,6 +199,12 @@ class CentralPlanner(RouteMode):
         return self._waypoint
 
     # ------------------------------------------------------------------ planning
+    def _tangent(self, s: float) -> float:
+        """Heading (rad) of the leader's path around arc length ``s`` (m)."""
+        a = self._path.point_at(max(0.0, min(s, self._path.length) - 0.5))
+        b = self._path.point_at(min(self._path.length, max(s, 0.0) + 0.5))
+        return math.atan2(b[1] - a[1], b[0] - a[0]) if np.any(b != a) else 0.0
+
     @staticmethod
     def _moving(obs: Observation) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Position, velocity and radius of each sensed moving disc, once (m, m/s, m)."""
@@ -295,6 +309,85 @@ class CentralPlanner(RouteMode):
         self._waypoint = self._waypoints(obs.t, pos)
         self.plan_times.append(time.perf_counter() - t0)
 
+    # ---------------------------------------------------------------- route mode
+    def _path_blocked(self, s_c: float, k: int) -> bool:
+        """Whether the scenario's formation, rigid at scale 1, hits a static obstacle ahead.
+
+        Its centre is placed on the leader's path (heading bin ``k``) from the
+        formation's progress ``s_c`` to ``lookahead`` plus its extent beyond.
+        """
+        end = min(s_c + self.p.lookahead + self._extent, self._path.length)
+        s = np.append(np.arange(max(s_c, 0.0), end, 2.0 * self._guide.inflated.cell_size), end)
+        lead = self._path.points_at(s)
+        centres = lead + rotate(self._centre, bin_heading(k))
+        return not bool(self._cspace.free_at(centres, float(self._scales[-1]), k).all())
+
+    def _follow_route(self, obs: Observation, pos: FloatArray, centroid: FloatArray,
+                      k: int) -> bool:
+        """Targets along the formation's route; False when there is none.
+
+        The rigid formation at the route's scale, or single file, along the route
+        of :class:`~comparisons.reshape.routes.RoutePlanner` (docs/methods/reshape.md,
+        "1. Route"); the goal's formation once the goal is within reach.
+        """
+        way, way_scale = self._routes.update(obs.t, centroid, k)
+        if way is None:
+            return False
+        here = way.project(centroid)
+        head = 0.0 if way_scale is not None else 0.5 * self._spacing * (self._n - 1)
+        centre, leader_near = self._route_centre(way, here, obs.leader)
+        ahead = centre + head
+        if here + self.p.route_lead + head >= way.length and leader_near:
+            # the goal within reach: the formation of the goal, if free
+            if not self._cspace.free_at(self._goal_centre[None], 1.0,
+                                        heading_bin(self._goal_heading))[0]:
+                return False
+            template, scale = "scenario", 1.0
+            slots = self._goal_centre + rotate(self._offsets - self._centre,
+                                               self._goal_heading)
+        elif way_scale is not None:  # the scenario's shape, rigid, at the route's scale
+            template, scale = "scenario", way_scale
+            slots = way.point_at(ahead) + scale * rotate(self._offsets - self._centre,
+                                                         bin_heading(k))
+        else:  # single file along the route
+            template, scale = "column", 1.0
+            slots = way.along(ahead - self._spacing * np.arange(self._n))
+        if template != self._template and self._template is not None:
+            self.counters["switches"] += 1
+        self.history.append((obs.t, template, scale))
+        self._assign = self._assignment(pos, slots, template)
+        self._template, self._nominal, self._carried = template, False, None
+        self._targets = slots[self._assign]
+        self._waypoint = self._waypoints(obs.t, pos)
+        return True
+
+    def _route_centre(self, way: Route, here: float, leader: FloatArray) -> tuple[float, bool]:
+        """Arc length (m) along the route where the formation's centre is sent.
+
+        ``route_lead`` beyond ``here`` (the centroid's projection on the route,
+        m), but not past the leader's progress: the route point's arc length
+        along the leader's path stays at most that of the centre of the leader's
+        formation (and at least ``here``, so the formation never goes back). A
+        column that crossed a doorway at ``v_max`` would otherwise get ahead of
+        the leader and stand there, waiting for its slots; a formation that
+        reached the goal long before the leader would stand there too. Once the
+        leader's formation is within ``route_lead`` of the goal (the leader
+        stops up to its settle tolerance short of the path's end), the cap is off.
+
+        Returns:
+            The arc length, and whether the cap is off (so the formation may take
+            its goal slots).
+        """
+        nominal = leader[:2] + rotate(self._centre, float(leader[2]))
+        cap = float(self._path.arc_length(nominal[None])[0])
+        arcs = here + np.linspace(0.0, self.p.route_lead, 9)
+        progress = self._path.arc_length(np.vstack([way.along(arcs), self._goal_centre]))
+        if cap + self.p.route_lead >= progress[-1]:
+            return float(arcs[-1]), True
+        within = np.flatnonzero(progress[:-1] <= cap + 1e-9)
+        return (float(arcs[within[-1]]) if within.size else here), False
+
+    # -------------------------------------------------------------- nominal mode
     def _nominal_plan(self, obs: Observation, pos: FloatArray) -> None:
         """The scenario's formation on the virtual leader (``goto_slot`` with the CBF filter).
 
@@ -310,6 +403,7 @@ class CentralPlanner(RouteMode):
         self._targets = obs.slot.copy()
         self._waypoint = self._waypoints(obs.t, pos)
 
+    # ------------------------------------------------------------ every mode's
     def _waypoints(self, t: float, pos: FloatArray) -> dict[int, FloatArray]:
         """Guidance waypoints towards the targets (stuck robots: around the others too)."""
         return self._guide.waypoints(pos, self._targets, self._stuck.stuck(t, self._rows),

@@ -35,10 +35,10 @@ from typing import Any
 from dfcoa_opt.bench.lifecycle import deferred, forkserver_context, init_worker, terminate
 from dfcoa_opt.bench.runner import Outcome, execute_batch
 from dfcoa_opt.bench.sweep.expand import RunSpec
-from dfcoa_opt.control.registry import BUILTIN_MODULES
 from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.core.plugins import load_plugins
 from dfcoa_opt.core.plugins import loaded as loaded_plugins
+from dfcoa_opt.core.registry import CONTROLLERS, ESTIMATORS, FILTERS
 
 EXECUTORS = ("serial", "process", "dask")
 
@@ -161,7 +161,7 @@ class WorkerPool:
 
     def __init__(self, jobs: int) -> None:
         self.jobs = jobs
-        ctx = forkserver_context(WORKER_PRELOAD)
+        ctx = forkserver_context(worker_preload())
         self.results = ctx.SimpleQueue()
         self.pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx,
                                         initializer=_init_batch_worker, initargs=(self.results,))
@@ -302,12 +302,17 @@ def _submit(pool: ProcessPoolExecutor, work: Iterable[tuple[int, Sequence[RunSpe
     return n
 
 
-#: Imported once by the fork server (when it starts), so that every pool worker
-#: forks with them loaded instead of importing them itself: about 1.2 s saved per
-#: worker and pool (``make figures`` starts a pool per recipe). Importing runs no
-#: numba kernel, so no OpenMP thread exists yet when the server forks.
-WORKER_PRELOAD = ("dfcoa_opt.bench.runner", "dfcoa_opt.sim.simulator", "dfcoa_opt.metrics",
-                  "dfcoa_opt.sim.localization.mcl", *BUILTIN_MODULES)
+def worker_preload() -> tuple[str, ...]:
+    """The modules the fork server imports once, when it starts.
+
+    Every pool worker then forks with them loaded instead of importing them
+    itself: about 1.2 s saved per worker and pool (``make figures`` starts a pool
+    per recipe). They are the run path and the modules of every installed
+    controller, filter and estimator entry point. Importing runs no numba
+    kernel, so no OpenMP thread exists yet when the server forks.
+    """
+    return ("dfcoa_opt.bench.runner", "dfcoa_opt.sim.simulator", "dfcoa_opt.metrics",
+            *CONTROLLERS.modules(), *FILTERS.modules(), *ESTIMATORS.modules())
 
 
 def _dask(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome]:

@@ -8,8 +8,8 @@ The figure recipes (a sweep file and a renderer each) are registered in
 writes the index ``paper_figures/README.md``. Renderers of sweep recipes read
 saved rows and logs only; they never simulate.
 
-``Artefact``, ``recipe``, ``recipes`` and ``RECIPE_MODULES`` of release 0.1
-are still importable from here (they live in :mod:`dfcoa_opt.bench.recipes`).
+``Artefact``, ``recipe`` and ``recipes`` of release 0.1 are still importable
+from here (they live in :mod:`dfcoa_opt.bench.recipes`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from dfcoa_opt.bench.executors import WORKER_PRELOAD, ExecutorConfig
+from dfcoa_opt.bench.executors import ExecutorConfig, worker_preload
 from dfcoa_opt.bench.harness import run_sweep
 from dfcoa_opt.bench.lifecycle import (
     deferred,
@@ -34,14 +34,14 @@ from dfcoa_opt.bench.lifecycle import (
     interruptible,
     terminate,
 )
-from dfcoa_opt.bench.recipes import RECIPE_MODULES, Artefact, Recipe, Renderer, recipe, registered
+from dfcoa_opt.bench.recipes import Artefact, Recipe, Renderer, recipe, registered
 from dfcoa_opt.core.atomic import atomic_write
 from dfcoa_opt.core.errors import DfcoaError, did_you_mean
 
 #: The 0.1 name of :func:`dfcoa_opt.bench.recipes.registered`.
 recipes = registered
 
-__all__ = ["RECIPE_MODULES", "Artefact", "Recipe", "make_figures", "recipe", "recipes",
+__all__ = ["Artefact", "Recipe", "make_figures", "recipe", "recipes",
            "write_index"]
 
 
@@ -190,7 +190,7 @@ class _Renderer:
     def __init__(self, workers: int) -> None:
         self.pool: ProcessPoolExecutor | None = None
         if workers:  # the sweeps' fork server: started here, so with their preload
-            ctx = forkserver_context(WORKER_PRELOAD)
+            ctx = forkserver_context(worker_preload())
             self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
                                             initializer=init_worker, initargs=(None,))
         self.pending: list[tuple[Recipe, Path, str, Future[_Rendered]]] = []

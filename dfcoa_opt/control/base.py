@@ -314,13 +314,22 @@ def as_batch(obs: Observation) -> Observation:
                    env=np.zeros(obs.n, dtype=np.intp))
 
 
+#: Filter status codes of :class:`FilterResult` (``RunLog.filter_status`` logs them).
+STATUS_OK = 0          # nominal command passed unchanged
+STATUS_MODIFIED = 1    # filter changed the command, constraints met
+STATUS_FALLBACK = 2    # infeasible: the configured fallback policy was applied
+STATUS_SOLVER_FAIL = 3  # solver error: the configured fallback policy was applied
+#: A filtered command closer than this to the nominal one is unchanged (STATUS_OK), m/s.
+UNCHANGED_TOL = 1e-9
+
+
 @dataclass
 class FilterResult:
     """Output of a safety filter for one step.
 
     Attributes:
         command: ``(N, k)`` safe commands (the filter's command kind).
-        status: ``(N,)`` int8, ``dfcoa_opt.sim.log.STATUS_*``.
+        status: ``(N,)`` int8, ``STATUS_*``.
         slack: ``(N,)`` constraint violation left (0 when feasible), in the
             command's units.
         solve_time: ``(N,)`` wall time per robot, s.

@@ -1,9 +1,11 @@
-"""Controller registry: ids -> controller classes, plus entry-point discovery.
+"""The controller registry's API: ids -> controllers, built with validated parameters.
 
 A controller class has a ``Params`` frozen dataclass (fields made with
 :func:`dfcoa_opt.core.params.param`) and is constructed as ``cls(params)``. Register
-it with ``@register("my_id")`` in an imported module, or -- from another
-package -- through the entry-point group ``dfcoa_opt.controllers``::
+it with ``@register("my_id")`` in an imported module, and -- from a package --
+name it in the entry-point group ``dfcoa_opt.controllers``, where the built-in
+controllers are declared too (the tables are
+:data:`dfcoa_opt.core.registry.CONTROLLERS` and :data:`~dfcoa_opt.core.registry.FILTERS`)::
 
     [project.entry-points."dfcoa_opt.controllers"]
     my_id = "my_pkg.my_module:MyController"
@@ -31,47 +33,27 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import replace
-from importlib.metadata import entry_points
 from typing import Any, TypeVar
 
+from dfcoa_opt.control.base import Filtered
 from dfcoa_opt.core import plugins
-from dfcoa_opt.core.errors import DfcoaError, ScenarioError, UnknownNameError, did_you_mean
-from dfcoa_opt.core.params import Tunable, build, check_robot_indices, tunables
+from dfcoa_opt.core.errors import UnknownNameError, did_you_mean
+from dfcoa_opt.core.params import Tunable, build, tunables
+from dfcoa_opt.core.registry import CONTROLLERS, FILTERS, POLICY_PREFIX, check_tables
 
-ENTRY_POINT_GROUP = "dfcoa_opt.controllers"
-#: Controller ids ``policy:PATH`` name a policy file; its classes come from this module.
-POLICY_PREFIX, POLICY_MODULE = "policy:", "dfcoa_opt.control.policy.controller"
-#: Modules of this distribution that register controllers when imported (or, the policy
-#: module, build them from files).
-BUILTIN_MODULES = ("dfcoa_opt.control.goto_slot", "dfcoa_opt.control.dfcoa.controller",
-                   "comparisons.orca.filter", "comparisons.consensus", "comparisons.lf_vo",
-                   "comparisons.virtual_spring", "comparisons.cbf", "comparisons.nmpc",
-                   "comparisons.reshape", "comparisons.learned", "comparisons.learned_ppo",
-                   POLICY_MODULE)
-
-_REGISTRY: dict[str, type] = {}
-_FILTERS: dict[str, type] = {}
-_loaded = False
+#: The module that makes classes of policy files and callables; imported by name, so that
+#: the registry (which every run executes) does not make it part of every run's code
+#: fingerprint.
+POLICY_MODULE = "dfcoa_opt.control.policy"
+#: The entry-point group of controllers (:data:`dfcoa_opt.core.registry.CONTROLLERS`).
+ENTRY_POINT_GROUP = CONTROLLERS.group
 C = TypeVar("C", bound=type)
 T = TypeVar("T")
 
-
-def _registrar(table: dict[str, type], kind: str, key: str) -> Callable[[C], C]:
-    """Class decorator putting a class with ``Params`` into ``table`` under ``key``."""
-
-    def deco(cls: C) -> C:
-        if table is _REGISTRY and (key.startswith(POLICY_PREFIX) or "+" in key):
-            raise ValueError(f"controller id {key!r}: '+' and the prefix {POLICY_PREFIX!r} "
-                             "are reserved (filters, policy files)")
-        if key in table and table[key] is not cls:
-            raise ValueError(f"{kind} id {key!r} is already registered")
-        if not hasattr(cls, "Params"):
-            raise TypeError(f"{cls.__name__} needs a Params dataclass")
-        cls.name = key
-        table[key] = cls
-        return cls
-
-    return deco
+__all__ = ["CONTROLLERS", "ENTRY_POINT_GROUP", "FILTERS", "POLICY_PREFIX", "available", "available_filters",
+           "build_controller", "check_tables", "component_classes", "controller_class",
+           "controller_tunables", "data_digest", "is_policy", "known_to_workers",
+           "make_controller", "register", "register_filter"]
 
 
 def register(controller_id: str, *, command: str | None = None, spec: Any = None,
@@ -119,10 +101,10 @@ def register(controller_id: str, *, command: str | None = None, spec: Any = None
             if command is not None or spec is not None:
                 raise TypeError(f"register('{controller_id}'): command and spec are for "
                                 f"policy functions; {obj.__name__} is a class")
-            _registrar(_REGISTRY, "controller", controller_id)(obj)
+            CONTROLLERS.register(controller_id)(obj)
         else:
             cls = _policy().callable_policy_class(obj, command, spec, frame, batched)
-            _registrar(_REGISTRY, "controller", controller_id)(cls)
+            CONTROLLERS.register(controller_id)(cls)
         return obj
 
     return deco
@@ -130,13 +112,12 @@ def register(controller_id: str, *, command: str | None = None, spec: Any = None
 
 def register_filter(filter_id: str) -> Callable[[C], C]:
     """Class decorator registering a safety filter under ``filter_id``."""
-    return _registrar(_FILTERS, "filter", filter_id)
+    return FILTERS.register(filter_id)
 
 
 def available_filters() -> list[str]:
     """Sorted ids of all registered safety filters."""
-    _load_all()
-    return sorted(_FILTERS)
+    return FILTERS.names()
 
 
 def _parts(controller_id: str) -> tuple[str, str | None]:
@@ -146,11 +127,7 @@ def _parts(controller_id: str) -> tuple[str, str | None]:
 
 
 def _policy() -> Any:
-    """The policy module (:mod:`dfcoa_opt.control.policy.controller`), imported by name like the built-ins.
-
-    Named, not imported by an ``import`` statement, so that the registry (which
-    every run executes) does not make it part of every run's code fingerprint.
-    """
+    """The policy package (:mod:`dfcoa_opt.control.policy`), imported by name."""
     return importlib.import_module(POLICY_MODULE)
 
 
@@ -166,65 +143,29 @@ def data_digest(controller_id: str) -> str:
     (:func:`dfcoa_opt.core.plugins.plugin_digest`); empty for every other id.
     The results store adds it to the run's identity, so a changed policy or
     plugin file re-simulates its runs
-    (:func:`dfcoa_opt.control.policy.controller.policy_digest`).
+    (:func:`dfcoa_opt.control.policy.file.policy_digest`).
     """
     if not is_policy(controller_id):
-        _load_all()
-        digests = [plugins.plugin_digest(getattr(table.get(part), "__module__", ""))
-                   for part, table in zip(_parts(controller_id), (_REGISTRY, _FILTERS),
+        digests = [plugins.plugin_digest(getattr(table.find(part), "__module__", ""))
+                   for part, table in zip(_parts(controller_id), (CONTROLLERS, FILTERS),
                                           strict=True) if part is not None]
         return " ".join(d for d in digests if d)
     return str(_policy().policy_digest(_parts(controller_id)[0][len(POLICY_PREFIX):]))
 
 
-def _load_all() -> None:
-    """Import the built-in controllers, the entry points and ``DFCOA_PLUGINS`` (once).
-
-    Raises:
-        DfcoaError: An entry point whose class is registered under another id
-            (``@register("a")`` with the entry point named ``b`` would list it
-            twice), or a plugin of ``DFCOA_PLUGINS`` that cannot be imported.
-    """
-    global _loaded
-    if _loaded:
-        return
-    _loaded = True
-    for mod in BUILTIN_MODULES:
-        importlib.import_module(mod)
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        cls = ep.load()
-        ids = [key for key, c in _REGISTRY.items() if c is cls]
-        if ids and ep.name not in ids:
-            raise DfcoaError(f"entry point '{ep.name}' of group {ENTRY_POINT_GROUP} loads "
-                             f"{getattr(cls, '__name__', cls)}, which @register names "
-                             f"'{ids[0]}': name the entry point '{ids[0]}'")
-        if ep.name not in _REGISTRY:
-            _REGISTRY[ep.name] = cls
-            cls.name = ep.name
-    plugins.load_plugins(plugins.from_env(), plugins.ENV_VAR)
-
-
 def known_to_workers(controller_id: str) -> bool:
     """Whether a fresh process finds ``controller_id`` (and its filter) in the registry.
 
-    True for classes of :data:`BUILTIN_MODULES`, of the entry-point group and
-    of plugins (:mod:`dfcoa_opt.core.plugins`, which workers load too), and
+    True for the classes of the entry-point groups (the built-ins among them)
+    and of plugins (:mod:`dfcoa_opt.core.plugins`, which workers load too), and
     for policy files (``policy:PATH``; workers share the working folder); a
     class registered with :func:`register` in a notebook or a script (a
     callable policy too) is known only to the process that ran it, so a sweep's
     worker processes cannot build it.
     """
-    _load_all()
-    points = {ep.name for ep in entry_points(group=ENTRY_POINT_GROUP)}
-    for part, table in zip(_parts(controller_id), (_REGISTRY, _FILTERS), strict=True):
-        if part is None or part in points or (table is _REGISTRY
-                                              and part.startswith(POLICY_PREFIX)):
-            continue
-        module = getattr(table.get(part), "__module__", "")
-        if not (any(module == m or module.startswith(m + ".") for m in BUILTIN_MODULES)
-                or plugins.is_plugin_module(module)):
-            return False
-    return True
+    base, filt = _parts(controller_id)
+    return ((base.startswith(POLICY_PREFIX) or CONTROLLERS.known_to_workers(base))
+            and (filt is None or FILTERS.known_to_workers(filt)))
 
 
 def available() -> list[str]:
@@ -232,8 +173,7 @@ def available() -> list[str]:
 
     Policy files (``policy:PATH``) are not listed: any path names one.
     """
-    _load_all()
-    return sorted(_REGISTRY)
+    return CONTROLLERS.names()
 
 
 def controller_class(controller_id: str) -> type:
@@ -246,21 +186,15 @@ def controller_class(controller_id: str) -> type:
         UnknownNameError: Unknown controller or filter, with a "did you mean" hint.
         ScenarioError: A policy file that does not fit, naming the file.
     """
-    _load_all()
     base, filt = _parts(controller_id)
-    if filt is not None and filt not in _FILTERS:
+    if filt is not None and FILTERS.find(filt) is None:
         raise UnknownNameError(
-            f"unknown safety filter '{filt}' in '{controller_id}'{did_you_mean(filt, _FILTERS)}; "
-            f"available filters: {', '.join(sorted(_FILTERS))}")
+            f"unknown safety filter '{filt}' in '{controller_id}'"
+            f"{did_you_mean(filt, FILTERS.names())}; "
+            f"available filters: {', '.join(FILTERS.names())}")
     if base.startswith(POLICY_PREFIX):
         return _policy().file_policy_class(base)
-    try:
-        return _REGISTRY[base]
-    except KeyError:
-        raise UnknownNameError(
-            f"unknown controller '{base}'{did_you_mean(base, _REGISTRY)}; "
-            f"available: {', '.join(sorted(_REGISTRY))} (dfcoa list controllers; a "
-            f"controller in a file: --plugin FILE.py)") from None
+    return CONTROLLERS.get(base)
 
 
 def component_classes(controller_id: str) -> list[type]:
@@ -272,7 +206,7 @@ def component_classes(controller_id: str) -> list[type]:
     classes = [controller_class(controller_id)]
     filt = _parts(controller_id)[1]
     if filt is not None:
-        classes.append(_FILTERS[filt])
+        classes.append(FILTERS.get(filt))
     return classes
 
 
@@ -335,36 +269,10 @@ def build_controller(controller_id: str, tables: Mapping[str, Mapping[str, Any]]
     ctrl = make_controller(base, tables.get(base, {}), source)
     if filt is None:
         return ctrl
-    from dfcoa_opt.control.base import Filtered
-
-    fcls = _FILTERS[filt]
+    fcls = FILTERS.get(filt)
     return Filtered(ctrl, fcls(build(fcls.Params, dict(tables.get(filt, {})), source,
                                      f"controllers.{filt}")))
 
 
-def check_overrides(controllers: Mapping[str, Mapping[str, Any]], source: str,
-                    team_size: int | None = None) -> None:
-    """Validate every ``[controllers.<id>]`` table of a file.
-
-    Args:
-        controllers: The tables, by controller or filter id.
-        source: File name for messages.
-        team_size: The scenario's ``team.n``: every ``param(robot_index=True)`` field
-            must name one of its robots. None skips that check.
-
-    Raises:
-        ScenarioError: Unknown controller id or a bad key; a table of a policy
-            file (its parameters are in its spec).
-    """
-    _load_all()
-    for cid, table in controllers.items():
-        if cid.startswith(POLICY_PREFIX):
-            raise ScenarioError(source, f"controllers.{cid}", "a policy file takes no "
-                                "parameters here: they are in its JSON spec")
-        cls = _REGISTRY.get(cid, _FILTERS.get(cid))
-        if cls is None:
-            raise ScenarioError(source, f"controllers.{cid}", "unknown controller or filter"
-                                + did_you_mean(cid, [*_REGISTRY, *_FILTERS]))
-        params = build(cls.Params, dict(table), source, f"controllers.{cid}")
-        if team_size is not None:
-            check_robot_indices(params, team_size, source, f"controllers.{cid}")
+#: The former name of :func:`dfcoa_opt.core.registry.check_tables`.
+check_overrides = check_tables

@@ -32,7 +32,7 @@ from typing import Any, Generic, TypeVar
 
 from dfcoa_opt.core import plugins
 from dfcoa_opt.core.errors import DfcoaError, ScenarioError, UnknownNameError, did_you_mean
-from dfcoa_opt.core.params import build, check_robot_indices
+from dfcoa_opt.core.params import build, build_options, check_robot_indices
 
 T = TypeVar("T")
 
@@ -41,9 +41,9 @@ POLICY_PREFIX = "policy:"
 
 
 @functools.cache
-def _installed_points() -> tuple[EntryPoint, ...]:
-    """Every entry point of the installed distributions (read once per process)."""
-    return tuple(entry_points())
+def _installed_points(group: str) -> tuple[EntryPoint, ...]:
+    """The entry points of one group, of every installed distribution (read once per process)."""
+    return tuple(entry_points(group=group))
 
 
 class Registry(Generic[T]):
@@ -72,18 +72,22 @@ class Registry(Generic[T]):
 
     def entry_points(self) -> list[EntryPoint]:
         """The installed entry points of this kind's group."""
-        return [ep for ep in _installed_points() if ep.group == self.group]
+        return list(_installed_points(self.group))
 
     def register(self, name: str) -> Callable[[T], T]:
         """Decorator registering an object under ``name``; it returns the object.
+
+        Registering an equal object again (a module imported twice) keeps the first.
 
         Raises:
             ValueError: ``name`` is taken by another object.
         """
 
         def deco(obj: T) -> T:
-            if name in self._table and self._table[name] is not obj:
-                raise ValueError(f"{self.kind} id {name!r} is already registered")
+            if name in self._table:
+                if self._table[name] != obj:
+                    raise ValueError(f"{self.kind} id {name!r} is already registered")
+                return obj
             if self.prepare is not None:
                 self.prepare(name, obj)
             self._table[name] = obj
@@ -157,6 +161,37 @@ class Registry(Generic[T]):
         """Every id -> its object, in registration order (imports every entry point)."""
         self.load()
         return dict(self._table)
+
+    def options(self, name: str, table: Mapping[str, Any], source: str, key: str) -> Any:
+        """A scenario's options table for ``name``, built against its ``Params`` dataclass.
+
+        Args:
+            name: The registered id.
+            table: The options (``[leader.planner_options]``, ...).
+            source: File name for messages.
+            key: Dotted key of the table in the file.
+
+        Returns:
+            An instance of the object's ``Params`` (None when it has none and the
+            table is empty).
+
+        Raises:
+            UnknownNameError: An unknown id.
+            ScenarioError: Unknown or bad key (names ``<key>.<field>``).
+        """
+        return build_options(getattr(self.get(name), "Params", None), table, source, key,
+                             f"{self.kind} '{name}'")
+
+    def check_name(self, name: str, source: str, key: str) -> None:
+        """A scenario's id of this kind, checked.
+
+        Raises:
+            ScenarioError: An unknown id (names ``key``), with a "did you mean" hint.
+        """
+        if name not in self:
+            names = self.names()
+            raise ScenarioError(source, key, f"unknown {self.kind} '{name}'"
+                                f"{did_you_mean(name, names)}; available: {', '.join(names)}")
 
     def known_to_workers(self, name: str) -> bool:
         """Whether a fresh process finds ``name``: an entry point or a plugin's registers it.

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dfcoa_opt.control.base import STATUS_FALLBACK, STATUS_MODIFIED, STATUS_SOLVER_FAIL
 from dfcoa_opt.metrics.deploy import deployability
 from dfcoa_opt.metrics.outcome import classify
 from dfcoa_opt.metrics.risk import (
@@ -39,7 +40,7 @@ from dfcoa_opt.metrics.robots import (
 )
 from dfcoa_opt.metrics.units import UNITS, unit
 from dfcoa_opt.scenario.schema import MetricSpec
-from dfcoa_opt.sim.log import STATUS_FALLBACK, STATUS_MODIFIED, STATUS_SOLVER_FAIL, RunLog
+from dfcoa_opt.sim.log import RunLog
 
 __all__ = ["PAPER_000_TABLE5", "RISK_DISTANCE_FLOOR", "UNITS", "centroid_offset", "centroids",
            "collision_risk", "collision_risk_normalised", "filter_counts",

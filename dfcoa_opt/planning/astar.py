@@ -347,6 +347,6 @@ def plan(grid: OccupancyGrid, start: ArrayLike, goal: ArrayLike,
 
 @register_planner("astar", params=AStarParams)
 def astar_planner(grid: OccupancyGrid, start: NDArray[np.float64], goal: NDArray[np.float64],
-                  spec: Any, options: AStarParams | None = None) -> NDArray[np.float64]:
+                  waypoints: Any, options: AStarParams | None = None) -> NDArray[np.float64]:
     """Traditional A* leader planner: ``(P, 2)`` path in m, empty when unreachable."""
     return plan(grid, start, goal, options).path

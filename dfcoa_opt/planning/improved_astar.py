@@ -81,7 +81,7 @@ class ImprovedAStarParams(AStarParams):
 
 @register_planner("improved_astar", params=ImprovedAStarParams)
 def improved_astar_planner(grid: OccupancyGrid, start: NDArray[np.float64],
-                           goal: NDArray[np.float64], spec: Any,
+                           goal: NDArray[np.float64], waypoints: Any,
                            options: ImprovedAStarParams | None = None) -> NDArray[np.float64]:
     """Improved A* (eq 13) leader planner: ``(P, 2)`` path in m, empty when unreachable."""
     return plan(grid, start, goal, options if options is not None else ImprovedAStarParams()).path

@@ -18,8 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from dfcoa_opt.core.errors import ScenarioError, did_you_mean
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.core.registry import ESTIMATORS, check_tables
 from dfcoa_opt.planning.pure_pursuit import PurePursuit
+from dfcoa_opt.planning.registry import PLANNERS
 from dfcoa_opt.scenario.budget import CELL_BYTES, MAX_RUN_BYTES
 from dfcoa_opt.scenario.formation import slot_positions
 from dfcoa_opt.scenario.scenario import World
@@ -28,21 +30,17 @@ from dfcoa_opt.world.grid import OccupancyGrid
 
 
 def check_names(spec: ScenarioSpec, source: str) -> None:
-    """Registered planner, localization mode and controller override tables."""
-    from dfcoa_opt.control.registry import check_overrides
-    from dfcoa_opt.planning.registry import planner_names
-    from dfcoa_opt.sim.localization import estimator_names, estimator_options
+    """Registered planner, localization mode and controller override tables.
 
-    if spec.leader.planner not in planner_names():
-        raise ScenarioError(source, "leader.planner", f"unknown planner '{spec.leader.planner}'"
-                            f"{did_you_mean(spec.leader.planner, planner_names())}; available: "
-                            f"{', '.join(planner_names())}")
-    if spec.localization.mode not in estimator_names():
-        raise ScenarioError(source, "localization.mode", f"unknown mode '{spec.localization.mode}'"
-                            f"{did_you_mean(spec.localization.mode, estimator_names())}; "
-                            f"available: {', '.join(estimator_names())}")
-    estimator_options(spec.localization.mode, spec.localization.options, source)
-    check_overrides(spec.controllers, source, spec.team.n)
+    The catalogues are the registries of :mod:`dfcoa_opt.core.registry` and
+    :mod:`dfcoa_opt.planning.registry`; each asks only the entry point of the
+    id it is given.
+    """
+    PLANNERS.check_name(spec.leader.planner, source, "leader.planner")
+    ESTIMATORS.check_name(spec.localization.mode, source, "localization.mode")
+    ESTIMATORS.options(spec.localization.mode, spec.localization.options, source,
+                       "localization.options")
+    check_tables(spec.controllers, source, spec.team.n)
 
 
 def check_waypoints(spec: ScenarioSpec, source: str) -> None:

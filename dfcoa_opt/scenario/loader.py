@@ -297,8 +297,8 @@ def _plan_leader(world: World, spec: ScenarioSpec, source: str) -> np.ndarray | 
     options = planner_options(spec.leader.planner, spec.leader.planner_options, source)
     try:
         path = get_planner(spec.leader.planner)(world.grid, np.asarray(spec.leader.start, float),
-                                                np.asarray(spec.leader.goal, float), spec.leader,
-                                                options)
+                                                np.asarray(spec.leader.goal, float),
+                                                np.asarray(spec.leader.waypoints, float), options)
     except DfcoaError as exc:
         raise ScenarioError(source, "leader.goal", str(exc)) from None
     return None if path is None or len(path) == 0 else np.asarray(path, dtype=float)

@@ -22,14 +22,6 @@ from dfcoa_opt.core.errors import DfcoaError
 
 FloatArray = NDArray[np.float64]
 
-#: Filter status codes stored in ``RunLog.filter_status``.
-STATUS_OK = 0          # nominal command passed unchanged
-STATUS_MODIFIED = 1    # filter changed the command, constraints met
-STATUS_FALLBACK = 2    # infeasible: the configured fallback policy was applied
-STATUS_SOLVER_FAIL = 3  # solver error: the configured fallback policy was applied
-#: A filtered command closer than this to the nominal one is unchanged (STATUS_OK), m/s.
-UNCHANGED_TOL = 1e-9
-
 
 #: Log fields that are measured wall-clock times (not part of a run's result).
 TIMING_FIELDS = ("filter_time",)
@@ -94,7 +86,7 @@ class RunLog:
             lasts several steps counts once).
         dyn_pos: ``(T, M, 2)`` moving obstacle positions, m.
         dyn_radius: ``(M,)`` moving obstacle radii, m.
-        filter_status: ``(T, N)`` int8 safety-filter status (``STATUS_*``; 0 when
+        filter_status: ``(T, N)`` int8 safety-filter status (``dfcoa_opt.control.base.STATUS_*``; 0 when
             there is no filter).
         filter_slack: ``(T, N)`` constraint violation left by the filter.
         filter_time: ``(T, N)`` filter solve time per robot, s.

@@ -1,23 +1,26 @@
-"""Per-run lookups of a batch's stepper: each run's leader, moving discs, disturbances, clearance.
+"""Per-run lookups of a batch: each run's leader, moving discs, disturbances, clearance.
 
-A mixin of :class:`~dfcoa_opt.sim.stepper.Stepper`. Runs whose worlds follow
-their seed (a seeded clutter field, a generated world) have a world, a leader
-track, shapes and moving discs of their own; these lookups serve every active
-run in one array operation where they can, with each run's own numbers.
+Runs whose worlds follow their seed (a seeded clutter field, a generated world)
+have a world, a leader track, shapes and moving discs of their own.
+:class:`RunLookups` holds every world group's leader track and moving discs
+over a run and serves every active run in one array operation where it can,
+with each run's own numbers. The :class:`~dfcoa_opt.sim.stepper.Stepper` owns
+one and tells it of a world placed in a slot (:meth:`RunLookups.place`).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
+from dfcoa_opt.sim.leader import leader_track
 from dfcoa_opt.world.shape_clearance import shape_clearance_worlds
 
 if TYPE_CHECKING:
+    from dfcoa_opt.scenario.scenario import Scenario
     from dfcoa_opt.scenario.schema import ScenarioSpec
-    from dfcoa_opt.sim.batch import BatchSimulator
     from dfcoa_opt.sim.leader import LeaderTrack
 
 FloatArray = NDArray[np.float64]
@@ -26,20 +29,60 @@ FloatArray = NDArray[np.float64]
 TRACKS_STACKED_BYTES = 64 * 2**20
 
 
+class Batch(Protocol):
+    """What the lookups read of their batch (a :class:`~dfcoa_opt.sim.batch.BatchSimulator`).
+
+    Read at each call: a world placed in a slot changes ``group`` and
+    ``group_scenarios``.
+    """
+
+    group: NDArray[np.intp]  # each slot's world group
+    group_scenarios: list[Scenario]  # each world group's scenario
+    disturbances: dict[str, list[tuple[int, float, float, Any]]]  # by kind
+
+    def world_shapes(self) -> tuple[NDArray[Any], ...] | None:
+        """Every group's static shapes stacked, or None (a world with a map raster)."""
+
+
 class RunLookups:
-    """Lookups over the active runs (the stepper's ``sim``, ``spec``, ``n``, ``dt``, ``tracks``)."""
+    """Lookups over the active runs of a batch, by each run's world group.
 
-    sim: BatchSimulator
-    spec: ScenarioSpec
-    n: int
-    dt: float
-    tracks: list[LeaderTrack]
-    movers: list[tuple[FloatArray, FloatArray, FloatArray]]
-    _stacked: tuple[Any, ...] | None
-    _movers_stacked: tuple[FloatArray, ...] | None = None
+    Args:
+        sim: The batch (its slots' world groups, worlds, disturbances).
+        spec: Its scenario spec (the clearance cap).
+        n: Robots of a run.
+        dt: Step, s.
+        steps: Instants of a run (the leader tracks' and moving discs' length).
+    """
 
-    def _leader(self, active: NDArray[np.intp],
-                kk: NDArray[np.int64]) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+    def __init__(self, sim: Batch, spec: ScenarioSpec, n: int, dt: float, steps: int) -> None:
+        self.sim, self.spec, self.n, self.dt, self.steps = sim, spec, n, dt, steps
+        #: each world group's leader track
+        self.tracks: list[LeaderTrack] = [leader_track(sc, dt, steps)
+                                          for sc in sim.group_scenarios]
+        self._stacked: tuple[Any, ...] | None = None  # the tracks stacked, for leader()
+        #: each world group's moving discs over the run: positions, velocities ``(K, M, 2)``
+        #: and radii ``(M,)``
+        self.movers = [self._movers(sc) for sc in sim.group_scenarios]
+        self._movers_stacked: tuple[FloatArray, ...] | None = None  # for moving()
+
+    def _movers(self, scenario: Any) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """A world's moving discs at every instant: positions, velocities and radii."""
+        dyn = scenario.world.dynamic
+        return (*dyn.state(np.arange(self.steps) * self.dt), dyn.radii)
+
+    def place(self, g: int, scenario: Any) -> None:
+        """World group ``g`` is now ``scenario``'s world (a group reused, or one more)."""
+        track = leader_track(scenario, self.dt, self.steps)
+        if g < len(self.tracks):  # the freed world's group, reused
+            self.tracks[g], self.movers[g] = track, self._movers(scenario)
+        else:
+            self.tracks.append(track)
+            self.movers.append(self._movers(scenario))
+        self._stacked = self._movers_stacked = None
+
+    def leader(self, active: NDArray[np.intp],
+               kk: NDArray[np.int64]) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
         """Each active run's leader state ``(A, 5)``, slots ``(A, N, 2)``, at-goal flag ``(A,)``."""
         if len(self.tracks) == 1:
             tr = self.tracks[0]
@@ -57,8 +100,13 @@ class RunLookups:
                                             zip(g, kk, strict=True)]), at_goal[g, kk]
         return states[g, kk], slots[g, kk], at_goal[g, kk]
 
-    def _moving(self, active: NDArray[np.intp], kk: NDArray[np.int64]
-                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    @property
+    def one_mover_table(self) -> bool:
+        """Whether every run reads one table of moving discs (one world group)."""
+        return len(self.movers) == 1
+
+    def moving(self, active: NDArray[np.intp], kk: NDArray[np.int64]
+               ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Each active run's moving discs: positions and velocities ``(A, M, 2)``, radii ``(A, M)``.
 
         One world (or worlds whose discs the file sets, the same in every run)
@@ -76,11 +124,11 @@ class RunLookups:
         g = self.sim.group[active]
         return pos[g, kk], vel[g, kk], radii[g]
 
-    def _moving_rows(self, radii: FloatArray) -> FloatArray:
-        """:meth:`_moving`'s radii per robot row: ``(1, M)`` for one world, else ``(A*N, M)``."""
+    def moving_rows(self, radii: FloatArray) -> FloatArray:
+        """:meth:`moving`'s radii per robot row: ``(1, M)`` for one world, else ``(A*N, M)``."""
         return radii[:1] if len(self.movers) == 1 else np.repeat(radii, self.n, axis=0)
 
-    def _disturbance(self, kind: str, kk: NDArray[np.int64]) -> FloatArray | None:
+    def disturbance(self, kind: str, kk: NDArray[np.int64]) -> FloatArray | None:
         """``(A*N, 2)`` disturbances of ``kind`` at each active run's time (None without any)."""
         table = self.sim.disturbances[kind]
         if not table:
@@ -94,7 +142,7 @@ class RunLookups:
                     out[c, robot] += value
         return out[np.searchsorted(clocks, kk)].reshape(-1, 2)
 
-    def _clearance(self, pos: FloatArray, active: NDArray[np.intp]) -> FloatArray:
+    def clearance(self, pos: FloatArray, active: NDArray[np.intp]) -> FloatArray:
         """Every row's clearance to the static obstacles of its own run's world, m."""
         sim, n, cap = self.sim, self.n, self.spec.metrics.clearance_cap
         if len(sim.group_scenarios) == 1:

@@ -13,6 +13,11 @@ arithmetic on all rows, reductions per run along the robot axis, each run's
 draws from its own generator in its own order), so a run's log is the log of
 the run simulated alone, bit for bit, wherever its clock stands against the
 others'.
+
+The controller's observations are made here from what :meth:`Stepper.sense`
+saw (:meth:`Stepper.batch_observation`, :meth:`Stepper.run_observation`); each
+run's leader, moving discs, disturbances and clearance come from the stepper's
+:class:`~dfcoa_opt.sim.lookups.RunLookups`.
 """
 
 from __future__ import annotations
@@ -26,16 +31,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.control.adapters import convert
-from dfcoa_opt.control.base import MovingObstacles
+from dfcoa_opt.control.base import MovingObstacles, Neighbours, Observation
 from dfcoa_opt.core.errors import DfcoaError, RunFailed
 from dfcoa_opt.metrics.outcome import StallMonitor
 from dfcoa_opt.sim.comms import Comms, wanted
-from dfcoa_opt.sim.leader import leader_track
 from dfcoa_opt.sim.localization import TruthEstimator, make_estimators
 from dfcoa_opt.sim.log import BatchLog
 from dfcoa_opt.sim.lookups import RunLookups
 from dfcoa_opt.sim.neighbours import batch_proximity, gather, new_contacts
-from dfcoa_opt.sim.observe import Observing
 from dfcoa_opt.sim.scans import ScanBook
 from dfcoa_opt.world.lidar import LaserScan
 from dfcoa_opt.world.robots.models import CommandKind, RobotState
@@ -68,7 +71,7 @@ class Ended:
     t_goal: float
 
 
-class Stepper(Observing, RunLookups):
+class Stepper:
     """The state of a batch's runs, stepped in two halves (module docstring).
 
     Args:
@@ -84,8 +87,8 @@ class Stepper(Observing, RunLookups):
         self.steps = int(math.floor(spec.t_max / self.dt + 1e-9)) + 1
         slots = len(sim.seeds)
         self.rngs = [np.random.default_rng(s) for s in sim.seeds]
-        self.tracks = [leader_track(sc, self.dt, self.steps) for sc in sim.group_scenarios]
-        self._stacked: tuple[Any, ...] | None = None  # the tracks stacked, for _leader
+        #: each world group's leader track and moving discs, looked up by run
+        self.lookups = RunLookups(sim, spec, n, self.dt, self.steps)
         start = [sc.start_pose(rng) for sc, rng in zip(sim.scenarios, self.rngs, strict=True)]
         self.estimators = make_estimators(spec.localization.mode, sim.scenarios)
         if is_batched(self.estimators[0]):
@@ -98,9 +101,6 @@ class Stepper(Observing, RunLookups):
             scan_wanted or getattr(self.estimators[0], "uses_scan", True))
         self.state = RobotState.at_rest(np.concatenate(start))
         self.m = len(sim.scenarios[0].world.dynamic)
-        #: each world group's moving discs over the run: positions, velocities ``(K, M, 2)``
-        #: and radii ``(M,)``
-        self.movers = [self._movers(sc) for sc in sim.group_scenarios]
         self.goal = np.asarray(spec.leader.goal, dtype=float)
         self.robot_ids = np.arange(n)
         self.robot_ids.flags.writeable = False  # the same rows every step
@@ -131,11 +131,6 @@ class Stepper(Observing, RunLookups):
         """Start counting the runs' wall times (after the controllers' resets)."""
         self._tick = time.perf_counter()
 
-    def _movers(self, scenario: Any) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """A world's moving discs at every instant: positions, velocities and radii."""
-        dyn = scenario.world.dynamic
-        return (*dyn.state(np.arange(self.steps) * self.dt), dyn.radii)
-
     def _monitor(self, scenario: Any) -> StallMonitor | None:
         spec = self.spec
         return (StallMonitor(scenario.leader_path, self.steps, self.dt,
@@ -163,13 +158,7 @@ class Stepper(Observing, RunLookups):
         sc = sim.template.for_seed(seed)
         fresh = sim.place(slot, seed, sc)
         if fresh:  # a world of its own: its leader track and moving discs too
-            track, g = leader_track(sc, self.dt, self.steps), int(sim.group[slot])
-            if g < len(self.tracks):  # the freed world's group, reused
-                self.tracks[g], self.movers[g] = track, self._movers(sc)
-            else:
-                self.tracks.append(track)
-                self.movers.append(self._movers(sc))
-            self._stacked = self._movers_stacked = None
+            self.lookups.place(int(sim.group[slot]), sc)
         rng = self.rngs[slot] = np.random.default_rng(seed)
         start = sc.start_pose(rng)
         self.estimators[slot] = make_estimators(self.spec.localization.mode, [sc])[0]
@@ -193,18 +182,19 @@ class Stepper(Observing, RunLookups):
         active, kk = self.active, self.k[self.active]
         a, m = len(active), self.m
         pos = st.pose[:, :2]
-        dyn_pos, dyn_vel, dyn_r = self._moving(active, kk)  # (A, M, 2) twice, (A, M)
-        row_r = self._moving_rows(dyn_r)  # the radii of each row's discs, (1 or A*N, M)
+        dyn_pos, dyn_vel, dyn_r = self.lookups.moving(active, kk)  # (A, M, 2) twice, (A, M)
+        row_r = self.lookups.moving_rows(dyn_r)  # the radii of each row's discs, (1 or A*N, M)
         # centre distances robot -> moving obstacle, (rows, M); sensing and contacts
         dyn_dist = (np.linalg.norm(pos.reshape(a, n, 1, 2) - dyn_pos[:, None], axis=3)
                     .reshape(a * n, m) if m else np.zeros((a * n, 0)))
-        lead, slots, at_goal = self._leader(active, kk)
+        lead, slots, at_goal = self.lookups.leader(active, kk)
         scans: list[LaserScan | None] = [None] * a  # per run; views of scan_all made on demand
         scan_all: LaserScan | None = None  # every row's scan, when made in one call
         fields = sim.lidar_fields() if self.scanning and len(sim.lidars) > 1 else None
         if self.scanning and a > 1 and (len(sim.lidars) == 1 or fields is not None):
             scan_all = sim.lidars[0].scan_teams(
-                st.pose, n, dyn_pos, dyn_r[0] if len(self.movers) == 1 else dyn_r, sim.radius,
+                st.pose, n, dyn_pos, dyn_r[0] if self.lookups.one_mover_table else dyn_r,
+                sim.radius,
                 self._row_constants()[6], None if fields is None else (fields, sim.group[active]))
         elif self.scanning:
             for j, e in enumerate(active):
@@ -251,7 +241,7 @@ class Stepper(Observing, RunLookups):
         heard, heard_slots = lead, slots  # the leader state and slots the robots received
         if comms is not None and comms.leader_on:
             stamp, self.leader_ages[active] = comms.leader(kk, active)
-            heard, heard_slots, _ = self._leader(active, stamp)
+            heard, heard_slots, _ = self.lookups.leader(active, stamp)
             self.leaders_now[active] = lead
         self.leaders[active] = heard
         self._s = dict(pos=pos, dyn_pos=dyn_pos, dyn_dist=dyn_dist, dyn_r=row_r, lead=lead,
@@ -316,6 +306,62 @@ class Stepper(Observing, RunLookups):
         """``(A,)`` each active run's time, s."""
         return self.k[self.active] * self.dt
 
+    # ------------------------------------------------------------------ observe
+    def batch_observation(self, one_clock: bool = True) -> Observation:
+        """The observation of every active run (``env`` = slot; ``leader`` one state a slot).
+
+        Args:
+            one_clock: Require the runs to share one clock (a batched controller sees
+                one ``t``). With False, runs restarted at different steps give ``t`` NaN.
+
+        Raises:
+            DfcoaError: ``one_clock`` and the runs' clocks differ.
+        """
+        s, n, a = self._s, self.n, len(self.active)
+        kk = self.k[self.active]
+        same = a == 1 or bool((kk == kk[0]).all())
+        if one_clock and not same:
+            raise DfcoaError("a batched controller needs the runs of a batch on one clock")
+        _, nb_pos, nb_vel, nb_heading, nb_dist, nb_age = s["nb"]
+        rows = self._row_constants()
+        return Observation(
+            float(kk[0] * self.dt) if same else math.nan, self.dt, rows[2], s["est"],
+            self.state.velocity, self.state.twist, s["scan_all"],
+            Neighbours(s["row_index"], nb_pos, nb_vel, nb_dist, nb_heading, nb_age),
+            s["moving"], self.leaders, self.goal, rows[4],
+            np.ascontiguousarray(s["heard_slots"]).reshape(a * n, 2), env=rows[3],
+            leader_age=self.leader_ages if self.comms is not None else 0.0,
+            team=s["team"][0], team_age=s["team"][1], limits=self.sim.limits,
+            **self._now(slice(None)))
+
+    def run_observation(self, j: int) -> Observation:
+        """The observation of the ``j``-th active run alone (today's single-run Observation)."""
+        s, n, e = self._s, self.n, int(self.active[j])
+        rows = slice(j * n, (j + 1) * n)
+        nb_index, nb_pos, nb_vel, nb_heading, nb_dist, nb_age = s["nb"]
+        st = self.state
+        nb = Neighbours(nb_index[rows], nb_pos[rows], nb_vel[rows], nb_dist[rows],
+                        nb_heading[rows], None if nb_age is None else nb_age[rows])
+        return Observation(float(self.k[e] * self.dt), self.dt, self.robot_ids, s["est"][rows],
+                           st.velocity[rows], st.twist[rows],
+                           self._scan(s["scans"], s["scan_all"], j), nb,
+                           s["moving"].take(rows), s["heard"][j], self.goal,
+                           self.sim.scenarios[e].offsets, s["heard_slots"][j],
+                           leader_age=float(self.leader_ages[e]),
+                           team=None if s["team"][0] is None else s["team"][0][rows],
+                           team_age=None if s["team"][1] is None else s["team"][1][rows],
+                           limits=self.sim.limits, **self._now(j))
+
+    def _now(self, j: int | slice) -> dict[str, Any]:
+        """``leader_now`` and ``slot_now`` of the ``j``-th active run (a slice: all), or none."""
+        if self.comms is None or not self.comms.leader_on:
+            return {}
+        s, n = self._s, self.n
+        if isinstance(j, slice):  # the batch's: leaders by slot, slots by row
+            return {"leader_now": self.leaders_now,
+                    "slot_now": np.ascontiguousarray(s["slots"]).reshape(-1, 2)}
+        return {"leader_now": s["lead"][j], "slot_now": s["slots"][j].reshape(n, 2)}
+
     # ------------------------------------------------------------------ apply
     def apply(self, cmd: FloatArray, kind: CommandKind, extras: Any = None) -> list[Ended]:
         """Apply the active rows' commands: move, count contacts, log, stop, drop ended runs.
@@ -340,7 +386,8 @@ class Stepper(Observing, RunLookups):
                          spec.robots.nid_distance)
         if self.comms is not None:
             native = self.comms.command(native, active)
-        args = (st, native, dt, self._disturbance("velocity", kk), self._disturbance("force", kk))
+        args = (st, native, dt, self.lookups.disturbance("velocity", kk),
+                self.lookups.disturbance("force", kk))
         std = spec.robots.wheel_noise_std
         new_state = sim.model.step(*args) if not std else sim.model.step(  # type: ignore[call-arg]
             *args, wheel_noise=np.concatenate([self.rngs[e].normal(0.0, std, (n, 2))
@@ -348,7 +395,7 @@ class Stepper(Observing, RunLookups):
         if not np.isfinite(new_state.pose).all():
             self._diverged(new_state.pose, active, kk)
         # -- contacts at t_k
-        clearance = self._clearance(pos, active)
+        clearance = self.lookups.clearance(pos, active)
         static_hit = clearance < sim.radius
         dyn_hit = s["dyn_dist"] < sim.radius + s["dyn_r"]
         pairs = prox.key_ptr[1:] - prox.key_ptr[:-1]

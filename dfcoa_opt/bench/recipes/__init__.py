@@ -4,7 +4,7 @@ A *figure recipe* is a sweep file (under ``scenarios/sweeps/``) plus a
 renderer that turns the sweep's saved results into tables and figures. A
 recipe without a sweep (``sweep=None``, e.g. the planner comparison, which
 simulates nothing) computes its artefacts itself. One module per paper or
-group registers its recipes, in index order (:data:`RECIPE_MODULES`):
+group registers its recipes (index order: :data:`ORDER`):
 
 - :mod:`~dfcoa_opt.bench.recipes.examples`: every controller on the example scenarios;
 - :mod:`~dfcoa_opt.bench.recipes.comparison`: the cross-method comparison;
@@ -33,8 +33,10 @@ Adding a recipe::
         ...                                    # read store.rows(), write into dest
         return [Artefact("table5.md", "paper 000 Table 5", "metrics of S1 and S2")]
 
-and list the module in :data:`RECIPE_MODULES`. :func:`dfcoa_opt.bench.figures.make_figures`
-runs the sweeps and the renderers.
+and name the recipe's module in the entry-point group ``dfcoa_opt.recipes`` of
+``pyproject.toml`` (``dfcoa_tables = "my_pkg.my_recipes"``), as the built-in
+ones are (:data:`RECIPES`, a :class:`~dfcoa_opt.core.registry.Registry`).
+:func:`dfcoa_opt.bench.figures.make_figures` runs the sweeps and the renderers.
 """
 
 from __future__ import annotations
@@ -45,10 +47,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-#: Modules whose import registers recipes, in index order.
-RECIPE_MODULES = tuple(f"dfcoa_opt.bench.recipes.{m}" for m in (
-    "examples", "comparison", "beyond", "reshape", "ladders", "heldout", "dfcoa", "astar",
-    "paper001", "paper002", "paper004"))
+from dfcoa_opt.core.registry import Registry
+
+#: The recipes ``make figures`` runs first, in this order; any other follows, in the order
+#: it was registered.
+ORDER = ("examples", "comparison", "beyond", "reshape", "ladders", "heldout", "dfcoa_paper",
+         "astar_comparison", "paper001_ivo", "paper001_consensus", "paper002_tables",
+         "paper004_tables", "paper004_baseline")
 
 
 @dataclass(frozen=True)
@@ -90,33 +95,24 @@ class Recipe:
     render: Renderer
 
 
-_RECIPES: dict[str, Recipe] = {}
+#: The figure recipes (entry-point group ``dfcoa_opt.recipes``).
+RECIPES: Registry[Recipe] = Registry("figure recipe", "dfcoa_opt.recipes")
 
 
 def recipe(name: str, title: str, sweep: str | None = None) -> Callable[[Renderer], Renderer]:
     """Decorator registering a renderer as the recipe ``name`` (see :class:`Recipe`)."""
 
     def deco(fn: Renderer) -> Renderer:
-        if name in _RECIPES and _RECIPES[name].render is not fn:
-            raise ValueError(f"figure recipe {name!r} is already registered")
-        _RECIPES[name] = Recipe(name, sweep, title, fn)
+        RECIPES.register(name)(Recipe(name, sweep, title, fn))
         return fn
 
     return deco
 
 
 def registered() -> list[Recipe]:
-    """Every registered recipe, in index order.
-
-    The recipes of :data:`RECIPE_MODULES` come in that module order, whatever
-    order the modules were imported in; recipes registered elsewhere follow, in
-    registration order.
-    """
-    for mod in RECIPE_MODULES:
-        importlib.import_module(mod)
-    rank = {m: i for i, m in enumerate(RECIPE_MODULES)}
-    return sorted(_RECIPES.values(),
-                  key=lambda r: rank.get(getattr(r.render, "__module__", ""), len(rank)))
+    """Every registered recipe, in index order (:data:`ORDER`, then registration order)."""
+    rank = {name: i for i, name in enumerate(ORDER)}
+    return sorted(RECIPES.items().values(), key=lambda r: rank.get(r.name, len(rank)))
 
 
 #: Names of the 0.1 module ``dfcoa_opt.bench.recipes`` -> the module that holds them now.

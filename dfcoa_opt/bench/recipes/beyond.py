@@ -56,7 +56,7 @@ def render_beyond(store: ResultsStore, dest: Path) -> list[Artefact]:
              "`cbf` filter's programs (its time is the step's total over the robots, fast "
              "path included), the `orca` filter's exact LP (`goto_slot+orca`, `orca_nav`). "
              "Wall-clock times on the machine that ran `make figures`, over all seeds "
-             "(per run: `comparisons.nmpc.solve_time_stats`). `dfcoa` has no solver.", "",
+             "(per run: `dfcoa_opt.metrics.solver.solve_time_stats`). `dfcoa` has no solver.", "",
              *solve_time_table(store)]
     atomic_write(dest / "solve_times.md", "\n".join(lines) + "\n")
     return [*arts, Artefact("solve_times.md", "-", "median and p95 solve time per robot per "

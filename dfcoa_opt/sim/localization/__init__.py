@@ -10,43 +10,30 @@ validated against it at load time (:func:`estimator_options`) and the
 estimator reads it the same way. An estimator that never reads the scan says
 so with ``uses_scan = False`` (the simulator then may skip the LiDAR). A batch of
 runs makes one estimator per run, or one for the batch (:func:`make_estimators`).
-Modules that register estimators are listed in :data:`ESTIMATOR_MODULES`.
+The table is :data:`dfcoa_opt.core.registry.ESTIMATORS` (below the scenario
+layer, which checks ``[localization]``); an estimator is registered with
+``@register_estimator("name")`` and named in the entry-point group
+``dfcoa_opt.estimators``.
 """
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
-from dfcoa_opt.core.params import build_options
-
-#: Modules of this distribution that register estimators when imported.
-ESTIMATOR_MODULES: tuple[str, ...] = ("dfcoa_opt.sim.localization.mcl",)
-_ESTIMATORS: dict[str, Callable[..., Any]] = {}
-
-
-def _load() -> None:
-    for mod in ESTIMATOR_MODULES:
-        importlib.import_module(mod)
+from dfcoa_opt.core.registry import ESTIMATORS
 
 
 def register_estimator(name: str) -> Callable[[type], type]:
     """Class decorator registering an estimator under ``name``."""
-
-    def deco(cls: type) -> type:
-        _ESTIMATORS[name] = cls
-        return cls
-
-    return deco
+    return ESTIMATORS.register(name)
 
 
 def estimator_names() -> list[str]:
     """Sorted names of the registered estimators."""
-    _load()
-    return sorted(_ESTIMATORS)
+    return ESTIMATORS.names()
 
 
 def estimator_options(name: str, options: Mapping[str, Any], source: str) -> Any:
@@ -55,15 +42,12 @@ def estimator_options(name: str, options: Mapping[str, Any], source: str) -> Any
     Raises:
         ScenarioError: Unknown or bad key (names ``localization.options.<key>``).
     """
-    _load()
-    return build_options(getattr(_ESTIMATORS[name], "Params", None), options, source,
-                         "localization.options", f"estimator '{name}'")
+    return ESTIMATORS.options(name, options, source, "localization.options")
 
 
 def make_estimator(name: str, scenario: Any) -> Any:
     """Instantiate the estimator ``name`` for ``scenario``."""
-    _load()
-    return _ESTIMATORS[name](scenario)
+    return ESTIMATORS.get(name)(scenario)
 
 
 def make_estimators(name: str, scenarios: list[Any]) -> list[Any]:
@@ -78,8 +62,7 @@ def make_estimators(name: str, scenarios: list[Any]) -> list[Any]:
     Returns:
         ``[the batched estimator]``, or one estimator per scenario.
     """
-    _load()
-    cls = _ESTIMATORS[name]
+    cls = ESTIMATORS.get(name)
     if getattr(cls, "batched", False):
         return [cls.for_batch(scenarios)]
     return [cls(sc) for sc in scenarios]

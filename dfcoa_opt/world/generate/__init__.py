@@ -2,7 +2,8 @@
 
 A *family* is a function ``family(params, rng, layout) -> Generated`` with a
 ``Params`` dataclass (typed keys with units and ranges, :func:`dfcoa_opt.core.params.param`)
-registered with :func:`register_family`. Given the run's world generator and
+registered with :func:`register_family` and named in the entry-point group
+``dfcoa_opt.world_families`` (:data:`FAMILIES`). Given the run's world generator and
 the :class:`Layout` (map, mission, team), it returns exact static shapes,
 moving discs and the realised statistics of the draw (``facts``: what a test
 compares with the parameters). Families:
@@ -24,7 +25,6 @@ on every machine, in a batch or alone.
 
 from __future__ import annotations
 
-import importlib
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -33,15 +33,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.core.errors import ScenarioError, UnknownNameError, did_you_mean
-from dfcoa_opt.core.params import build_options
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.core.registry import Registry
 from dfcoa_opt.world.dynamic import MovingDisc
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.shapes import Shape
 
-#: Modules of this distribution that register families when imported.
-FAMILY_MODULES = tuple(f"dfcoa_opt.world.generate.{m}"
-                       for m in ("cellular", "rooms", "corridors", "crowd"))
 #: Second word of the world generator's seed sequence: the world's draws never share a
 #: stream with the run's generator (``np.random.default_rng(seed)``).
 WORLD_STREAM = 0x776F726C64  # "world"
@@ -105,32 +102,26 @@ class Generated:
 
 
 Family = Callable[[Any, np.random.Generator, Layout], Generated]
-_FAMILIES: dict[str, Family] = {}
-_PARAMS: dict[str, type] = {}
+#: The world families (entry-point group ``dfcoa_opt.world_families``).
+FAMILIES: Registry[Family] = Registry("world family", "dfcoa_opt.world_families")
 
 
 def register_family(name: str, params: type) -> Callable[[Family], Family]:
-    """Decorator registering a world family under ``name`` with its ``Params`` dataclass."""
+    """Decorator registering a world family under ``name`` with its ``Params`` dataclass.
+
+    The dataclass is kept as the family's ``Params`` attribute.
+    """
 
     def deco(fn: Family) -> Family:
-        if name in _FAMILIES and _FAMILIES[name] is not fn:
-            raise ValueError(f"world family {name!r} is already registered")
-        _FAMILIES[name] = fn
-        _PARAMS[name] = params
-        return fn
+        fn.Params = params  # type: ignore[attr-defined]
+        return FAMILIES.register(name)(fn)
 
     return deco
 
 
-def _load() -> None:
-    for mod in FAMILY_MODULES:
-        importlib.import_module(mod)
-
-
 def family_names() -> list[str]:
     """Sorted names of the registered families."""
-    _load()
-    return sorted(_FAMILIES)
+    return FAMILIES.names()
 
 
 def family_params(name: str) -> type:
@@ -139,11 +130,7 @@ def family_params(name: str) -> type:
     Raises:
         UnknownNameError: With a "did you mean" hint.
     """
-    _load()
-    if name not in _PARAMS:
-        raise UnknownNameError(f"unknown world family '{name}'{did_you_mean(name, _PARAMS)}; "
-                               f"available: {', '.join(sorted(_PARAMS))}")
-    return _PARAMS[name]
+    return FAMILIES.get(name).Params  # type: ignore[attr-defined, no-any-return]
 
 
 def family_options(name: str, options: Mapping[str, Any], source: str) -> Any:
@@ -152,11 +139,8 @@ def family_options(name: str, options: Mapping[str, Any], source: str) -> Any:
     Raises:
         ScenarioError: Unknown family (key ``world.generate.family``) or a bad option.
     """
-    try:
-        cls = family_params(name)
-    except UnknownNameError as exc:
-        raise ScenarioError(source, "world.generate.family", str(exc)) from None
-    return build_options(cls, options, source, "world.generate.options", f"family '{name}'")
+    FAMILIES.check_name(name, source, "world.generate.family")
+    return FAMILIES.options(name, options, source, "world.generate.options")
 
 
 def world_rng(seed: int) -> np.random.Generator:
@@ -166,8 +150,7 @@ def world_rng(seed: int) -> np.random.Generator:
 
 def generate(name: str, params: Any, rng: np.random.Generator, layout: Layout) -> Generated:
     """One draw of family ``name`` (the loader redraws when it closes the way)."""
-    _load()
-    return _FAMILIES[name](params, rng, layout)
+    return FAMILIES.get(name)(params, rng, layout)
 
 
 def check_range(value: tuple[float, float], src: str, key: str) -> None:
@@ -204,6 +187,6 @@ def passage_exists(grid: OccupancyGrid, start: Any, goal: Any, clearance: float)
     return bool(labels[rs, cs] == labels[rg, cg])
 
 
-__all__ = ["FAMILY_MODULES", "Generated", "Layout", "check_range", "family_names",
+__all__ = ["FAMILIES", "Generated", "Layout", "check_range", "family_names",
            "family_options", "family_params", "generate", "passage_exists", "register_family",
            "world_rng"]

@@ -1,4 +1,4 @@
-"""Scenario of the scaling study (:mod:`benchmarks.bench_scaling`): one per N and robot model.
+"""Scenario of the scaling study (:mod:`benchmarks.scaling`): one per N and robot model.
 
 Built with :func:`dfcoa_opt.scenario.loader.scenario_from_dict`: an open field without
 obstacles whose area grows with N (:data:`AREA_PER_ROBOT` m^2 per robot, square), a
@@ -66,4 +66,4 @@ def open_scenario(n: int, robots: dict[str, Any], steps: int, seed: int = 7) -> 
         "sensors": {"max_neighbors": 8, "comm_radius": 5.0,
                     "lidar": {"beams": 36, "range_max": 4.0}},
     }
-    return scenario_from_dict(data, f"<bench_scaling N={n}>")
+    return scenario_from_dict(data, f"<benchmarks.scaling N={n}>")

@@ -17,7 +17,7 @@ Per call of :meth:`MonteCarloLocalization.estimate`:
    its odometry moved more than the x, y or theta threshold since its last update.
 3. **Motion update**: its particles move by the odometry change since the last
    update, with noise from the same model.
-4. **Sensor update**: likelihood field (:mod:`dfcoa_opt.sim.localization.mcl_models`).
+4. **Sensor update**: likelihood field (:mod:`dfcoa_opt.sim.localization.mcl.sensor`).
 5. **Estimate**: the weighted mean position and circular mean heading of the
    robot's particles after the sensor update.
 6. **Resampling** every ``resampling_interval`` updates: low-variance, to the
@@ -46,9 +46,10 @@ from numpy.typing import NDArray
 from dfcoa_opt.core.errors import DfcoaError, ScenarioError
 from dfcoa_opt.core.geometry import wrap_angle, wrap_angle_fast
 from dfcoa_opt.sim.localization import estimator_options, register_estimator
-from dfcoa_opt.sim.localization import mcl_models as mm
-from dfcoa_opt.sim.localization.mcl_setup import Maps
-from dfcoa_opt.sim.localization.mcl_setup import Params as MclParams
+from dfcoa_opt.sim.localization.mcl.motion import compose_relative, decompose_motion, sample_motion
+from dfcoa_opt.sim.localization.mcl.params import MclParams
+from dfcoa_opt.sim.localization.mcl.resampling import resample
+from dfcoa_opt.sim.localization.mcl.sensor import Maps
 from dfcoa_opt.world.lidar import LaserScan
 
 FloatArray = NDArray[np.float64]
@@ -68,7 +69,7 @@ class MonteCarloLocalization:
         ScenarioError: The scenario's LiDAR is disabled.
     """
 
-    Params = MclParams  # the options (dfcoa_opt.sim.localization.mcl_setup.Params)
+    Params = MclParams  # the options (dfcoa_opt.sim.localization.mcl.params.MclParams)
     batched = True  # one object may hold every run of a batch (make_estimators)
 
     def __init__(self, scenario: Any, params: MclParams | None = None) -> None:
@@ -242,8 +243,8 @@ class MonteCarloLocalization:
         Returns:
             ``(K,)`` whether each moved past an update threshold since its last update.
         """
-        motion = mm.decompose_motion(self._prev_true[robots], true, self.params.rotation_noise)
-        odom = mm.sample_motion(self._odom[robots], motion, self._alphas, normals)
+        motion = decompose_motion(self._prev_true[robots], true, self.params.rotation_noise)
+        odom = sample_motion(self._odom[robots], motion, self._alphas, normals)
         self._odom[robots] = odom
         self._prev_true[robots] = true
         delta = np.abs(odom - self._odom_u[robots])
@@ -278,10 +279,10 @@ class MonteCarloLocalization:
                 offsets.append(rngs[e].random((n_do[e], 2)))
         if normals:
             sel = np.repeat(move, counts)
-            step = mm.decompose_motion(self._odom_u[move], self._odom[move], p.rotation_noise)
+            step = decompose_motion(self._odom_u[move], self._odom[move], p.rotation_noise)
             which = np.repeat(np.arange(int(move.sum())), counts[move])
-            self._parts[sel] = mm.sample_motion(self._parts[sel], tuple(s[which] for s in step),
-                                                self._alphas, _joined(normals))
+            self._parts[sel] = sample_motion(self._parts[sel], tuple(s[which] for s in step),
+                                             self._alphas, _joined(normals))
         ex, ey, nvalid = self._beams(scan, n_rows)
         if n_rows != sense.size:  # some runs have ended: their rows are absent
             ex, ey, nvalid = (_scatter(a, rows, sense.size) for a in (ex, ey, nvalid))
@@ -292,7 +293,7 @@ class MonteCarloLocalization:
         if offsets:
             u = np.zeros((sense.size, 2))
             u[do] = _joined(offsets)  # the runs' robots in order, as drawn
-            self._parts, self._w, self._ptr = mm.resample(
+            self._parts, self._w, self._ptr = resample(
                 self._parts, self._w, self._ptr, do, u, p.particle_limits[0],
                 p.particle_limits[1], self._bins, p.kld_error, p.kld_z)
         self._odom_u[sense] = self._odom[sense]
@@ -377,8 +378,8 @@ class MonteCarloLocalization:
         self._updated[rows] = sense[rows]
         if sense.any():
             self._filter(sense, move, runs, rows, len(true), scan)
-        return _wrap_rows(mm.compose_relative(self._est_u[rows], self._odom_u[rows],
-                                              self._odom[rows]))
+        return _wrap_rows(compose_relative(self._est_u[rows], self._odom_u[rows],
+                                           self._odom[rows]))
 
 
 def _joined(draws: list[FloatArray]) -> FloatArray:

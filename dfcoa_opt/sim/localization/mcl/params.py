@@ -1,31 +1,20 @@
-"""Options and maps of ``mcl`` (:mod:`dfcoa_opt.sim.localization.mcl`).
+"""Options of ``mcl``: :class:`MclParams`, its ``[localization.options]`` table.
 
-:class:`Params` is the ``[localization.options]`` table of ``mcl`` (defaults:
-paper 000, Algorithm 3). :class:`Maps` holds the likelihood field of every map
-of a batch of runs: one when the runs share their world, one per run when each
-has its own (a seeded clutter field), and runs the sensor update of every robot
-on its own run's map.
+Defaults: paper 000, Algorithm 3 (each field names MATLAB's default beside it).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
 
-import numpy as np
-from numpy.typing import NDArray
-
-from dfcoa_opt.core.errors import DfcoaError, ScenarioError
+from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.core.params import param
-from dfcoa_opt.sim.localization import mcl_models as mm
-
-FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
-class Params:
+class MclParams:
     """Options of ``mcl`` (``[localization.options]``); defaults = paper 000 Algorithm 3."""
 
     particle_limits: tuple[int, int] = param(
@@ -103,74 +92,5 @@ class Params:
                                                             ">= 0.001 m")
 
 
-class Maps:
-    """The likelihood fields of a batch's maps, and which map each robot is on.
-
-    Args:
-        scenarios: One scenario per run, in run order; runs whose scenarios share
-            a grid object share its field.
-        n: Robots per run.
-        params: The estimator's options (sensor model).
-        previous: Maps built before; their fields are reused for the same grids.
-
-    Raises:
-        DfcoaError: The maps differ in resolution (the beam end points are pushed
-            half a cell, one length for the batch).
-    """
-
-    def __init__(self, scenarios: Sequence[Any], n: int, params: Params,
-                 previous: Maps | None = None) -> None:
-        known = {} if previous is None else dict(zip(map(id, previous.grids), previous.fields,
-                                                     strict=True))
-        index: dict[int, int] = {}
-        #: The distinct grids, in order of first use.
-        self.grids: list[Any] = []
-        for sc in scenarios:
-            if id(sc.world.grid) not in index:
-                index[id(sc.world.grid)] = len(self.grids)
-                self.grids.append(sc.world.grid)
-        if len({g.cell_size for g in self.grids}) > 1:
-            raise DfcoaError("localization 'mcl': the runs of a batch need one map resolution")
-        p = params
-        #: ``(table (H, W), outside score)`` of each grid (:func:`mm.likelihood_table`).
-        self.fields: list[tuple[FloatArray, float]] = [known.get(id(g)) or mm.likelihood_table(
-            g, p.measurement_noise, p.expected_measurement_weight, p.random_measurement_weight,
-            p.sensor_limits[1], p.max_likelihood_distance, p.beam_combination,
-            p.likelihood_field) for g in self.grids]
-        #: ``(E*N,)`` the grid of each robot (robot ``r`` of run ``e`` is ``e*N + r``).
-        self.world = np.repeat([index[id(sc.world.grid)] for sc in scenarios], n)
-        self._stacked: tuple[Any, ...] = ()
-        if len(self.grids) > 1:  # every field in one padded array for the kernel
-            shapes = np.array([t.shape for t, _ in self.fields], dtype=np.int64)
-            tables = np.zeros((len(self.grids), *shapes.max(axis=0)))
-            for k, (t, _) in enumerate(self.fields):
-                tables[k, :t.shape[0], :t.shape[1]] = t
-            self._stacked = (tables, shapes, np.array([o for _, o in self.fields]),
-                             np.array([g.origin[0] for g in self.grids], dtype=float),
-                             np.array([g.origin[1] for g in self.grids], dtype=float),
-                             np.array([g.resolution for g in self.grids], dtype=float))
-
-    def sensor_update(self, parts: FloatArray, w: FloatArray, ptr: NDArray[np.int64],
-                      upd: NDArray[np.bool_], ex: FloatArray, ey: FloatArray,
-                      nvalid: NDArray[np.int64], amcl: bool, est: FloatArray) -> None:
-        """:func:`mm.sensor_update` of robots ``upd``, each on its own run's map.
-
-        Args:
-            parts: ``(P, 3)`` particles (m, m, rad), robot ``r``'s rows ``ptr[r]:ptr[r+1]``.
-            w: ``(P,)`` weights, normalised per robot; updated in place.
-            ptr: ``(E*N + 1,)`` row offsets.
-            upd: ``(E*N,)`` robots to update.
-            ex: ``(E*N, B)`` beam end points in the robot frame, x (m); valid ones first.
-            ey: ``(E*N, B)`` same, y (m).
-            nvalid: ``(E*N,)`` number of valid beams per robot.
-            amcl: AMCL's beam combination (else the product).
-            est: ``(E*N, 3)`` output: the updated robots' weighted means (m, m, rad).
-        """
-        if not self._stacked:
-            (table, outside), grid = self.fields[0], self.grids[0]
-            mm.sensor_update(parts, w, ptr, upd, ex, ey, nvalid, table, outside, grid.origin[0],
-                             grid.origin[1], grid.resolution, amcl, est)
-        else:
-            tables, shapes, outs, oxs, oys, inv_h = self._stacked
-            mm.sensor_update_worlds(parts, w, ptr, upd, ex, ey, nvalid, self.world, tables,
-                                    shapes, outs, oxs, oys, inv_h, amcl, est)
+#: The class's former name (``mcl_setup.Params``).
+Params = MclParams

@@ -1,18 +1,6 @@
-"""Scaling study (issue 7): cost per step of every registered controller against team size N.
+"""Timing of the scaling study (:mod:`benchmarks.scaling`): per-step times of every run.
 
-Run ``python -m benchmarks.bench_scaling`` (full study, writes ``benchmarks/scaling.md``,
-``scaling.csv`` and ``scaling.png``) or ``python -m benchmarks.bench_scaling --quick``
-(smoke configuration, prints only unless ``--out`` is given).
-
-Modules: the scenario (open field, grid formation, LiDAR on for every controller because
-``dfcoa`` needs it) is :mod:`benchmarks.scaling_scenario`; peak memory (a fresh subprocess
-per controller, ``--memory-child``) :mod:`benchmarks.scaling_memory`; the summary, CSV,
-plot and stdout tables :mod:`benchmarks.scaling_report`; ``scaling.md``
-:mod:`benchmarks.scaling_markdown`. This one times the runs and holds the command line.
-The simulator's own share of a step (LiDAR, neighbour query, the rest) is reported
-separately.
-
-Timing. Each (controller, N) run is ``Simulator(scenario, controller).run()`` with
+Each (controller, N) run is ``Simulator(scenario, controller).run()`` with
 ``t_max`` covering ``warmup + steps`` steps. A wrapper times every ``act`` call (the
 controller's cost per step); the whole step is the time between two successive
 ``act`` starts (the rest of the step, logging, and the next step's sensing). The
@@ -28,40 +16,29 @@ timed against same-process variants (:func:`sensing_reference`).
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
-import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from benchmarks.scaling_markdown import markdown
-from benchmarks.scaling_memory import memory_child, peak_memory
-from benchmarks.scaling_report import median_ms, plot, print_summary, summarise, write_csv
-from benchmarks.scaling_scenario import DEFAULT_MODEL, model_of, open_scenario
-from dfcoa_opt.control.registry import available, make_controller
-from dfcoa_opt.core.runtime.provenance import machine, versions
+from benchmarks.scaling.samples import Sample, median_ms
+from benchmarks.scaling.scenario import DEFAULT_MODEL, model_of, open_scenario
+from dfcoa_opt.control.registry import make_controller
 from dfcoa_opt.scenario.scenario import Scenario
 from dfcoa_opt.sim import neighbours as sim_neighbours
-from dfcoa_opt.sim import simulator as sim_module
+from dfcoa_opt.sim import stepper as sim_stepper
 from dfcoa_opt.sim.simulator import Simulator
 from dfcoa_opt.world import lidar as lidar_module
 
-OUT_DIR = Path(__file__).resolve().parent
-SIZES = (4, 16, 64, 256, 1000)
-QUICK_SIZES = (4, 16, 64)
 #: Measured-step budget per (controller, N, round), s; past it the run is cut short (reported).
 BUDGET_S = 60.0
 #: Timed calls per variant in :func:`sensing_reference`.
 SENSING_CALLS = 30
 
 
-# --------------------------------------------------------------------------- timing
 class _OverBudget(Exception):
     """Raised from inside a run when its measured steps exceed the budget."""
 
@@ -120,29 +97,6 @@ class _TimedLidar:
         return out
 
 
-@dataclass
-class Sample:
-    """Per-step times (s) of one or more runs of one controller at one N.
-
-    Attributes:
-        act: Controller ``act`` durations.
-        step: Whole-step durations (successive ``act`` starts).
-        lidar: LiDAR scan durations (sensing of the step that follows).
-        query: Neighbour-query (``proximity``) durations.
-        rounds: Median ``act`` time of each round, s (noise indicator).
-        log_step: ``wall_time / steps`` of each run's log (warm-up included), s.
-        notes: Caps and skips.
-    """
-
-    act: list[float] = field(default_factory=list)
-    step: list[float] = field(default_factory=list)
-    lidar: list[float] = field(default_factory=list)
-    query: list[float] = field(default_factory=list)
-    rounds: list[float] = field(default_factory=list)
-    log_step: list[float] = field(default_factory=list)
-    notes: list[str] = field(default_factory=list)
-
-
 def timed_run(scenario: Scenario, controller_id: str, warmup: int, steps: int,
               budget: float = BUDGET_S) -> tuple[dict[str, np.ndarray], float, str]:
     """One simulator run with timers; drop the first ``warmup`` steps.
@@ -164,7 +118,7 @@ def timed_run(scenario: Scenario, controller_id: str, warmup: int, steps: int,
     if lidar is not None:
         sim.lidar = lidar
     query_times: list[float] = []
-    original = sim_module.proximity
+    original = sim_stepper.batch_proximity  # the simulator's neighbour query, once a step
 
     def timed_proximity(*args: Any, **kwargs: Any) -> Any:
         t0 = time.perf_counter()
@@ -172,7 +126,7 @@ def timed_run(scenario: Scenario, controller_id: str, warmup: int, steps: int,
         query_times.append(time.perf_counter() - t0)
         return out
 
-    sim_module.proximity = timed_proximity
+    sim_stepper.batch_proximity = timed_proximity
     note, log_step = "", math.nan
     try:
         log = sim.run()
@@ -180,7 +134,7 @@ def timed_run(scenario: Scenario, controller_id: str, warmup: int, steps: int,
     except _OverBudget:
         note = f"cut at {len(ctrl.starts) - 1 - warmup} of {steps} steps (budget {budget:g} s)"
     finally:
-        sim_module.proximity = original
+        sim_stepper.batch_proximity = original
     starts = np.asarray(ctrl.starts)
     m = len(starts) - 1  # complete steps: act start k to act start k + 1
     sl = slice(warmup, m)
@@ -308,92 +262,3 @@ def sensing_reference(sizes: Sequence[int], calls: int = 20) -> list[dict[str, f
         rows.append(row)
     return rows
 
-
-# --------------------------------------------------------------------------- main
-def _ints(text: str) -> list[int]:
-    return [int(x) for x in text.split(",") if x.strip()]
-
-
-def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
-    """Command-line options (see ``--help``)."""
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_scaling",
-                                 description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=_ints, default=None,
-                    help=f"team sizes, comma-separated (default {','.join(map(str, SIZES))})")
-    ap.add_argument("--controllers", default=None,
-                    help="controller ids, comma-separated (default: every registered one)")
-    ap.add_argument("--steps", type=int, default=None, help="measured steps per run (30)")
-    ap.add_argument("--warmup", type=int, default=None, help="unmeasured steps per run (5)")
-    ap.add_argument("--rounds", type=int, default=None, help="interleaved rounds (5)")
-    ap.add_argument("--budget", type=float, default=BUDGET_S,
-                    help="measured seconds per run before it is cut short (60)")
-    ap.add_argument("--memory-n", type=int, default=None,
-                    help="team size of the peak-memory runs (largest size); 0 = skip")
-    ap.add_argument("--memory-steps", type=int, default=10, help="steps of a memory run")
-    ap.add_argument("--out", type=Path, default=None,
-                    help="folder for scaling.md/.csv/.png (default benchmarks/; --quick: none)")
-    ap.add_argument("--quick", action="store_true",
-                    help="smoke run: N=4,16,64, 2+5 steps, 1 round, memory at N=64, no files")
-    ap.add_argument("--memory-child", default=None, help=argparse.SUPPRESS)
-    ap.add_argument("--memory-traced", action="store_true", help=argparse.SUPPRESS)
-    args = ap.parse_args(argv)
-    quick = args.quick
-    args.sizes = args.sizes or list(QUICK_SIZES if quick else SIZES)
-    args.steps = args.steps or (5 if quick else 30)
-    args.warmup = args.warmup if args.warmup is not None else (2 if quick else 5)
-    args.rounds = args.rounds or (1 if quick else 5)
-    if args.memory_n is None:
-        args.memory_n = max(args.sizes)
-    if args.out is None and not quick:
-        args.out = OUT_DIR
-    return args
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the study; print the tables; write the files unless ``--quick`` without ``--out``.
-
-    Returns:
-        Process exit code (0).
-    """
-    args = parse_args(argv)
-    if args.memory_child:
-        print(json.dumps(memory_child(args.memory_child, args.memory_n, args.memory_steps,
-                                      args.memory_traced)))
-        return 0
-    t_start = time.perf_counter()
-    controllers = (args.controllers.split(",") if args.controllers else available())
-    sizes = sorted(set(args.sizes))
-    print(f"CPU: {machine()}; {versions()}")
-    print(f"controllers: {', '.join(controllers)}; sizes {sizes}; {args.rounds} round(s) of "
-          f"{args.warmup} + {args.steps} steps")
-    warm_up(controllers)
-    samples, build = measure(controllers, sizes, args.warmup, args.steps, args.rounds,
-                             args.budget)
-    summary = summarise(samples, controllers, sizes)
-    print_summary(summary, controllers, sizes)
-    sensing = sensing_reference(sizes, SENSING_CALLS)
-    for r in sensing:
-        print(f"sensing N={r['n']:5d}: LiDAR as chosen {r['lidar_default']:.3f} ms, all pairs "
-              f"{r['lidar_all_pairs']:.3f}, candidates {r['lidar_kdtree']:.3f}; proximity "
-              f"{r['proximity']:.3f} ms, neighbour_table {r['neighbour_table']:.3f}")
-    memory: dict[str, dict[str, float]] = {}
-    ref_n = min(sizes)
-    if args.memory_n:
-        memory = peak_memory(controllers, args.memory_n, ref_n, args.memory_steps)
-    elapsed = time.perf_counter() - t_start
-    print(f"\nwhole run: {elapsed:.1f} s")
-    if args.out is not None:
-        cfg = {"rounds": args.rounds, "warmup": args.warmup, "steps": args.steps,
-               "budget": args.budget, "memory_n": args.memory_n, "memory_ref_n": ref_n,
-               "memory_steps": args.memory_steps, "sensing_calls": SENSING_CALLS}
-        args.out.mkdir(parents=True, exist_ok=True)
-        write_csv(summary, args.out / "scaling.csv")
-        plot(summary, controllers, sizes, args.out / "scaling.png")
-        (args.out / "scaling.md").write_text(
-            markdown(summary, controllers, sizes, memory, build, cfg, elapsed, sensing))
-        print(f"wrote {args.out / 'scaling.md'}, scaling.csv, scaling.png")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))

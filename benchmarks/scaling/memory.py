@@ -1,8 +1,8 @@
-"""Peak memory of the scaling study (:mod:`benchmarks.bench_scaling`), one subprocess per run.
+"""Peak memory of the scaling study (:mod:`benchmarks.scaling`), one subprocess per run.
 
-A fresh subprocess per controller (``python -m benchmarks.bench_scaling --memory-child
-<id> --memory-n N --memory-steps S [--memory-traced]``, dispatched to
-:func:`memory_child` by ``bench_scaling.main``) loads the kernels with a 4-robot run,
+A fresh subprocess per controller (``python -m benchmarks.scaling.memory <id> --n N
+--steps S [--traced]``: this module's own command line, which prints the JSON of
+:func:`memory_child`; :func:`peak_memory` starts it) loads the kernels with a 4-robot run,
 resets its peak-RSS counter (``/proc/self/clear_refs``), then builds and runs N = 1000
 (and, as the reference, N = 4 in another subprocess) for a few steps and reports the
 peak RSS growth (``VmHWM`` - ``VmRSS`` before) and the whole process's peak; the
@@ -12,6 +12,7 @@ allocations only; memory allocated inside numba kernels is not traced).
 
 from __future__ import annotations
 
+import argparse
 import gc
 import json
 import math
@@ -23,14 +24,15 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from benchmarks.scaling_scenario import model_of, open_scenario
+from benchmarks.scaling.scenario import model_of, open_scenario
 from dfcoa_opt.control.registry import make_controller
 from dfcoa_opt.sim.simulator import Simulator
 
 #: Working directory of the child processes (the repository root, so ``-m benchmarks`` works).
-REPO = Path(__file__).resolve().parent.parent
-#: Module whose ``--memory-child`` option runs :func:`memory_child` in a child process.
-CHILD_MODULE = "benchmarks.bench_scaling"
+REPO = Path(__file__).resolve().parents[2]
+#: The module the child processes run (this one, :func:`main`): it imports nothing that
+#: imports it back.
+CHILD_MODULE = "benchmarks.scaling.memory"
 
 
 def _status_kib(key: str) -> int:
@@ -119,10 +121,10 @@ def peak_memory(controllers: Sequence[str], n: int, ref_n: int, steps: int,
     for cid in controllers:
         res: dict[str, Any] = {}
         for size, traced, prefix in ((n, True, ""), (ref_n, False, "ref_")):
-            cmd = [sys.executable, "-m", CHILD_MODULE, "--memory-child", cid,
-                   "--memory-n", str(size), "--memory-steps", str(steps)]
+            cmd = [sys.executable, "-m", CHILD_MODULE, cid, "--n", str(size),
+                   "--steps", str(steps)]
             if traced:
-                cmd.append("--memory-traced")
+                cmd.append("--traced")
             try:
                 proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True,
                                       timeout=600, check=True)
@@ -137,3 +139,26 @@ def peak_memory(controllers: Sequence[str], n: int, ref_n: int, steps: int,
             f"{res.get('ref_run_growth_mb', math.nan):4.1f}), process peak "
             f"{res.get('process_peak_mb', math.nan):5.0f} MiB")
     return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """The child process: print the JSON of :func:`memory_child` on one line.
+
+    Returns:
+        Process exit code (0).
+    """
+    ap = argparse.ArgumentParser(prog=f"python -m {CHILD_MODULE}",
+                                 description="One peak-memory run of the scaling study "
+                                             "(started by peak_memory, one per process).")
+    ap.add_argument("controller", help="controller id")
+    ap.add_argument("--n", type=int, required=True, help="team size")
+    ap.add_argument("--steps", type=int, default=10, help="steps after the first one")
+    ap.add_argument("--traced", action="store_true",
+                    help="also repeat the build and run under tracemalloc")
+    args = ap.parse_args(argv)
+    print(json.dumps(memory_child(args.controller, args.n, args.steps, args.traced)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,9 +1,10 @@
-"""Results of the scaling study (:mod:`benchmarks.bench_scaling`): summary, CSV, plot, stdout.
+"""Results of the scaling study (:mod:`benchmarks.scaling`): summary, CSV, plot, stdout.
 
-:func:`summarise` turns the pooled step times into one row per (controller, N) with
+:func:`summarise` turns the pooled step times (:class:`~benchmarks.scaling.samples.Sample`)
+into a :class:`~benchmarks.scaling.samples.Summary`, one row per (controller, N) with
 medians, min-max, ratios and fitted log-log slopes; :func:`write_csv`, :func:`plot`
-and :func:`print_summary` write them out (``scaling.md`` is
-:mod:`benchmarks.scaling_markdown`).
+and :func:`print_summary` write it out (``scaling.md`` is
+:mod:`benchmarks.scaling.markdown`).
 """
 
 from __future__ import annotations
@@ -11,35 +12,19 @@ from __future__ import annotations
 import csv
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from benchmarks.scaling_scenario import model_of
+from benchmarks.scaling.samples import Sample, Summary, median_ms
+from benchmarks.scaling.scenario import model_of
 from dfcoa_opt.core.runtime.provenance import machine
-
-if TYPE_CHECKING:
-    from benchmarks.bench_scaling import Sample
 
 #: The "upper" slope is fitted over the sizes at or above this N (small N = constant overhead).
 UPPER_FROM = 64
 #: Issue 7's target for the fitted log-log slope.
 TARGET_SLOPE = 1.2
-
-
-@dataclass
-class Summary:
-    """Per-controller results, ready to print.
-
-    Attributes:
-        rows: CSV rows, one per (controller, N).
-        slopes: Per controller: act/step slopes over all sizes and over N >= UPPER_FROM.
-    """
-
-    rows: list[dict[str, Any]]
-    slopes: dict[str, dict[str, float]]
 
 
 def summarise(samples: dict[tuple[str, int], Sample], controllers: Sequence[str],
@@ -90,11 +75,6 @@ def summarise(samples: dict[tuple[str, int], Sample], controllers: Sequence[str]
                                       [r["step_median_ms"] for r in mine[-2:]]),
         }
     return Summary(rows, slopes)
-
-
-def median_ms(a: Sequence[float] | np.ndarray) -> float:
-    """Median in ms (nan when empty)."""
-    return float(np.median(a)) * 1e3 if len(a) else math.nan
 
 
 def loglog_slope(ns: Sequence[float], ts: Sequence[float]) -> float:
