@@ -26,6 +26,7 @@ MOVED = {
     "comparisons.orca.ivo_disc": "comparisons.orca.ivo.discs",
     "comparisons.orca.ellipse": "comparisons.orca.ivo.ellipse",
     "comparisons.orca.qp_backend": "comparisons.constraints.solvers",
+    "comparisons.reshape.route_mode": "comparisons.reshape.central",
 }
 
 keep_old_paths(MOVED, removal="0.3")

@@ -270,7 +270,9 @@ class Run:
         Returns:
             ``path``.
         """
-        return self.log.to_mcap(path, self.scenario.world)
+        from dfcoa_opt.viz.mcap import write_mcap
+
+        return write_mcap(self.log, path, self.scenario.world)
 
 
 def sweep(spec: str | Path | Mapping[str, Any], out: str | Path | None = None, *,

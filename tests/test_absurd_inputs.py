@@ -18,7 +18,7 @@ import dfcoa_opt as d
 from dfcoa_opt.cli import main
 from dfcoa_opt.core.errors import DfcoaError, RunFailed
 from dfcoa_opt.scenario import budget
-from dfcoa_opt.scenario.checks import MAX_CELLS
+from dfcoa_opt.scenario.budget import MAX_CELLS
 from dfcoa_opt.sim.simulator import Simulator
 from dfcoa_opt.world.robots.models import make_model
 

@@ -9,7 +9,7 @@ import pytest
 
 import dfcoa_opt as d
 from dfcoa_opt.core.errors import DfcoaError
-from dfcoa_opt.scenario.loader import load_scenario
+from dfcoa_opt.scenario.loader import load_scenario, reseed
 from dfcoa_opt.sim.batch import BatchSimulator
 from dfcoa_opt.sim.simulator import Simulator, run_batch_logs, run_scenario
 
@@ -173,7 +173,7 @@ def test_one_batched_mcl_estimator_gives_each_run_its_single_run_estimates(path)
 
     overrides = {"t_max": 3.0, "localization": "mcl"}
     sc = load_scenario(path, 0, overrides)
-    (est,) = make_estimators("mcl", [sc.for_seed(s) for s in SEEDS])
+    (est,) = make_estimators("mcl", [reseed(sc, s) for s in SEEDS])
     assert est.n_runs == len(SEEDS)
     batch = run_batch_logs(sc, "dfcoa", SEEDS)
     assert [log.digest() for log in batch] == singles(path, "dfcoa", overrides)

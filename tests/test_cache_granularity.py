@@ -1,7 +1,7 @@
-"""The result cache keys on each controller's own code (dfcoa_opt.bench.results.store.code_fingerprint).
+"""The result cache keys on each controller's own code (bench.results.fingerprint).
 
 Edits are simulated by changing what the fingerprint reads for a source file
-(``store._read_source``); the sources on disk are never touched.
+(``fingerprint._read_source``); the sources on disk are never touched.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import comparisons
 import dfcoa_opt
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
-from dfcoa_opt.bench.results import store
+from dfcoa_opt.bench.results import fingerprint, store
 from dfcoa_opt.bench.sweep.expand import load_sweep
 from dfcoa_opt.control import registry
 from dfcoa_opt.core.runtime.kernel_cache import module_files
@@ -33,8 +33,8 @@ Edit = Callable[[str, Callable[[str], str]], None]
 
 
 def _forget() -> None:
-    store._sources.cache_clear()
-    store.code_fingerprint.cache_clear()
+    fingerprint._sources.cache_clear()
+    fingerprint.code_fingerprint.cache_clear()
 
 
 @pytest.fixture
@@ -46,7 +46,7 @@ def edit(monkeypatch) -> Iterator[Edit]:
     """
     changes: dict[str, Callable[[str], str]] = {}
     disk: dict[Path, str] = {}
-    read = store._read_source
+    read = fingerprint._read_source
 
     def patched(path: Path) -> str:
         if path not in disk:
@@ -58,11 +58,11 @@ def edit(monkeypatch) -> Iterator[Edit]:
         return text
 
     def apply(rel: str, change: Callable[[str], str]) -> None:
-        assert rel in store.fingerprint_sources(), rel  # a real, fingerprinted source
+        assert rel in fingerprint.fingerprint_sources(), rel  # a real, fingerprinted source
         changes[rel] = change
         _forget()
 
-    monkeypatch.setattr(store, "_read_source", patched)
+    monkeypatch.setattr(fingerprint, "_read_source", patched)
     _forget()
     yield apply
     _forget()
@@ -90,7 +90,7 @@ def docstring_edit(text: str) -> str:
 
 
 def fingerprints(ids=IDS) -> dict[str, str]:
-    return {c: store.code_fingerprint(c) for c in ids}
+    return {c: fingerprint.code_fingerprint(c) for c in ids}
 
 
 def changed(before: dict[str, str], after: dict[str, str]) -> set[str]:
@@ -104,13 +104,13 @@ def test_each_controller_has_its_own_fingerprint(edit):
     for a, b in itertools.combinations(IDS, 2):
         assert fps[a] != fps[b], (a, b)
     # ids of one module (parameter presets of one class) share their code
-    assert store.code_fingerprint("consensus") == store.code_fingerprint("consensus_ivo")
-    assert fps["goto_slot"] != store.code_fingerprint()  # not everything any more
+    assert fingerprint.code_fingerprint("consensus") == fingerprint.code_fingerprint("consensus_ivo")
+    assert fps["goto_slot"] != fingerprint.code_fingerprint()  # not everything any more
 
 
 def test_the_sources_of_each_fingerprint():
-    src = {c: set(store.fingerprint_sources(c)) for c in IDS}
-    everything = set(store.fingerprint_sources())
+    src = {c: set(fingerprint.fingerprint_sources(c)) for c in IDS}
+    everything = set(fingerprint.fingerprint_sources())
     core = set.intersection(*src.values())
     # the simulator, the run path of the harness, scenario loading, planners and
     # localization, the registry and the controller interfaces: every run
@@ -125,7 +125,6 @@ def test_the_sources_of_each_fingerprint():
                 "dfcoa_opt/control/dfcoa/formation_law.py"}
     own = {s for s in everything if s.startswith("dfcoa_opt/")}
     assert controls <= own - core and all(s.startswith("dfcoa_opt/control/") for s in own - core)
-    assert not any(store.outside_fingerprint(s) for s in everything)
     assert src["goto_slot"] - core == {GOTO_SLOT}
     assert src["dfcoa"] - core == controls - {GOTO_SLOT}
     lf_vo = src["lf_vo"] - core
@@ -136,20 +135,46 @@ def test_the_sources_of_each_fingerprint():
     cbf = src["goto_slot+cbf"] - src["goto_slot"]
     assert CBF_FILTER in cbf and cbf <= src["reshape"]
     assert CBF_FILTER in src["reshape"] and CBF_FILTER not in src["orca_nav"]
-    assert "comparisons/orca/filter.py" in set(store.fingerprint_sources("consensus"))
+    assert "comparisons/orca/filter.py" in set(fingerprint.fingerprint_sources("consensus"))
 
 
 def test_controllers_whose_imports_cannot_be_read_cover_every_source(monkeypatch):
-    everything = store.fingerprint_sources()
-    assert store.fingerprint_sources("no_such_controller") == everything
+    everything = fingerprint.fingerprint_sources()
+    assert fingerprint.fingerprint_sources("no_such_controller") == everything
 
     class Outside:  # as from an entry point or a notebook: its imports are not read
         Params = registry.controller_class("goto_slot").Params
 
     registry.available()
     monkeypatch.setitem(registry.CONTROLLERS._table, "test_outside", Outside)
-    assert store.fingerprint_sources("test_outside") == everything
-    assert store.fingerprint_sources("test_outside+cbf") == everything
+    assert fingerprint.fingerprint_sources("test_outside") == everything
+    assert fingerprint.fingerprint_sources("test_outside+cbf") == everything
+
+
+def test_the_layers_above_the_run_are_in_no_fingerprint():
+    """The rule is the layer contract: what runs is the run layers, the root and the run path."""
+    everything = set(fingerprint.fingerprint_sources())
+    for rel in ("dfcoa_opt/bench/report/tables.py", "dfcoa_opt/bench/figures.py",
+                "dfcoa_opt/bench/harness.py", "dfcoa_opt/bench/results/store.py",
+                "dfcoa_opt/viz/plotting.py", "dfcoa_opt/envs/core.py", "dfcoa_opt/api.py",
+                "dfcoa_opt/cli/__init__.py", "comparisons/learned/train.py"):
+        assert rel not in everything, rel
+    for rel in ("dfcoa_opt/__init__.py", "dfcoa_opt/bench/runner.py",
+                "dfcoa_opt/bench/sweep/expand.py", "dfcoa_opt/metrics/summary.py",
+                "dfcoa_opt/sim/stall.py", "dfcoa_opt/core/registry.py"):
+        assert rel in fingerprint.core_sources(), rel
+
+
+def test_editing_a_report_reruns_nothing(edit, monkeypatch):
+    """A module above the run path changes no fingerprint, even where it is read."""
+    before, everything = fingerprints(), fingerprint.code_fingerprint()
+    read = fingerprint._read_source
+    monkeypatch.setattr(fingerprint, "_read_source", lambda p: (
+        read(p) + "\n_EDITED = 1\n" if Path(p).as_posix().endswith("bench/report/tables.py")
+        else read(p)))
+    fingerprint._sources.cache_clear()
+    fingerprint.code_fingerprint.cache_clear()
+    assert fingerprints() == before and fingerprint.code_fingerprint() == everything
 
 
 # -- edits -----------------------------------------------------------------------------------
@@ -182,17 +207,18 @@ def test_editing_the_simulator_changes_every_fingerprint(edit):
 
 def test_docstring_and_comment_edits_change_nothing(edit):
     before = fingerprints()
-    everything = store.code_fingerprint()
-    for rel in (LF_VO_KERNEL, CBF_FILTER, BATCH, GOTO_SLOT, "dfcoa_opt/control/dfcoa/controller.py"):
+    everything = fingerprint.code_fingerprint()
+    for rel in (LF_VO_KERNEL, CBF_FILTER, BATCH, GOTO_SLOT,
+                "dfcoa_opt/control/dfcoa/controller.py"):
         edit(rel, docstring_edit)
     assert fingerprints() == before
-    assert store.code_fingerprint() == everything
+    assert fingerprint.code_fingerprint() == everything
 
 
 def test_an_import_by_an_old_module_name_is_followed(edit):
-    """``comparisons.lf_vo_core`` moved to ``comparisons.lf_vo.equations`` (dfcoa_opt.core.moved)."""
+    """``comparisons.lf_vo_core`` moved to ``comparisons.lf_vo.equations`` (core.moved)."""
     edit(GOTO_SLOT, lambda t: t + "\n\ndef _old():\n    from comparisons.lf_vo_core import x\n")
-    assert "comparisons/lf_vo/equations.py" in store.fingerprint_sources("goto_slot")
+    assert "comparisons/lf_vo/equations.py" in fingerprint.fingerprint_sources("goto_slot")
     before = fingerprints()
     edit("comparisons/lf_vo/equations.py", code_edit)
     assert changed(before, fingerprints()) == {"goto_slot", "goto_slot+cbf", "lf_vo"}
@@ -202,15 +228,15 @@ def test_a_controller_importing_by_a_computed_name_covers_every_source(edit):
     loader = ("\n\ndef _load(name):\n    import importlib\n\n"
               "    return importlib.import_module(name)\n")
     edit(LF_VO_KERNEL, lambda t: t + loader)
-    assert store.fingerprint_sources("lf_vo") == store.fingerprint_sources()
-    assert store.fingerprint_sources("goto_slot") != store.fingerprint_sources()
+    assert fingerprint.fingerprint_sources("lf_vo") == fingerprint.fingerprint_sources()
+    assert fingerprint.fingerprint_sources("goto_slot") != fingerprint.fingerprint_sources()
 
 
-def test_the_core_names_no_controller_module_but_to_register_it():
+def test_the_core_names_no_controller_module():
     """An ``importlib`` import by name of a controller module from the core is invisible to the
-    import graph: the only such names are the registry's (it imports every built-in controller
-    to register it; a run computes with its own only) and ``find_spec("comparisons")``."""
-    src = store._sources()
+    import graph. The registry names none (the built-ins are entry points); the only names
+    are the policy package's (built from files) and ``find_spec("comparisons")``."""
+    src = fingerprint._sources()
     files = module_files([Path(dfcoa_opt.__file__).parent, Path(comparisons.__file__).parent])
     controller_side = set(src.hashed) - src.core
     named = set()
@@ -218,7 +244,7 @@ def test_the_core_names_no_controller_module_but_to_register_it():
         tree = ast.parse(files[name].read_text(encoding="utf-8"))
         named |= {n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
                   and isinstance(n.value, str) and n.value in controller_side}
-    assert named <= set(registry.BUILTIN_MODULES) | {"comparisons"}
+    assert named <= {registry.POLICY_MODULE, "comparisons"}
 
 
 # -- the store --------------------------------------------------------------------------------
@@ -232,7 +258,7 @@ def test_pending_lists_exactly_the_runs_of_the_edited_controller(tmp_path, edit)
     assert res.failed == 0 and res.ran == 6
     runs = load_sweep(sweep).runs
     assert res.store.pending(runs) == []
-    assert res.store.manifest()["code"] == {c: store.code_fingerprint(c)
+    assert res.store.manifest()["code"] == {c: fingerprint.code_fingerprint(c)
                                             for c in ("goto_slot", "goto_slot+cbf", "lf_vo")}
 
     edit(LF_VO_KERNEL, docstring_edit)

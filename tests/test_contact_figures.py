@@ -16,8 +16,7 @@ from test_plotting import make_grid, make_log
 from dfcoa_opt.metrics import contacts, outcome
 from dfcoa_opt.scenario.schema import MetricSpec
 from dfcoa_opt.sim.log import RunLog
-from dfcoa_opt.viz import animation, plotting
-from dfcoa_opt.viz import layout as figure_layout
+from dfcoa_opt.viz import animation, layout, plotting
 from dfcoa_opt.world.grid import OccupancyGrid
 
 K = 10  # the step of the first contact
@@ -137,7 +136,7 @@ def test_a_long_title_is_wrapped_to_the_figure() -> None:
     log = bumping_log()
     log.meta["scenario"] = "a_scenario_with_a_rather_long_name"
     fig = plotting.run_figure(log, make_grid(), figsize=(5.0, 4.0), dpi=50)
-    figure_layout.png_bytes(fig)
+    layout.png_bytes(fig)
     box = fig.axes[0].title.get_window_extent(fig.canvas.get_renderer())
     assert box.x0 >= 0 and box.x1 <= fig.bbox.x1 and box.y1 <= fig.bbox.y1
     assert len(fig.axes[0].get_title().split("\n")) >= 3

@@ -21,7 +21,7 @@ CLUTTER = ROOT / "scenarios" / "bench" / "clutter.toml"
 pytestmark = pytest.mark.skipif(not dispatch.is_x86(), reason="the cap applies to x86-64 only")
 
 #: What a fresh interpreter reports after its imports: numpy's level, the variables.
-PROBE = ("import json, os; from dfcoa_opt.core.runtime.provenance import numpy_simd; "
+PROBE = ("import json, os; from dfcoa_opt.core.runtime.dispatch import numpy_simd; "
          "print(json.dumps({'level': numpy_simd(), 'disabled': "
          "os.environ.get('NPY_DISABLE_CPU_FEATURES'), 'blas': "
          "os.environ.get('OPENBLAS_CORETYPE')}))")
@@ -109,7 +109,7 @@ def test_sweep_workers_run_capped_and_rows_record_it(tmp_path):
 
 
 VIRTUAL_SPRING_CLUTTER = (
-    "import dfcoa_opt as d; from dfcoa_opt.core.runtime.provenance import numpy_simd; "
+    "import dfcoa_opt as d; from dfcoa_opt.core.runtime.dispatch import numpy_simd; "
     f"p = {str(CLUTTER)!r}; "
     "print(numpy_simd(), *[d.run(d.load(p, seed=s, overrides={"
     "'controllers.virtual_spring.offset_frame': 'leader'}), 'virtual_spring').log.digest() "

@@ -26,8 +26,9 @@ from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.envs import OUTCOME_CODES, OUTCOME_NAMES, RewardSpec, parallel_env, vector_env
 from dfcoa_opt.envs.rewards import path_arc_length
 from dfcoa_opt.metrics import formation_centroid_error, formation_shape_error, summary
-from dfcoa_opt.metrics.outcome import formation_progress, leader_path
+from dfcoa_opt.metrics.outcome import leader_path
 from dfcoa_opt.planning.pure_pursuit import PurePursuit
+from dfcoa_opt.sim.stall import formation_progress
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = [ROOT / "scenarios" / "example_obstacles.toml",

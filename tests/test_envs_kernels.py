@@ -14,8 +14,9 @@ from dfcoa_opt.control.base import MovingObstacles, Neighbours, Observation
 from dfcoa_opt.control.features import ObservationSpec, flatten, flatten_reference
 from dfcoa_opt.envs import RewardSpec, rewards, vector_env
 from dfcoa_opt.envs.kernels import score_runs
-from dfcoa_opt.envs.rewards import BatchStall, PathTable, path_arc_length
+from dfcoa_opt.envs.rewards import PathTable, path_arc_length
 from dfcoa_opt.scenario.schema import MetricSpec
+from dfcoa_opt.sim.stall import BatchStall
 from dfcoa_opt.world.lidar import LaserScan
 
 CROSSING = Path(__file__).resolve().parents[1] / "scenarios" / "bench" / "crossing.toml"

@@ -58,7 +58,7 @@ from dfcoa_opt import metrics
 from dfcoa_opt.control.registry import build_controller
 from dfcoa_opt.core.errors import DfcoaError, ScenarioError
 from dfcoa_opt.metrics.outcome import OUTCOMES
-from dfcoa_opt.scenario.loader import apply_overrides, scenario_from_dict
+from dfcoa_opt.scenario.loader import apply_overrides, reseed, scenario_from_dict
 from dfcoa_opt.scenario.scenario import Scenario
 from dfcoa_opt.sim.simulator import Simulator
 from tests.fuzz_schema import num, too_costly
@@ -113,7 +113,7 @@ def too_slow_to_run(scenario: Scenario, controller: str) -> bool:
 def capped(scenario: Scenario, seed: int | None) -> Scenario:
     """The scenario for ``seed`` with ``t_max`` at most :data:`STEPS` steps of its ``dt``."""
     if seed is not None:
-        scenario = scenario.for_seed(seed)
+        scenario = reseed(scenario, seed)
     spec = scenario.spec
     t_max = min(spec.t_max, STEPS * spec.dt)
     return dataclasses.replace(scenario, spec=dataclasses.replace(spec, t_max=t_max))

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from dfcoa_opt.core.errors import ScenarioError
-from dfcoa_opt.scenario import checks, loader
-from dfcoa_opt.scenario.checks import final_leader_poses
+from dfcoa_opt.scenario import loader, placement
 from dfcoa_opt.scenario.formation import slot_positions
 from dfcoa_opt.scenario.loader import load_scenario, read_toml, scenario_from_dict
+from dfcoa_opt.scenario.placement import final_leader_poses
 from dfcoa_opt.scenario.scenario import Scenario
 from dfcoa_opt.sim.leader import VirtualLeader
 
@@ -49,7 +49,7 @@ def test_the_final_poses_run_from_the_goal_to_where_the_simulated_leader_stops(n
     # to the exact goal: its direction (-135 and -90 degrees) is not the arrival heading
     sc = load_scenario(ROOT / "scenarios" / name)
     poses = final_leader_poses(sc.leader_path, sc.spec, sc.leader_heading)
-    assert poses.shape == (checks.GOAL_SAMPLES, 3)
+    assert poses.shape == (placement.GOAL_SAMPLES, 3)
     np.testing.assert_allclose(poses[0, :2], sc.spec.leader.goal, atol=1e-12)
     stop = _stop_pose(sc)
     assert np.hypot(*(stop[:2] - poses[-1, :2])) < 0.11
@@ -134,4 +134,4 @@ def test_the_original_large_100_breaks_the_goal_slot_rule_and_no_other(monkeypat
 @pytest.mark.parametrize("path", SHIPPED, ids=[str(p.relative_to(ROOT)) for p in SHIPPED])
 def test_every_shipped_scenario_has_clear_goal_slots(path):
     sc = load_scenario(path)
-    assert _goal_clearance(sc) > sc.spec.robots.radius + checks.GOAL_TOLERANCE
+    assert _goal_clearance(sc) > sc.spec.robots.radius + placement.GOAL_TOLERANCE

@@ -1,4 +1,4 @@
-"""numba's kernel cache follows edits of the modules a kernel imports (dfcoa_opt.core.runtime.kernel_cache)."""
+"""numba's kernel cache follows edits of the modules a kernel imports (core.runtime.kernel_cache)."""
 
 from __future__ import annotations
 

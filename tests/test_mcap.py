@@ -1,4 +1,4 @@
-"""RunLog.to_mcap: a rosbag2 MCAP file read back with rosbags' own reader.
+"""write_mcap: a rosbag2 MCAP file read back with rosbags' own reader.
 
 The run (dfcoa on example_obstacles: LiDAR, three static shapes, one moving
 disc, contacts) is written once; every check decodes the file with
@@ -24,7 +24,7 @@ from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.batch import BatchSimulator
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.sim.simulator import batch_controllers
-from dfcoa_opt.viz.mcap import ROS_DISTRO
+from dfcoa_opt.viz.mcap import ROS_DISTRO, write_mcap
 
 SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "example_obstacles.toml"
 
@@ -40,7 +40,7 @@ def _run(record: bool, seeds=(0,), **over):
 def bag(tmp_path_factory):
     """The run, its scenario, and every message of its file by topic: (stamp ns, message)."""
     sc, (log,) = _run(True)
-    path = log.to_mcap(tmp_path_factory.mktemp("mcap") / "run.mcap", sc.world)
+    path = write_mcap(log, tmp_path_factory.mktemp("mcap") / "run.mcap", sc.world)
     store = get_typestore(getattr(Stores, ROS_DISTRO))
     topics: dict[str, list] = defaultdict(list)
     order = []
@@ -199,7 +199,7 @@ def test_without_rosbags_one_clear_error(monkeypatch, tmp_path):
     _, (log,) = _run(False, t_max=1.0)
     monkeypatch.setattr(builtins, "__import__", no_rosbags)
     with pytest.raises(DfcoaError, match=r"'ros' extra"):
-        log.to_mcap(tmp_path / "x.mcap")
+        write_mcap(log, tmp_path / "x.mcap")
     assert not list(tmp_path.iterdir())
     # the CLI says so before it simulates: no log written either
     assert main(["run", str(SCENARIO), "--out", str(tmp_path), "--mcap",

@@ -15,7 +15,7 @@ from dfcoa_opt import metrics as m
 from dfcoa_opt.bench.runner import jsonable
 from dfcoa_opt.metrics import risk as metrics_risk
 from dfcoa_opt.metrics import robots as mr
-from dfcoa_opt.metrics import units as metrics_units
+from dfcoa_opt.metrics import units
 from dfcoa_opt.metrics import world as metrics_world
 from dfcoa_opt.metrics.outcome import OUTCOMES
 from dfcoa_opt.scenario.schema import MetricSpec
@@ -353,34 +353,34 @@ def test_summary_keys_types_and_json():
 
 
 def test_every_summary_key_has_a_unit():
-    """A new metric without a unit in metrics_units.UNITS fails here."""
+    """A new metric without a unit in units.UNITS fails here."""
     log = make_log(pose=np.zeros((4, 2, 2)) + [[0.0, 0.0], [2.0, 0.0]],
                    meta={"controller_counters": {"replans": 2}})
     keys = list(m.summary(log, MetricSpec()))
     assert "ctl_replans" in keys
-    missing = [k for k in keys if k not in metrics_units.UNITS
-               and not k.startswith(metrics_units.COUNTER_PREFIX)]
+    missing = [k for k in keys if k not in units.UNITS
+               and not k.startswith(units.COUNTER_PREFIX)]
     assert missing == []
-    assert metrics_units.units(keys)["ctl_replans"] == "1"
-    assert {k: metrics_units.unit(k) for k in ("fce_rms", "time_to_goal", "risk_raw_max",
+    assert units.units(keys)["ctl_replans"] == "1"
+    assert {k: units.unit(k) for k in ("fce_rms", "time_to_goal", "risk_raw_max",
                                                 "collisions", "stability_pct", "w_rms")} == {
         "fce_rms": "m", "time_to_goal": "s", "risk_raw_max": "1/m^2", "collisions": "1",
         "stability_pct": "%", "w_rms": "rad/s"}
     with pytest.raises(KeyError, match="no unit"):
-        metrics_units.unit("no_such_metric")
+        units.unit("no_such_metric")
     # no unit of a key that no summary or world-difficulty table has
     world = [k for k, _, _ in metrics_world.INDEX_SCALES]
     world += ["world_difficulty", "world_path_length", "world_reference_time"]
-    assert set(metrics_units.UNITS) == set(keys) - {"ctl_replans"} | set(world)
+    assert set(units.UNITS) == set(keys) - {"ctl_replans"} | set(world)
 
 
 def test_with_unit_formats_values_for_people():
-    assert metrics_units.with_unit(0.0027474, "fce_rms") == "0.002747 m"
-    assert metrics_units.with_unit(65.4, "time_to_goal") == "65.4 s"
-    assert metrics_units.with_unit(3, "collisions") == "3"
-    assert metrics_units.with_unit(math.nan, "time_to_goal") == "n/a"
-    assert metrics_units.with_unit(math.inf, "risk_raw_max") == "inf 1/m^2"
-    assert metrics_units.with_unit("collision", "outcome") == "collision"
+    assert units.with_unit(0.0027474, "fce_rms") == "0.002747 m"
+    assert units.with_unit(65.4, "time_to_goal") == "65.4 s"
+    assert units.with_unit(3, "collisions") == "3"
+    assert units.with_unit(math.nan, "time_to_goal") == "n/a"
+    assert units.with_unit(math.inf, "risk_raw_max") == "inf 1/m^2"
+    assert units.with_unit("collision", "outcome") == "collision"
 
 
 def test_summary_accepts_scenario_like_settings():

@@ -8,10 +8,11 @@ import pytest
 from test_metrics import make_log
 
 from dfcoa_opt import metrics
-from dfcoa_opt.metrics.outcome import OUTCOMES, classify, stalled
+from dfcoa_opt.metrics.outcome import OUTCOMES, classify
 from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.scenario.schema import MetricSpec
 from dfcoa_opt.sim.simulator import run_scenario
+from dfcoa_opt.sim.stall import stalled
 
 ROOT = Path(__file__).resolve().parents[1]
 CFG = MetricSpec()  # window 10 s, advance 0.2 m, displacement 0.2 m

@@ -20,7 +20,7 @@ from dfcoa_opt import metrics as run_metrics
 from dfcoa_opt.bench.report import document as report
 from dfcoa_opt.bench.report import plots, stats, tables, trajectories
 from dfcoa_opt.core.errors import DfcoaError
-from dfcoa_opt.core.runtime import provenance as environment
+from dfcoa_opt.core.runtime import dispatch, provenance
 from dfcoa_opt.scenario.loader import read_toml, scenario_from_dict
 from dfcoa_opt.sim.simulator import run_scenario
 
@@ -190,12 +190,12 @@ def test_environment_header(tmp_path, monkeypatch):
     rows[1]["provenance"]["simd"] = "AVX512_ICL"
     rows[0]["provenance"]["simd_cap"] = rows[1]["provenance"]["simd_cap"] = "X86_V3"
     folder = write_results(tmp_path / "res", rows)
-    monkeypatch.setattr(environment, "PACKAGES", (*environment.PACKAGES, "no-such-package-xyz"))
+    monkeypatch.setattr(provenance, "PACKAGES", (*provenance.PACKAGES, "no-such-package-xyz"))
     head = report.environment_header(folder)
     assert "Date (newest finished run): 2024-05-01T11:00:00-02:00" in head
     assert SHA in head and f"`{SHA[:12]}`" in head and "**demo**" in head
     assert f"numpy {np.__version__}" in head and "no-such-package-xyz not installed" in head
-    assert f"{os.cpu_count()} cores, numpy SIMD {environment.numpy_simd()}" in head
+    assert f"{os.cpu_count()} cores, numpy SIMD {dispatch.numpy_simd()}" in head
     assert "hosts: h1 (numpy SIMD AVX512_ICL, X86_V3; cap X86_V3)" in head
 
 
@@ -203,12 +203,12 @@ def test_numpy_simd_follows_numpy_dispatch():
     """The level is numpy's own choice: with every dispatch target disabled, the baseline."""
     from numpy._core import _multiarray_umath as umath
 
-    here = environment.numpy_simd()
+    here = dispatch.numpy_simd()
     assert here in [*umath.__cpu_dispatch__, *umath.__cpu_baseline__]
     assert umath.__cpu_features__[here]
     env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": " ".join(umath.__cpu_dispatch__)}
-    out = subprocess.run([sys.executable, "-c", "from dfcoa_opt.core.runtime import provenance; "
-                          "print(provenance.numpy_simd())"],
+    out = subprocess.run([sys.executable, "-c", "from dfcoa_opt.core.runtime import dispatch; "
+                          "print(dispatch.numpy_simd())"],
                          env=env, capture_output=True, text=True, check=True).stdout.strip()
     assert out == umath.__cpu_baseline__[-1]
 

@@ -18,8 +18,7 @@ from dfcoa_opt.bench.report import plots, trajectories
 from dfcoa_opt.bench.results.logs import read_log
 from dfcoa_opt.bench.sweep.expand import load_sweep
 from dfcoa_opt.metrics import contacts
-from dfcoa_opt.viz import layout as figure_layout
-from dfcoa_opt.viz import plotting
+from dfcoa_opt.viz import layout, plotting
 
 ROOT = Path(__file__).resolve().parents[1]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -163,7 +162,7 @@ def test_panels_have_one_titled_panel_per_variant_with_the_same_axes(ladder_resu
     assert texts[:6] == ["robots (a colour each)", "final position", "leader path", "start",
                          "goal", "obstacle"]
     assert "first contact" not in texts  # no panel has a contact to mark
-    figure_layout.png_bytes(fig)  # laid out and drawn: the legend is clear of every panel
+    layout.png_bytes(fig)  # laid out and drawn: the legend is clear of every panel
     assert not any(_bbox_in(legend, fig).overlaps(_bbox_in(ax, fig)) for ax in fig.axes)
     assert "boom" in " ".join(t.get_text() for t in axes[0].texts)
     with pytest.raises(ValueError, match="mix"):

@@ -11,10 +11,11 @@ from comparisons.reshape.controller import Reshape
 from comparisons.reshape.region import Region, grow_region, shape_segments
 from comparisons.reshape.tracking import FREED_MEMORY, Guidance, StuckMonitor
 from dfcoa_opt.control.registry import make_controller
-from dfcoa_opt.metrics.outcome import formation_progress, leader_path, stalled_steps
+from dfcoa_opt.metrics.outcome import leader_path, stalled_steps
 from dfcoa_opt.scenario.formation import line_offsets, v_offsets
 from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.sim.simulator import Simulator
+from dfcoa_opt.sim.stall import formation_progress
 from dfcoa_opt.world.shapes import Circle, Rectangle
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -9,6 +9,7 @@ import pytest
 import dfcoa_opt as d
 from dfcoa_opt.cli import main
 from dfcoa_opt.core.errors import DfcoaError
+from dfcoa_opt.scenario.loader import reseed
 from dfcoa_opt.sim.log import RunLog
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -61,16 +62,16 @@ def test_a_loaded_clutter_scenario_is_drawn_again_for_the_run_seed():
 
 def test_a_scenario_without_a_seeded_world_is_not_rebuilt():
     s = d.load(ROOT / "scenarios" / "bench" / "corridor.toml")
-    assert not s.seed_dependent and s.for_seed(s.spec.seed + 1) is s
+    assert not s.seed_dependent and reseed(s, s.spec.seed + 1) is s
     fixed = d.load(CLUTTER, world__clutter__seed=11)  # the field has a seed of its own
-    assert not fixed.seed_dependent and fixed.for_seed(0) is fixed
+    assert not fixed.seed_dependent and reseed(fixed, 0) is fixed
 
 
 def test_a_seeded_world_without_its_file_data_stops_with_one_line():
     from dataclasses import replace
 
     bare = replace(d.load(CLUTTER), data=None)
-    assert bare.for_seed(bare.spec.seed) is bare
+    assert reseed(bare, bare.spec.seed) is bare
     with pytest.raises(DfcoaError, match=r"clutter\.toml: its world follows the seed, "
                                          r"so load it with seed 3") as err:
         d.run(bare, "goto_slot", seed=3)

@@ -104,7 +104,7 @@ def test_the_sweep_module_exports_every_public_name_of_its_parts() -> None:
 
 def test_patching_load_run_scenario_of_the_sweep_module_reaches_the_expansion(
         tmp_path: Path, monkeypatch) -> None:
-    """The tests that cache scenario loads patch ``dfcoa_opt.bench.sweep.expand.load_run_scenario``."""
+    """The tests that cache scenario loads patch ``bench.sweep.expand.load_run_scenario``."""
     seen = []
     real = sweep_mod.load_run_scenario
 

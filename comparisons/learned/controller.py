@@ -37,7 +37,7 @@ from dfcoa_opt.core.params import param
 
 #: The shipped policy file (its weights: ``learned.npz`` beside it).
 SHIPPED = Path(__file__).resolve().parent / "learned.json"
-#: SHA-256 of the shipped spec and weights (:func:`~dfcoa_opt.control.policy.controller.policy_digest`).
+#: SHA-256 of the shipped spec and weights (:func:`~dfcoa_opt.control.policy.policy_digest`).
 #: The results cache fingerprints code, not data: a retrained file must change this line,
 #: which re-simulates the stored runs of ``learned``.
 SHIPPED_DIGEST = "2ee25b1eca127db2f12a362583e033f7e9742ca0f2e331664ddc643eb2c9be19"

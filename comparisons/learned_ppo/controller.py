@@ -26,7 +26,7 @@ from dfcoa_opt.core.params import param
 
 #: The shipped policy file (its weights: ``learned_ppo.npz`` beside it).
 SHIPPED = Path(__file__).resolve().parent / "learned_ppo.json"
-#: SHA-256 of the shipped spec and weights (:func:`~dfcoa_opt.control.policy.controller.policy_digest`).
+#: SHA-256 of the shipped spec and weights (:func:`~dfcoa_opt.control.policy.policy_digest`).
 #: The results cache fingerprints code, not data: a retrained file must change this line,
 #: which re-simulates the stored runs of ``learned_ppo``.
 SHIPPED_DIGEST = "6674f0d2df7038d23ecef7ea3c69c761c388aa0b162f8f862b9671613610aaad"

@@ -150,7 +150,7 @@ class BodyVelocity(VecEnvWrapper):
 
     What a ``velocity`` controller with ``frame = "body"`` gets at run time:
     the row is rotated into the world by the robot's heading
-    (:func:`dfcoa_opt.core.geometry.rotate`, as :class:`~dfcoa_opt.control.policy.controller.PolicyController`
+    (:func:`dfcoa_opt.core.geometry.rotate`, as :class:`~dfcoa_opt.control.policy.PolicyController`
     does) and converted to the robots' ``(v, omega)`` by the simulator's
     near-identity map (:func:`dfcoa_opt.control.adapters.convert`), so the
     exported policy file runs the trained policy exactly.

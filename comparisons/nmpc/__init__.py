@@ -16,11 +16,10 @@ imports from here, with a :class:`DeprecationWarning`, until 0.3.
 Notes: ``docs/methods/nmpc.md``.
 """
 
-import importlib
-import warnings
 from typing import Any
 
 from comparisons.nmpc.controller import Nmpc, goto_command
+from dfcoa_opt.core.moved import moved_attribute
 
 __all__ = ["Nmpc", "goto_command"]
 
@@ -30,9 +29,4 @@ MOVED_NAMES = {"solve_time_stats": "dfcoa_opt.metrics.solver"}
 
 def __getattr__(name: str) -> Any:
     """A moved name (:data:`MOVED_NAMES`), from its new module, with a DeprecationWarning."""
-    if name not in MOVED_NAMES:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    new = MOVED_NAMES[name]
-    warnings.warn(f"{__name__}.{name} moved to {new}.{name}; the old name goes in 0.3",
-                  DeprecationWarning, stacklevel=2)
-    return getattr(importlib.import_module(new), name)
+    return moved_attribute(__name__, name, MOVED_NAMES, "0.3")

@@ -43,7 +43,6 @@ from typing import TYPE_CHECKING, Any
 from dfcoa_opt.bench.sweep.expand import RunSpec, load_run_scenario
 from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.core.runtime import dispatch
-from dfcoa_opt.core.runtime import provenance as environment
 
 if TYPE_CHECKING:
     from dfcoa_opt.scenario.scenario import Scenario
@@ -113,7 +112,7 @@ def _outcome(run: RunSpec, log: RunLog, scenario: Scenario, wall: float) -> Outc
 
 
 def _provenance(wall: float) -> dict[str, Any]:
-    return dict(wall_time=wall, host=socket.gethostname(), simd=environment.numpy_simd(),
+    return dict(wall_time=wall, host=socket.gethostname(), simd=dispatch.numpy_simd(),
                 simd_cap=dispatch.describe(), pid=os.getpid(),
                 finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
 

@@ -283,7 +283,7 @@ def _cmd_run(a: argparse.Namespace) -> int:
     if a.mcap and len(seeds) > 1:
         raise DfcoaError("--mcap: one file holds one run; use --seed")
     if a.mcap:
-        from dfcoa_opt.viz.mcap import require_rosbags
+        from dfcoa_opt.viz.mcap import require_rosbags, write_mcap
 
         require_rosbags()  # before the run, not after it
     sim = BatchSimulator(scenario, batch_controllers(a.controller, scenario, len(seeds)), seeds,
@@ -312,7 +312,7 @@ def _cmd_run(a: argparse.Namespace) -> int:
                 animation.animate_run(log, sc.world.grid, a.animate, goal=goal, start=start,
                                       shapes=sc.world.shapes, metrics=sc.spec.metrics)
         if a.mcap:
-            log.to_mcap(a.mcap, sc.world)
+            write_mcap(log, a.mcap, sc.world)
         if a.json:
             print(json.dumps(result))  # one object per line (JSON Lines) with --seeds
             continue

@@ -32,8 +32,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.control.base import Observation, slot_velocity
+from dfcoa_opt.control.features_kernel import flatten_rows
 from dfcoa_opt.core.params import param
-from dfcoa_opt.envs.kernels import flatten_rows
 
 FloatArray = NDArray[np.float64]
 
@@ -87,7 +87,7 @@ def _f64(x: object) -> FloatArray:
 def flatten(obs: Observation, spec: ObservationSpec) -> FloatArray:
     """Every row of ``obs`` as the vector of :class:`ObservationSpec` (module docstring).
 
-    One compiled pass (:func:`~dfcoa_opt.envs.kernels.flatten_rows`) with the
+    One compiled pass (:func:`~dfcoa_opt.control.features_kernel.flatten_rows`) with the
     bits of :func:`flatten_reference`.
 
     Args:

@@ -50,10 +50,10 @@ ENTRY_POINT_GROUP = CONTROLLERS.group
 C = TypeVar("C", bound=type)
 T = TypeVar("T")
 
-__all__ = ["CONTROLLERS", "ENTRY_POINT_GROUP", "FILTERS", "POLICY_PREFIX", "available", "available_filters",
-           "build_controller", "check_tables", "component_classes", "controller_class",
-           "controller_tunables", "data_digest", "is_policy", "known_to_workers",
-           "make_controller", "register", "register_filter"]
+__all__ = ["CONTROLLERS", "ENTRY_POINT_GROUP", "FILTERS", "POLICY_PREFIX", "available",
+           "available_filters", "build_controller", "check_tables", "component_classes",
+           "controller_class", "controller_tunables", "data_digest", "is_policy",
+           "known_to_workers", "make_controller", "register", "register_filter"]
 
 
 def register(controller_id: str, *, command: str | None = None, spec: Any = None,

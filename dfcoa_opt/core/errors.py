@@ -72,3 +72,7 @@ class RunFailed(DfcoaError):
     ``dfcoa run`` prints it as ``run failed: ...`` (exit code 1); a sweep records
     the run as ``failed`` with this message.
     """
+
+
+class ControllerError(RunFailed):
+    """A controller returned a malformed or non-finite command (the run fails)."""

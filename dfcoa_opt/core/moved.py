@@ -7,6 +7,15 @@ names. ``import comparisons.lf_vo_core`` (and ``from ... import ...``) then
 returns the module at its new path, under a :class:`DeprecationWarning` that
 names the new path, so code written against the old layout keeps running and
 says what to change. No file is left at the old path.
+
+The finder goes first in ``sys.meta_path``: when a whole package moves
+(``dfcoa_opt.robots`` became ``dfcoa_opt.world.robots``), Python's own path
+finder would otherwise find the old name of each submodule through the moved
+package's ``__path__`` and load a second copy of it (two class identities,
+two registrations). Every old submodule of a moved package is listed.
+
+A *name* that moved out of a module (a function, a constant) is served by
+the module's ``__getattr__`` with :func:`moved_attribute`.
 """
 
 from __future__ import annotations
@@ -18,6 +27,7 @@ import sys
 import types
 import warnings
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 
 class _MovedFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
@@ -67,4 +77,31 @@ def keep_old_paths(moves: Mapping[str, str], removal: str) -> None:
         if isinstance(finder, _MovedFinder) and finder.moves.keys() & moves.keys():
             finder.moves.update(moves)
             return
-    sys.meta_path.append(_MovedFinder(moves, removal))
+    sys.meta_path.insert(0, _MovedFinder(moves, removal))
+
+
+def moved_attribute(module: str, name: str, moves: Mapping[str, str], removal: str) -> Any:
+    """A name that moved out of ``module``, from its new module, with a DeprecationWarning.
+
+    For a module's ``__getattr__``::
+
+        MOVED_NAMES = {"solve_time_stats": "dfcoa_opt.metrics.solver"}
+
+        def __getattr__(name):
+            return moved_attribute(__name__, name, MOVED_NAMES, "0.3")
+
+    Args:
+        module: The old module's name (``__name__``).
+        name: The name asked for.
+        moves: Moved name -> the dotted name of the module that holds it now.
+        removal: The release that drops the old name (for the warning).
+
+    Raises:
+        AttributeError: ``name`` is not one of ``moves`` (as for any missing name).
+    """
+    if name not in moves:
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
+    new = moves[name]
+    warnings.warn(f"{module}.{name} moved to {new}.{name}; the old name goes in {removal}",
+                  DeprecationWarning, stacklevel=3)
+    return getattr(importlib.import_module(new), name)

@@ -91,7 +91,8 @@ def _typename(tp: Any) -> str:
 _INT64_MAX = 2**63 - 1  # the TOML spec's integer range (tomllib accepts more)
 #: Largest magnitude of a finite number (a float key): products and squares of two
 #: such numbers stay far inside the float range (1.8e308), and nothing physical in
-#: SI units here comes near it (lengths stop at 1e6 m; see ``sim.checks.MAX_EXTENT``).
+#: SI units here comes near it (lengths stop at 1e6 m:
+#: :data:`dfcoa_opt.scenario.budget.MAX_EXTENT`).
 MAX_MAGNITUDE = 1e9
 #: Smallest value of a key that must be strictly positive (``gt=0``): quotients by it
 #: stay finite, and a 5e-324 that underflows to 0 in the first division is refused.

@@ -17,7 +17,7 @@ The environments change three settings of the scenario they are given
 episode), ``leader.wait_for_formation = true`` (success needs the formation
 settled at the goal) and ``stop_on_deadlock`` (the environment's option,
 default true: a stalled run ends as a deadlock). The stall test is
-:class:`~dfcoa_opt.metrics.outcome.StallMonitor`'s, computed for every run at once
+:class:`~dfcoa_opt.sim.stall.StallMonitor`'s, computed for every run at once
 (:class:`~dfcoa_opt.envs.rewards.BatchStall`, whose flags are the Stepper's
 ``stall_flags``): the per-run monitors would cost a Python loop over the runs
 at every step (about half of a step at E = 1024).
@@ -39,13 +39,14 @@ from dfcoa_opt.control.features import ObservationSpec, flatten
 from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.core.runtime import dispatch
 from dfcoa_opt.envs.kernels import score_runs
-from dfcoa_opt.envs.rewards import BatchStall, PathTable, RewardSpec, end_bonus, end_of_episode
+from dfcoa_opt.envs.rewards import PathTable, RewardSpec, end_bonus, end_of_episode
 from dfcoa_opt.envs.spaces import action_bounds, observation_bounds
 from dfcoa_opt.metrics.outcome import OUTCOMES
 from dfcoa_opt.scenario.scenario import Scenario
 from dfcoa_opt.scenario.schema import MetricSpec
 from dfcoa_opt.sim.batch import BatchSimulator
 from dfcoa_opt.sim.log import RunLog
+from dfcoa_opt.sim.stall import BatchStall
 from dfcoa_opt.sim.stepper import Ended, Stepper, is_batched
 from dfcoa_opt.world.robots.models import CommandKind, make_model
 

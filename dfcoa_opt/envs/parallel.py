@@ -168,7 +168,7 @@ class FormationParallelEnv(ParallelEnv[str, FloatArray, FloatArray]):
         return self.core.episode_log(0)
 
     def render(self) -> None:
-        """No rendering: plot an episode with ``dfcoa_opt.viz.plotting`` from :meth:`episode_log`."""
+        """No rendering: plot an episode's log (:meth:`episode_log`) with :mod:`dfcoa_opt.viz`."""
         return None
 
     def close(self) -> None:

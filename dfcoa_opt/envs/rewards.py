@@ -16,7 +16,7 @@ the command they then applied), so its terms are the run log's own numbers::
 - ``E_s``: the formation shape error, paper 000 eq 7
   (:func:`dfcoa_opt.metrics.formation_shape_error`), m;
 - ``s``: the arc length along the leader's planned path of the point nearest
-  the robots' centroid (:func:`dfcoa_opt.metrics.outcome.formation_progress`), m, with
+  the robots' centroid (:func:`dfcoa_opt.sim.stall.formation_progress`), m, with
   ``s(t_{-1}) = s(t_0)``;
 - a contact is any of :func:`dfcoa_opt.metrics.outcome.contact_steps` (robot-robot,
   robot-static, robot-moving), the outcome ``collision``.
@@ -39,7 +39,6 @@ from numpy.typing import NDArray
 
 from dfcoa_opt.core.params import param
 from dfcoa_opt.metrics import formation_centroid_error, formation_shape_error
-from dfcoa_opt.scenario.schema import MetricSpec
 
 if TYPE_CHECKING:
     from dfcoa_opt.sim.log import RunLog
@@ -127,7 +126,7 @@ def path_arc_length(path: FloatArray, points: FloatArray) -> FloatArray:
     """Arc length of the nearest point of ``path`` to each point, vectorised over the points.
 
     The arithmetic of ``PurePursuit.arc_length`` (the measure of
-    :func:`dfcoa_opt.metrics.outcome.formation_progress`) in numpy, for every point in
+    :func:`dfcoa_opt.sim.stall.formation_progress`) in numpy, for every point in
     one call: for each segment the clipped projection ``t``, its distance, and
     the first nearest segment wins. (The environments' step computes it in
     :func:`~dfcoa_opt.envs.kernels.score_runs`, with these bits.)
@@ -210,66 +209,6 @@ def end_bonus(spec: RewardSpec, outcome: str) -> float:
     if outcome == "deadlock":
         return -spec.deadlock
     return 0.0
-
-
-class BatchStall:
-    """:class:`~dfcoa_opt.metrics.outcome.StallMonitor`'s test for every run of a batch at once.
-
-    The Stepper asks each run's monitor ``update(k, positions, slots)`` in a
-    Python loop; this object holds the answer of every run (:attr:`flags`,
-    the Stepper's ``stall_flags``), set in the compiled pass that scores the
-    step (:func:`~dfcoa_opt.envs.kernels.score_runs`, from the arc lengths the
-    reward already needs; :meth:`update_reference` is its numpy reference).
-    The rule and its arithmetic are the monitor's, so a run stops at the same
-    instant, bit for bit: instant ``k >= lag`` is stalled when the centroid advanced less
-    than ``metrics.deadlock_advance`` along the path since ``k - lag`` and every
-    robot farther than ``settle_tolerance`` from its slot moved less than
-    ``metrics.deadlock_displacement`` (:func:`dfcoa_opt.metrics.outcome.stalled`).
-
-    Args:
-        slots: E, the batch's slots.
-        steps: Instants a run can have.
-        dt: Step, s.
-        settle_tolerance: The leader's ``settle_tolerance``, m.
-        cfg: The scenario's ``[metrics]`` (window and thresholds).
-    """
-
-    def __init__(self, slots: int, steps: int, dt: float, settle_tolerance: float,
-                 cfg: MetricSpec) -> None:
-        self.progress = np.zeros((slots, steps))
-        self.flags = np.zeros(slots, dtype=bool)
-        self.lag = max(1, int(round(cfg.deadlock_window / dt)))
-        self.settle = settle_tolerance
-        self.advance, self.displacement = cfg.deadlock_advance, cfg.deadlock_displacement
-
-    def update_reference(self, arc: FloatArray, active: NDArray[np.intp], k: NDArray[np.int64],
-                         pose: FloatArray, slots: FloatArray) -> None:
-        """Record instant ``k`` of the active runs and decide which are stalled, in numpy.
-
-        The reference of the environments' compiled pass
-        (:func:`~dfcoa_opt.envs.kernels.score_runs`, which sets :attr:`progress`
-        and :attr:`flags` with these bits).
-
-        Args:
-            arc: ``(A,)`` each run's centroid arc length at its instant, m.
-            active: ``(A,)`` their slots.
-            k: ``(A,)`` their instants.
-            pose: The log's ``(E, T, N, 3)`` poses (rows up to ``k`` written), m.
-            slots: The log's ``(E, T, N, 2)`` slots, m.
-        """
-        self.progress[active, k] = arc
-        self.flags[active] = False
-        lo = k - self.lag
-        cand = lo >= 0
-        cand[cand] = (self.progress[active[cand], k[cand]]
-                      - self.progress[active[cand], lo[cand]] < self.advance)
-        if not cand.any():
-            return
-        e, kc, lc = active[cand], k[cand], lo[cand]
-        now = pose[e, kc, :, :2]
-        away = np.linalg.norm(now - slots[e, kc], axis=-1) > self.settle
-        moved = np.linalg.norm(now - pose[e, lc, :, :2], axis=-1)
-        self.flags[e] = np.all(~away | (moved < self.displacement), axis=1)
 
 
 class PathTable:

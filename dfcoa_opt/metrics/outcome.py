@@ -11,7 +11,7 @@ Every run ends in exactly one class, decided in this order:
    goal with the formation settled, the simulator's stop condition) with zero
    contacts.
 3. ``deadlock``: not reached, no contact, and the run was *stalled* at its end
-   (:func:`stalled`): over the last ``metrics.deadlock_window`` seconds the
+   (:func:`dfcoa_opt.sim.stall.stalled`): over the last ``metrics.deadlock_window`` seconds the
    formation's centroid advanced less than ``metrics.deadlock_advance`` along
    the leader's path, and every robot that was away from its slot moved less
    than ``metrics.deadlock_displacement``. :func:`deadlock_onset` is the start of
@@ -19,7 +19,7 @@ Every run ends in exactly one class, decided in this order:
 4. ``timeout``: everything else -- the run ran out of time while it was still
    progressing (a slow formation, or a robot circling without settling).
 
-The same :func:`stalled` test ends a run early when the scenario sets
+The same test (:mod:`dfcoa_opt.sim.stall`) ends a run early when the scenario sets
 ``stop_on_deadlock``, so a run stopped that way is classified ``deadlock`` by
 construction. Definitions and defaults: ``docs/metrics.md`` (outcomes).
 """
@@ -32,9 +32,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.planning.pure_pursuit import PurePursuit
 from dfcoa_opt.scenario.schema import MetricSpec
 from dfcoa_opt.sim.log import RunLog
+from dfcoa_opt.sim.stall import formation_progress, stalled
 
 FloatArray = NDArray[np.float64]
 
@@ -61,93 +61,6 @@ def leader_path(log: RunLog) -> FloatArray:
     if path is not None and len(path):
         return np.asarray(path, dtype=float).reshape(-1, 2)
     return np.asarray(log.leader[:, :2], dtype=float)
-
-
-def formation_progress(positions: FloatArray, path: FloatArray) -> FloatArray:
-    """Arc length along ``path`` of the point nearest the formation's centroid, per instant.
-
-    Args:
-        positions: ``(T, N, 2)`` robot positions, m.
-        path: ``(P, 2)`` the leader's path, m.
-
-    Returns:
-        ``(T,)`` arc lengths from the path's start, m.
-    """
-    centroid = np.asarray(positions, dtype=float).mean(axis=1)
-    return PurePursuit(path, 0.0, 0.0, 0.0).arc_length(centroid)
-
-
-def stalled(positions: FloatArray, slots: FloatArray, progress: FloatArray, lag: int,
-            settle_tolerance: float, advance: float, displacement: float) -> NDArray[np.bool_]:
-    """Whether the run had made no progress over the ``lag`` steps before each instant.
-
-    Instant ``k`` (``k >= lag``) is stalled when both hold over ``[k - lag, k]``:
-    the formation's centroid advanced less than ``advance`` along the leader's
-    path (``progress[k] - progress[k - lag] < advance``), and every robot farther
-    than ``settle_tolerance`` from its slot at ``k`` moved less than
-    ``displacement`` (net, ``|p_i(k) - p_i(k - lag)|``). Robots at their slots
-    are left out, so a robot that chatters around its settled slot does not hide
-    a stuck one. Instants before ``lag`` are never stalled.
-
-    Args:
-        positions: ``(T, N, 2)`` robot positions, m.
-        slots: ``(T, N, 2)`` their formation slots, m.
-        progress: ``(T,)`` :func:`formation_progress`, m.
-        lag: Window in steps (>= 1).
-        settle_tolerance: A robot this close to its slot is at its slot, m.
-        advance: Least advance of the centroid that counts as progress, m.
-        displacement: Least net displacement of a robot that counts as progress, m.
-
-    Returns:
-        ``(T,)`` booleans.
-    """
-    pos = np.asarray(positions, dtype=float)
-    out = np.zeros(len(pos), dtype=bool)
-    if lag < 1 or len(pos) <= lag:
-        return out
-    now, before = pos[lag:], pos[:-lag]
-    away = np.linalg.norm(now - np.asarray(slots, dtype=float)[lag:], axis=-1) > settle_tolerance
-    moved = np.linalg.norm(now - before, axis=-1)
-    still = np.all(~away | (moved < displacement), axis=1)
-    prog = np.asarray(progress, dtype=float)
-    out[lag:] = still & (prog[lag:] - prog[:-lag] < advance)
-    return out
-
-
-class StallMonitor:
-    """:func:`stalled` while a run is simulated, for ``stop_on_deadlock``.
-
-    Args:
-        path: ``(P, 2)`` the leader's path, m.
-        steps: Instants the run can have.
-        dt: Step, s.
-        settle_tolerance: The leader's ``settle_tolerance``, m.
-        cfg: Metric settings (window and thresholds).
-    """
-
-    def __init__(self, path: FloatArray, steps: int, dt: float, settle_tolerance: float,
-                 cfg: MetricSpec) -> None:
-        self._tracker = PurePursuit(path, 0.0, 0.0, 0.0)
-        self._progress = np.zeros(steps)
-        self._lag = max(1, int(round(cfg.deadlock_window / dt)))
-        self._args = (settle_tolerance, cfg.deadlock_advance, cfg.deadlock_displacement)
-
-    def update(self, k: int, positions: FloatArray, slots: FloatArray) -> bool:
-        """Record instant ``k`` and say whether it is stalled.
-
-        Args:
-            k: The instant just logged.
-            positions: ``(>k, N, 2)`` the logged positions so far (at least up to ``k``), m.
-            slots: ``(>k, N, 2)`` the logged slots so far, m.
-        """
-        self._progress[k] = self._tracker.arc_length(positions[k].mean(axis=0)[None])[0]
-        if k < self._lag:
-            return False
-        lo = k - self._lag
-        if not self._progress[k] - self._progress[lo] < self._args[1]:
-            return False  # the centroid advanced: not stalled, whatever the robots did
-        return bool(stalled(positions[lo:k + 1], slots[lo:k + 1], self._progress[lo:k + 1],
-                            self._lag, *self._args)[-1])
 
 
 def window_steps(log: RunLog, cfg: MetricSpec) -> int:

@@ -1,47 +1,30 @@
-"""Collision risk of paper 000 eq 11, and the metric settings every metric reads.
+"""Collision risk of paper 000 eq 11.
 
 :func:`collision_risk` is the raw risk ``R(t)`` in 1/m^2 and
 :func:`collision_risk_normalised` its clipped [0, 1] form;
 :func:`run_risk` gives the run summaries of the raw risk, which are ``inf``
 for a run with a contact (``docs/metrics.md``, "Safety and risk").
-:func:`metric_settings` turns what a metric function accepts as settings (a
-``MetricSpec``, a ``ScenarioSpec``, a ``Scenario`` or None) into the
-``MetricSpec``. :mod:`dfcoa_opt.metrics` re-exports everything here.
+Settings are read with :func:`dfcoa_opt.metrics.settings.metric_settings`.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, Union
 
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from dfcoa_opt.metrics.settings import Settings, metric_settings
 from dfcoa_opt.scenario.schema import MetricSpec
 from dfcoa_opt.sim.log import RunLog
 
-if TYPE_CHECKING:
-    from dfcoa_opt.scenario.scenario import Scenario
-    from dfcoa_opt.scenario.schema import ScenarioSpec
-
 FloatArray = NDArray[np.float64]
-Settings = Union[MetricSpec, "ScenarioSpec", "Scenario", None]
 
 #: Distances below this (m) are floored in the inverse-square risk terms of eq 11.
 RISK_DISTANCE_FLOOR = 1e-6
 #: (step, robot, moving obstacle) triples per chunk of the loops over moving discs.
 CHUNK_ELEMS = 2_000_000
-
-
-def metric_settings(spec: Settings) -> MetricSpec:
-    """The metric settings of a MetricSpec, ScenarioSpec or Scenario (None: the defaults)."""
-    if spec is None:
-        return MetricSpec()
-    if isinstance(spec, MetricSpec):
-        return spec
-    holder: Any = getattr(spec, "spec", spec)  # a Scenario holds its ScenarioSpec as .spec
-    return holder.metrics
 
 
 def _robot_pair_term(pos: FloatArray, cutoff: float) -> FloatArray:

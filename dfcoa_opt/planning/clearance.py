@@ -175,6 +175,7 @@ def clearance_path(grid: OccupancyGrid, start: Any, goal: Any,
 
 @register_planner("clearance_astar", params=ClearanceParams)
 def clearance_planner(grid: OccupancyGrid, start: NDArray[np.float64], goal: NDArray[np.float64],
-                      waypoints: Any, options: ClearanceParams | None = None) -> NDArray[np.float64]:
+                      waypoints: Any, options: ClearanceParams | None = None
+                      ) -> NDArray[np.float64]:
     """Leader planner: :func:`clearance_path` with the scenario's options."""
     return clearance_path(grid, start, goal, options)

@@ -1,4 +1,8 @@
-"""What a run may ask for: a bound on its instants, and one check of its estimated memory.
+"""What a run may ask for: sizes, a bound on its instants, and one check of its estimated memory.
+
+Sizes first: every position and length of a file within :data:`MAX_EXTENT` m
+of the origin (:func:`check_extents`), and a map of at most :data:`MAX_CELLS`
+cells (:func:`check_cells`; a map file is held to it from its header).
 
 A legal-looking scenario can ask for more than any machine has: ``t_max =
 1e9`` is ten billion instants of log, ``sensors.lidar.beams = 1e9`` a
@@ -16,7 +20,9 @@ particles, and the recorded scans; the interpreter and the libraries (about
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 from dfcoa_opt.core.errors import ScenarioError
 
@@ -110,3 +116,52 @@ def check_budget(spec: ScenarioSpec, source: str, cells: float = 0.0, runs: int 
                                      f"{what}, {parts[key] / 2**30:.3g} GiB of it from this "
                                      f"key, more than the {MAX_RUN_BYTES / 2**30:g} GiB this "
                                      "toolkit allows a run (docs/robustness.md)")
+
+
+def check_extents(spec: ScenarioSpec, offsets: np.ndarray, source: str) -> None:
+    """Every length and position of the file lies within :data:`MAX_EXTENT` of the origin.
+
+    Far-away values are mistakes (a missing decimal point, a unit slip), and
+    squaring them would overflow inside the geometry.
+
+    Raises:
+        ScenarioError: Names the first key with a value beyond the limit.
+    """
+    items: list[tuple[str, Any]] = [("leader.start", spec.leader.start),
+                                    ("leader.goal", spec.leader.goal),
+                                    ("team.poses", [p[:2] for p in spec.team.poses]),
+                                    ("formation", offsets)]
+    for i, o in enumerate(spec.world.obstacles):
+        items += [(f"world.obstacles[{i}].{name}", getattr(o, name))
+                  for name in ("center", "radius", "min", "max", "vertices")]
+    for i, d in enumerate(spec.world.dynamic_obstacles):
+        items += [(f"world.dynamic_obstacles[{i}].radius", d.radius),
+                  (f"world.dynamic_obstacles[{i}].waypoints", d.waypoints)]
+    for key, value in items:
+        values = np.asarray(value if value is not None else (), dtype=float)
+        if not np.all(np.abs(values) <= MAX_EXTENT):
+            shown = value if key != "formation" else "the slot offsets"
+            raise ScenarioError(source, key, f"{shown} reach beyond the {MAX_EXTENT:g} m "
+                                             f"this toolkit accepts")
+
+
+#: Largest map, in cells: what fits in a run's memory budget (2 GiB at
+#: :data:`CELL_BYTES` a cell: 33,554,432 cells, e.g. 579 m x 579 m at
+#: 10 cells/m). A map file is held to it from its header, ``world.size`` by the budget.
+MAX_CELLS = MAX_RUN_BYTES // CELL_BYTES
+#: Largest coordinate of the map's corners, m.
+MAX_EXTENT = 1e6
+
+
+def check_cells(size: tuple[float, float], resolution: float, source: str) -> None:
+    """Refuse a ``world.size`` whose grid would not fit in memory, before allocating it.
+
+    Raises:
+        ScenarioError: More than :data:`MAX_CELLS` cells.
+    """
+    cells = [s * resolution for s in size]
+    total = math.prod(max(1.0, c) for c in cells)
+    if not total <= MAX_CELLS:
+        raise ScenarioError(source, "world.size", f"{size[0]:g} x {size[1]:g} m at "
+                            f"{resolution:g} cells/m is {cells[0]:.3g} x {cells[1]:.3g} cells, "
+                            f"more than the {MAX_CELLS:.0e} this toolkit accepts")

@@ -16,7 +16,7 @@ too), no two robots may start overlapping (centres closer than
 start on a formation slot inside an obstacle (an error; a robot body that only
 overlaps an obstacle at the start is allowed and counted as a contact), and no
 formation slot may lie within (or at) a robot radius of an obstacle at the goal
-(:func:`~dfcoa_opt.scenario.checks.final_leader_poses`: no robot could stand on it without a
+(:func:`~dfcoa_opt.scenario.placement.final_leader_poses`: no robot could stand on it without a
 contact).
 Values that would be silently ignored are errors too: ``leader.waypoints``
 with a planner other than ``straight`` (and, in the schema, a formation key
@@ -41,26 +41,20 @@ import numpy as np
 
 from dfcoa_opt.core.errors import DfcoaError, ScenarioError
 from dfcoa_opt.core.params import build
-from dfcoa_opt.scenario.budget import check_budget
-from dfcoa_opt.scenario.checks import (
-    MAX_EXTENT,
-    check_cells,
-    check_connected,
-    check_extents,
-    check_free,
-    check_goal_clear,
-    check_names,
-    check_waypoints,
-    final_leader_poses,
-)
+from dfcoa_opt.scenario.budget import MAX_EXTENT, check_budget, check_cells, check_extents
 from dfcoa_opt.scenario.formation import formation_offsets, slot_positions
 from dfcoa_opt.scenario.map_files import grid_cells, map_file
+from dfcoa_opt.scenario.names import check_names, check_waypoints
 from dfcoa_opt.scenario.placement import (
+    check_connected,
+    check_free,
+    check_goal_clear,
     check_obstacles_in_map,
     check_polygons,
     check_start_clear,
     check_start_poses,
     check_via_points,
+    final_leader_poses,
 )
 from dfcoa_opt.scenario.scenario import Scenario, World
 from dfcoa_opt.scenario.schema import ObstacleSpec, ScenarioSpec
@@ -211,6 +205,39 @@ def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",
 
 
 #: Profile keys that only an actuated robot has (a kinematic one ignores them).
+
+
+def reseed(scenario: Scenario, seed: int) -> Scenario:
+    """``scenario`` as loaded with ``seed``: what the seed draws is drawn again.
+
+    The one meaning of a run's seed, whatever the entry point: a run with
+    seed ``s`` gets the world of ``load_scenario(file, s)``, so a loaded
+    scenario can be run with any seed.
+
+    Args:
+        scenario: A loaded scenario.
+        seed: The run's seed.
+
+    Returns:
+        ``scenario`` when ``seed`` is its own or nothing in it depends on the
+        seed; else the scenario built again from its ``data`` with ``seed``
+        (the same overrides).
+
+    Raises:
+        DfcoaError: The world depends on the seed and the scenario was not
+            built from a file or a dict (no ``data``).
+        ScenarioError: The scenario does not load with ``seed`` (e.g. a
+            clutter field that closes the way).
+    """
+    if int(seed) == scenario.spec.seed or not scenario.seed_dependent:
+        return scenario
+    if scenario.data is None:
+        raise DfcoaError(f"{scenario.source}: its world follows the seed, so load it with "
+                         f"seed {seed} (dfcoa_opt.load(path, seed={seed})) to run that seed")
+    return scenario_from_dict({**scenario.data, "seed": int(seed)}, scenario.source,
+                              scenario.base_dir)
+
+
 ACTUATED_KEYS = ("wheel_accel_max", "motor_time_constant")
 
 

@@ -2,7 +2,7 @@
 
 Each problem is a one-line :class:`~dfcoa_opt.core.errors.ScenarioError` naming the
 scenario file (or the map's YAML file) and the key; an image is held to
-:data:`~dfcoa_opt.scenario.checks.MAX_CELLS` from its header, before its pixels are
+:data:`~dfcoa_opt.scenario.budget.MAX_CELLS` from its header, before its pixels are
 decoded.
 """
 
@@ -13,7 +13,7 @@ from pathlib import Path
 
 from dfcoa_opt.core.atomic import file_exists
 from dfcoa_opt.core.errors import ScenarioError
-from dfcoa_opt.scenario.checks import MAX_CELLS
+from dfcoa_opt.scenario.budget import MAX_CELLS
 from dfcoa_opt.scenario.schema import WorldSpec
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.map_server import check_image, load_map_yaml

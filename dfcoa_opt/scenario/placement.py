@@ -1,16 +1,19 @@
-"""Checks of where a scenario's robots start and what its map holds (:mod:`dfcoa_opt.scenario.loader`).
+"""Checks of where things are in a scenario (:mod:`dfcoa_opt.scenario.loader`).
 
 Simple polygons (no crossing or touching edges, no repeated vertex), no
-obstacle wholly outside the map, leader via points on free cells inside the
-map, every robot starting inside the map (formation slots too), no two robots
-starting overlapping unless ``team.allow_start_contact``, and no robot
-starting on a formation slot inside an obstacle. Each raises
+obstacle wholly outside the map, the leader's start, goal and via points on
+free cells inside the map, a goal in the start's free region, no goal slot
+within a robot radius of an obstacle (:func:`final_leader_poses`), every robot
+starting inside the map (formation slots too), no two robots starting
+overlapping unless ``team.allow_start_contact``, and no robot starting on a
+formation slot inside an obstacle. Each raises
 :class:`~dfcoa_opt.core.errors.ScenarioError` (one line: the file, the key, the
 problem).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -19,7 +22,8 @@ import numpy as np
 from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.core.geometry import points_in_polygon
 from dfcoa_opt.core.polygons import polygon_defect, segments_intersect
-from dfcoa_opt.scenario.checks import check_free
+from dfcoa_opt.planning.pure_pursuit import PurePursuit
+from dfcoa_opt.scenario.formation import slot_positions
 from dfcoa_opt.scenario.scenario import World
 from dfcoa_opt.scenario.schema import ObstacleSpec, ScenarioSpec
 from dfcoa_opt.world.grid import OccupancyGrid
@@ -214,3 +218,114 @@ def check_obstacles_in_map(shapes: Sequence[Shape], extent: tuple[float, float, 
                                 f"the {kind} spans [{bx0:.6g}, {bx1:.6g}] x [{by0:.6g}, "
                                 f"{by1:.6g}] m, wholly outside the map [{x0:g}, {x1:g}] x "
                                 f"[{y0:g}, {y1:g}] m: no robot would ever meet it")
+
+
+#: Leader positions checked on the final approach, from where the leader stops to the goal.
+GOAL_SAMPLES = 5
+#: A goal slot this close to one robot radius from an obstacle counts as touching it, m: at
+#: exactly one radius, rounding decides whether the simulator sees a contact.
+GOAL_TOLERANCE = 1e-6
+#: Arc length over which the leader's arrival heading is measured, m.
+ARRIVAL_STEP = 1e-3
+
+
+def final_leader_poses(path: np.ndarray, spec: ScenarioSpec, heading: float) -> np.ndarray:
+    """Leader poses at which a run can end: the formation settles around one of these.
+
+    The virtual leader (:class:`~dfcoa_opt.sim.leader.VirtualLeader`) stops as
+    soon as it is within ``leader.goal_radius`` of ``leader.goal``. A leader
+    that starts there never moves: its only final pose is the start with its
+    initial heading. Otherwise it stops on the path's final stretch, about
+    ``goal_radius`` of arc length before the goal (exactly so on a straight
+    last segment), heading along the path there: the direction of the path's
+    last :data:`ARRIVAL_STEP` before the stop point (on a straight last
+    segment, its direction; not the direction of a few-cm hop from the last
+    A* cell centre or via point to the exact goal, which the leader never
+    drives). The poses returned run from the goal back to that stop point
+    along the path (:data:`GOAL_SAMPLES` of them), all with that heading.
+    The simulated leader stops near, not exactly at, that pose (pure pursuit
+    cuts corners and stops at a Euclidean, not an arc-length, distance): on
+    the shipped scenarios within 0.11 m and 1.2 degrees (``dfcoa_s1``,
+    ``dfcoa_s2``; ``tests/test_goal_slots.py``).
+
+    Args:
+        path: ``(P, 2)`` planned leader path from ``leader.start`` to ``leader.goal``, m.
+        spec: The scenario.
+        heading: The leader's initial heading, rad.
+
+    Returns:
+        ``(K, 3)`` leader poses ``(x, y, theta)`` in m, m, rad.
+    """
+    lead = spec.leader
+    start = np.asarray(lead.start, dtype=float)
+    if np.hypot(*(start - np.asarray(lead.goal, dtype=float))) <= lead.goal_radius:
+        return np.array([[*start, heading]])
+    track = PurePursuit(path, lead.speed, lead.lookahead, lead.w_max)
+    stop = max(track.length - lead.goal_radius, 0.0)
+    d = track.point_at(stop) - track.point_at(stop - ARRIVAL_STEP)
+    arrive = math.atan2(d[1], d[0]) if np.any(d) else heading
+    return np.array([[*track.point_at(s), arrive]
+                     for s in np.linspace(track.length, stop, GOAL_SAMPLES)])
+
+
+def check_goal_clear(world: World, leader: np.ndarray, offsets: np.ndarray, spec: ScenarioSpec,
+                      source: str) -> None:
+    """No formation slot may lie within (or at) a robot radius of a static obstacle at the goal.
+
+    The run succeeds only when every robot settles on its slot around the
+    leader's final pose; a slot whose centre is within the robot radius of an
+    obstacle (``World.clearance < radius``, the simulator's contact rule; at
+    exactly one radius, within :data:`GOAL_TOLERANCE`, rounding decides) cannot
+    be occupied without a contact (a robot could at best settle beside it,
+    within ``settle_tolerance``, which is not the formation the file asks
+    for). The slots are checked for every pose of :func:`final_leader_poses`.
+
+    Args:
+        world: The world (exact shapes, clutter and raster map).
+        leader: ``(K, 3)`` final leader poses, :func:`final_leader_poses`.
+        offsets: ``(N, 2)`` formation slot offsets, m.
+        spec: The scenario.
+        source: Name used in error messages.
+
+    Raises:
+        ScenarioError: Key ``leader.goal``, naming the first robot whose slot is too close.
+    """
+    radius = spec.robots.radius
+    for pose in leader:
+        xy = slot_positions(pose, offsets)
+        clear = world.clearance(xy)
+        for i in np.flatnonzero(clear <= radius + GOAL_TOLERANCE):
+            x, y = xy[i]
+            raise ScenarioError(source, "leader.goal", f"robot {i}'s formation slot at the goal "
+                                                       f"({x:.5g}, {y:.5g}) is {clear[i]:.3g} m "
+                                                       f"from an obstacle, within the robot "
+                                                       f"radius {radius:g} m: no controller can "
+                                                       f"settle there; move the goal")
+
+
+def check_connected(grid: OccupancyGrid, spec: ScenarioSpec, source: str) -> None:
+    """The goal must lie in the free region of the start, whatever the leader's planner.
+
+    A grid A* (8-connected, no corner cutting) on the map: a few ms. Planners
+    that search (``astar``) fail on their own; this catches the ``straight``
+    planner's line through a wall that closes the goal off.
+    """
+    from dfcoa_opt.planning.astar import search
+
+    start = tuple(int(v) for v in grid.world_to_cell(np.asarray(spec.leader.start, float)))
+    goal = tuple(int(v) for v in grid.world_to_cell(np.asarray(spec.leader.goal, float)))
+    if not search(grid.occupied, start, goal).found:
+        raise ScenarioError(source, "leader.goal", "unreachable from leader.start: no free "
+                                                   "path on the map joins them")
+
+
+def check_free(grid: OccupancyGrid, point: Any, source: str, key: str) -> None:
+    """``point`` (m) lies on a free cell inside the map (``key`` names it in the error)."""
+    p = np.asarray(point, dtype=float)[:2]
+    row, col = grid.world_to_cell(p)
+    if not bool(grid.in_bounds(row, col)):
+        x0, x1, y0, y1 = grid.extent
+        raise ScenarioError(source, key, f"({p[0]:g}, {p[1]:g}) is outside the map "
+                                         f"[{x0:g}, {x1:g}] x [{y0:g}, {y1:g}] m")
+    if grid.occupied[row, col]:
+        raise ScenarioError(source, key, f"({p[0]:g}, {p[1]:g}) is inside an obstacle")

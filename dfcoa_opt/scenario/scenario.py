@@ -11,7 +11,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.core.geometry import point_segment_distance, points_in_polygon, wrap_angle
 from dfcoa_opt.scenario.schema import ScenarioSpec
 from dfcoa_opt.world.dynamic import DynamicObstacles
@@ -162,7 +161,8 @@ class Scenario:
         leader_heading: Initial leader heading, rad.
         leader_path: ``(P, 2)`` the leader's planned path, m.
         data: The file's contents with the overrides applied, from which
-            :meth:`for_seed` draws the world again (None: built another way).
+            :func:`dfcoa_opt.scenario.loader.reseed` draws the world again (None: built
+            another way).
         base_dir: Folder against which ``world.map_image`` and ``map_yaml`` are resolved.
     """
 
@@ -209,36 +209,6 @@ class Scenario:
         clutter, generate = self.spec.world.clutter, self.spec.world.generate
         return ((clutter.density > 0.0 and clutter.seed is None)
                 or (bool(generate.family) and generate.seed is None))
-
-    def for_seed(self, seed: int) -> Scenario:
-        """This scenario as loaded with ``seed``: what the seed draws is drawn again.
-
-        The one meaning of a run's seed, whatever the entry point: a run with
-        seed ``s`` gets the world of ``load_scenario(file, s)``, so a loaded
-        scenario can be run with any seed.
-
-        Args:
-            seed: The run's seed.
-
-        Returns:
-            ``self`` when ``seed`` is the scenario's or nothing in it depends on
-            the seed; else the scenario built again from :attr:`data` with
-            ``seed`` (the same overrides).
-
-        Raises:
-            DfcoaError: The world depends on the seed and the scenario was not
-                built from a file or a dict (no :attr:`data`).
-            ScenarioError: The scenario does not load with ``seed`` (e.g. a
-                clutter field that closes the way).
-        """
-        if int(seed) == self.spec.seed or not self.seed_dependent:
-            return self
-        if self.data is None:
-            raise DfcoaError(f"{self.source}: its world follows the seed, so load it with "
-                             f"seed {seed} (dfcoa_opt.load(path, seed={seed})) to run that seed")
-        from dfcoa_opt.scenario.loader import scenario_from_dict
-
-        return scenario_from_dict({**self.data, "seed": int(seed)}, self.source, self.base_dir)
 
     @property
     def name(self) -> str:

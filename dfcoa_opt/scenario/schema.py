@@ -14,6 +14,7 @@ from typing import Any, Literal
 
 from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.core.params import param
+from dfcoa_opt.world.lidar import LidarSpec  # noqa: F401 - re-exported
 from dfcoa_opt.world.robots.spec import RobotSpec  # noqa: F401 - re-exported
 from dfcoa_opt.world.spec import (  # noqa: F401 - re-exported: the schema is one module
     ClutterSpec,
@@ -132,33 +133,6 @@ class LeaderSpec:
         default_factory=dict, doc="Options of the planner, checked against its Params "
                                   "(see docs/methods/).")
     waypoints: tuple[Vec2, ...] = param((), doc="Via points for the 'straight' planner.", unit="m")
-
-
-@dataclass(frozen=True)
-class LidarSpec:
-    """2-D LiDAR, the same on every robot (angles in the robot frame)."""
-
-    enabled: bool = param(True, doc="Simulate the LiDAR.")
-    beams: int = param(120, doc="Number of beams (a real 2-D LiDAR has at most a few "
-                                "thousand).", ge=1, le=100_000)
-    fov: float = param(2 * math.pi, doc="Field of view, centred on the heading.", unit="rad",
-                       gt=0.0, le=2 * math.pi)
-    range_min: float = param(0.0, doc="Returns closer than this are reported as -inf.",
-                             unit="m", ge=0.0)
-    range_max: float = param(10.0, doc="Largest range; beyond it: +inf (no return).", unit="m",
-                             gt=0.0)
-    noise_std: float = param(0.0, doc="Gaussian range noise standard deviation.", unit="m",
-                             ge=0.0)
-    rate: float = param(math.inf, doc="Scans per second; between two scans a robot keeps its "
-                                      "last one (inf = a scan every step).", unit="Hz",
-                        gt=0.0, finite=False)
-
-    def check(self, src: str, key: str) -> None:
-        """range_min < range_max: otherwise no return could ever be finite."""
-        if self.range_min >= self.range_max:
-            raise ScenarioError(src, f"{key}.range_min", f"({self.range_min:g} m) must be below "
-                                                         f"range_max ({self.range_max:g} m), or "
-                                                         "no return could ever be finite")
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """Batched simulation: E runs of one scenario stepped as one array of E x N robots.
 
 A batch is one scenario (the same file and overrides) with E seeds. Each run
-keeps its own random generator, world (:meth:`Scenario.for_seed`: a clutter
+keeps its own random generator, world (:func:`~dfcoa_opt.scenario.loader.reseed`: a clutter
 field follows the seed), leader track, pose estimator, stall monitor, contacts
 and log; neighbours, contacts and the LiDAR see only robots of the same run.
 The simulator's own work -- neighbour tables, gathering the neighbours' states,
@@ -31,11 +31,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt import __version__
 from dfcoa_opt.control.base import Controller, Limits
-from dfcoa_opt.core.errors import DfcoaError, RunFailed
+from dfcoa_opt.core.errors import ControllerError, DfcoaError
 from dfcoa_opt.core.runtime import dispatch
+from dfcoa_opt.core.runtime.version import __version__
 from dfcoa_opt.scenario.budget import check_budget
+from dfcoa_opt.scenario.loader import reseed
 from dfcoa_opt.scenario.scenario import Scenario, World
 from dfcoa_opt.sim.log import BatchLog, RunLog
 from dfcoa_opt.sim.stepper import Ended, Stepper, is_batched
@@ -43,10 +44,6 @@ from dfcoa_opt.world.lidar import Lidar
 from dfcoa_opt.world.robots.models import make_model
 
 FloatArray = NDArray[np.float64]
-
-
-class ControllerError(RunFailed):
-    """A controller returned a malformed or non-finite command (the run fails)."""
 
 
 __all__ = ["BatchSimulator", "ControllerError", "is_batched"]
@@ -83,9 +80,9 @@ class BatchSimulator:
         if not self.seeds:
             raise DfcoaError("a batch needs at least one seed")
         check_budget(scenario.spec, scenario.source, 0.0, len(self.seeds), record_scans)
-        #: The scenario as given; each run's is ``template.for_seed(seed)``.
+        #: The scenario as given; each run's is ``reseed(template, seed)``.
         self.template = scenario
-        self.scenarios = [scenario.for_seed(s) for s in self.seeds]
+        self.scenarios = [reseed(scenario, s) for s in self.seeds]
         for sc in self.scenarios[1:]:
             self._same_movers(sc)
         if isinstance(controller, Sequence):

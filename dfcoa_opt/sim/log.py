@@ -86,8 +86,8 @@ class RunLog:
             lasts several steps counts once).
         dyn_pos: ``(T, M, 2)`` moving obstacle positions, m.
         dyn_radius: ``(M,)`` moving obstacle radii, m.
-        filter_status: ``(T, N)`` int8 safety-filter status (``dfcoa_opt.control.base.STATUS_*``; 0 when
-            there is no filter).
+        filter_status: ``(T, N)`` int8 safety-filter status
+            (``dfcoa_opt.control.base.STATUS_*``; 0 when there is no filter).
         filter_slack: ``(T, N)`` constraint violation left by the filter.
         filter_time: ``(T, N)`` filter solve time per robot, s.
         steering: ``(T, N)`` steering direction chosen by the controller's local
@@ -192,24 +192,6 @@ class RunLog:
         """All array fields by name (an :data:`OPTIONAL_FIELDS` one only when present)."""
         out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "meta"}
         return {k: v for k, v in out.items() if v is not None or k not in OPTIONAL_FIELDS}
-
-    def to_mcap(self, path: str | Path, world: Any = None) -> Path:
-        """Write the run as a rosbag2 MCAP file that Foxglove and RViz 2 open (docs/ros.md).
-
-        Needs the ``ros`` extra (``rosbags``).
-
-        Args:
-            path: The ``.mcap`` file to write (replaced atomically).
-            world: The run's :class:`~dfcoa_opt.scenario.scenario.World`
-                (``Scenario.world``): gives ``/map`` and the static obstacles;
-                without it the file has neither.
-
-        Returns:
-            ``path``.
-        """
-        from dfcoa_opt.viz.mcap import write_mcap
-
-        return write_mcap(self, path, world)
 
     def digest(self) -> str:
         """SHA-256 over every array's bytes but the timings: equal digests = bit-identical runs.

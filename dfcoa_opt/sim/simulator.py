@@ -15,7 +15,7 @@ The run ends when the leader is within ``goal_radius`` of the goal and (unless
 ``leader.wait_for_formation`` is false) every robot is within
 ``settle_tolerance`` of its slot, or at ``t_max`` -- or earlier at the first
 collision with ``stop_on_collision``, or once the run is stalled
-(:class:`dfcoa_opt.metrics.outcome.StallMonitor`) with ``stop_on_deadlock``.
+(:class:`dfcoa_opt.sim.stall.StallMonitor`) with ``stop_on_deadlock``.
 
 The leader follows its path whatever the robots do, so its states and the slots
 of every step come from :func:`~dfcoa_opt.sim.leader.leader_track`, computed
@@ -45,7 +45,7 @@ class Simulator(BatchSimulator):
         controller: Any object implementing :class:`~dfcoa_opt.control.base.Controller`.
         seed: Seed of the run's only random generator (default ``scenario.spec.seed``).
             A world drawn from the seed (a clutter field) is drawn again for it
-            (:meth:`~dfcoa_opt.scenario.scenario.Scenario.for_seed`), so the run is
+            (:func:`~dfcoa_opt.scenario.loader.reseed`), so the run is
             that of the file loaded with ``seed``; :attr:`scenario` is the
             scenario that runs.
         record_scans: Keep the LiDAR scans in the log (:class:`BatchSimulator`).

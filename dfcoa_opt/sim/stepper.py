@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,18 +33,23 @@ from numpy.typing import NDArray
 from dfcoa_opt.control.adapters import convert
 from dfcoa_opt.control.base import MovingObstacles, Neighbours, Observation
 from dfcoa_opt.core.errors import DfcoaError, RunFailed
-from dfcoa_opt.metrics.outcome import StallMonitor
+from dfcoa_opt.scenario.loader import reseed
 from dfcoa_opt.sim.comms import Comms, wanted
 from dfcoa_opt.sim.localization import TruthEstimator, make_estimators
 from dfcoa_opt.sim.log import BatchLog
-from dfcoa_opt.sim.lookups import RunLookups
+from dfcoa_opt.sim.lookups import Batch, RunLookups
 from dfcoa_opt.sim.neighbours import batch_proximity, gather, new_contacts
 from dfcoa_opt.sim.scans import ScanBook
+from dfcoa_opt.sim.stall import StallMonitor
 from dfcoa_opt.world.lidar import LaserScan
 from dfcoa_opt.world.robots.models import CommandKind, RobotState
 
 if TYPE_CHECKING:
-    from dfcoa_opt.sim.batch import BatchSimulator
+    from dfcoa_opt.control.base import Limits
+    from dfcoa_opt.scenario.scenario import Scenario
+    from dfcoa_opt.scenario.schema import ScenarioSpec
+    from dfcoa_opt.world.lidar import Lidar
+    from dfcoa_opt.world.robots.models import RobotModel
 
 FloatArray = NDArray[np.float64]
 
@@ -52,6 +57,33 @@ FloatArray = NDArray[np.float64]
 def is_batched(obj: Any) -> bool:
     """Whether ``obj`` serves every run of a batch in one call (``batched = True``)."""
     return bool(getattr(obj, "batched", False))
+
+
+class Runs(Batch, Protocol):
+    """What the stepper reads of its batch (a :class:`~dfcoa_opt.sim.batch.BatchSimulator`).
+
+    The batch holds the runs' set-up (scenarios, seeds, robot model, LiDARs);
+    the stepper steps them. ``scenarios``, ``seeds``, ``group`` and ``lidars``
+    change when :meth:`place` gives a slot another run.
+    """
+
+    template: Scenario  # the scenario as given; each run's is reseed(template, seed)
+    scenarios: list[Scenario]  # each slot's run
+    seeds: list[int]  # each slot's seed
+    spec: ScenarioSpec  # the runs' common spec
+    n: int  # robots per run
+    model: RobotModel  # the robots' motion model
+    limits: Limits  # what every observation carries
+    radius: float  # robot radius, m
+    obstacle_range: float  # moving obstacles within it are observed, m
+    lidars: list[Lidar | None]  # each world group's LiDAR
+    record_scans: bool  # keep the scans in the log
+
+    def place(self, slot: int, seed: int, scenario: Scenario) -> bool:
+        """Make ``scenario`` the run of ``slot``; whether it has a world of its own."""
+
+    def lidar_fields(self) -> NDArray[np.float64] | None:
+        """Every group's LiDAR grid in one array, or None."""
 
 
 @dataclass(frozen=True)
@@ -80,7 +112,7 @@ class Stepper:
             runs; so it does when the estimator reads it).
     """
 
-    def __init__(self, sim: BatchSimulator, scan_wanted: bool) -> None:
+    def __init__(self, sim: Runs, scan_wanted: bool) -> None:
         self.sim = sim
         spec, n = sim.spec, sim.n
         self.spec, self.n, self.dt = spec, n, spec.dt
@@ -155,7 +187,7 @@ class Stepper:
             raise DfcoaError(f"slot {slot} still has a run")
         if is_batched(self.estimators[0]):
             raise DfcoaError("a batched estimator cannot restart one run of its batch")
-        sc = sim.template.for_seed(seed)
+        sc = reseed(sim.template, seed)
         fresh = sim.place(slot, seed, sc)
         if fresh:  # a world of its own: its leader track and moving discs too
             self.lookups.place(int(sim.group[slot]), sc)

@@ -76,7 +76,20 @@ def require_rosbags() -> None:
 
 
 def write_mcap(log: RunLog, path: str | Path, world: World | None = None) -> Path:
-    """Write ``log`` as a rosbag2 MCAP file (see :meth:`RunLog.to_mcap`).
+    """Write a run as a rosbag2 MCAP file that Foxglove and RViz 2 open (docs/ros.md).
+
+    Needs the ``ros`` extra (``rosbags``). :meth:`dfcoa_opt.api.Run.to_mcap`
+    calls it with the run's world.
+
+    Args:
+        log: The run.
+        path: The ``.mcap`` file to write (replaced atomically).
+        world: The run's :class:`~dfcoa_opt.scenario.scenario.World`
+            (``Scenario.world``): gives ``/map`` and the static obstacles;
+            without it the file has neither.
+
+    Returns:
+        ``path``.
 
     Raises:
         DfcoaError: ``rosbags`` is not installed, or the file cannot be written.

@@ -37,14 +37,42 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dfcoa_opt.core.errors import ScenarioError
+from dfcoa_opt.core.params import param
 from dfcoa_opt.world.lidar_kernel import SKIP_MIN_CELLS, _candidates, _scan_kernel, cast_grid
 
-__all__ = ["SKIP_MIN_CELLS", "LaserScan", "Lidar", "beam_layout", "cast_grid",
+__all__ = ["SKIP_MIN_CELLS", "LaserScan", "Lidar", "LidarSpec", "beam_layout", "cast_grid",
            "disc_candidates"]
 
 if TYPE_CHECKING:
-    from dfcoa_opt.scenario.schema import LidarSpec
     from dfcoa_opt.world.grid import OccupancyGrid
+
+@dataclass(frozen=True)
+class LidarSpec:
+    """2-D LiDAR, the same on every robot (angles in the robot frame)."""
+
+    enabled: bool = param(True, doc="Simulate the LiDAR.")
+    beams: int = param(120, doc="Number of beams (a real 2-D LiDAR has at most a few "
+                                "thousand).", ge=1, le=100_000)
+    fov: float = param(2 * math.pi, doc="Field of view, centred on the heading.", unit="rad",
+                       gt=0.0, le=2 * math.pi)
+    range_min: float = param(0.0, doc="Returns closer than this are reported as -inf.",
+                             unit="m", ge=0.0)
+    range_max: float = param(10.0, doc="Largest range; beyond it: +inf (no return).", unit="m",
+                             gt=0.0)
+    noise_std: float = param(0.0, doc="Gaussian range noise standard deviation.", unit="m",
+                             ge=0.0)
+    rate: float = param(math.inf, doc="Scans per second; between two scans a robot keeps its "
+                                      "last one (inf = a scan every step).", unit="Hz",
+                        gt=0.0, finite=False)
+
+    def check(self, src: str, key: str) -> None:
+        """range_min < range_max: otherwise no return could ever be finite."""
+        if self.range_min >= self.range_max:
+            raise ScenarioError(src, f"{key}.range_min", f"({self.range_min:g} m) must be below "
+                                                         f"range_max ({self.range_max:g} m), or "
+                                                         "no return could ever be finite")
+
 
 #: Disc candidates come from a bucket grid (:func:`disc_candidates`) only above this many
 #: robot-disc pairs and

@@ -31,7 +31,7 @@ from dfcoa_opt.bench.report import failures, ladders, paired, plots, stats, tabl
 from dfcoa_opt.bench.sweep.expand import safe_name
 from dfcoa_opt.core.atomic import atomic_write
 from dfcoa_opt.core.errors import DfcoaError
-from dfcoa_opt.core.runtime import provenance as environment
+from dfcoa_opt.core.runtime import provenance
 from dfcoa_opt.metrics.deploy import DEPLOY_KEYS
 from dfcoa_opt.metrics.outcome import OUTCOMES
 
@@ -263,8 +263,8 @@ def environment_header(results_dir: str | Path) -> str:
         f"hosts: {', '.join(hosts) or 'unknown'}"
         + (f" (numpy SIMD {', '.join(simd)}; cap {', '.join(caps) or 'unknown'})"
            if simd else ""),
-        f"- CPU: {environment.machine()}",
-        f"- Packages: {environment.versions()}",
+        f"- CPU: {provenance.machine()}",
+        f"- Packages: {provenance.versions()}",
     ]
     return "\n".join(lines) + "\n"
 

@@ -55,7 +55,8 @@ def explain(groups: Sequence[Mapping[str, Any]], rows: Sequence[Row], results_di
     """Markdown lines explaining every group below :data:`EXPLAIN_BELOW`, and their snapshots.
 
     Args:
-        groups: Aggregated groups of one table (see :func:`dfcoa_opt.bench.report.document.aggregate`).
+        groups: Aggregated groups of one table
+            (:func:`dfcoa_opt.bench.report.document.aggregate`).
         rows: Their rows.
         results_dir: The results folder (logs).
         out_dir: Where the snapshots go (``fail_<scenario>_<variant>_s<seed>.png``).

@@ -3,7 +3,7 @@
 A results folder keeps no LiDAR scans, so each drawn run is simulated again
 with :class:`~dfcoa_opt.sim.batch.BatchSimulator` ``record_scans=True`` from
 its row (scenario file, seed, overrides, controller) and written with
-:meth:`~dfcoa_opt.sim.log.RunLog.to_mcap` to ``<results>/mcap/<key>.mcap``.
+:func:`~dfcoa_opt.viz.mcap.write_mcap` to ``<results>/mcap/<key>.mcap``.
 Recording scans does not change a run, so the new log's digest must be the
 row's; a run whose digest differs (the code or the scenario file
 changed since it ran) is still written, and named in the returned notes.
@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from dfcoa_opt.bench.report.trajectories import overlay_rows
+from dfcoa_opt.viz.mcap import write_mcap
 
 #: The folder of a results folder that holds the MCAP files.
 MCAP_DIR = "mcap"
@@ -55,6 +56,6 @@ def write_run_mcaps(results_dir: str | Path, rows: Sequence[Mapping[str, Any]]
         if log.digest() != row.get("digest"):
             notes.append(f"{row['key']}: this run's digest differs from its row's (the code or "
                          "the scenario file changed since it ran)")
-        out.append(log.to_mcap(Path(results_dir) / MCAP_DIR / f"{row['key']}.mcap",
+        out.append(write_mcap(log, Path(results_dir) / MCAP_DIR / f"{row['key']}.mcap",
                                sim.scenarios[0].world))
     return out, notes

@@ -33,7 +33,7 @@ from dfcoa_opt.control.policy.file import (
     load_policy,
     policy_digest,
 )
-from dfcoa_opt.core.errors import UnknownNameError
+from dfcoa_opt.core.errors import ControllerError, UnknownNameError
 from dfcoa_opt.core.geometry import rotate
 from dfcoa_opt.world.robots.models import CommandKind
 
@@ -75,8 +75,6 @@ class PolicyController(BatchedController):
         """Row i from robot i's observation vector only."""
         y = np.asarray(self.forward(flatten(obs, self.spec)), dtype=float)
         if y.shape != (obs.n, 2):
-            from dfcoa_opt.sim.batch import ControllerError
-
             raise ControllerError(f"policy '{getattr(self, 'name', type(self).__name__)}' "
                                   f"returned shape {y.shape} for {obs.n} rows, expected "
                                   f"({obs.n}, 2)")

@@ -145,7 +145,7 @@ def above_cap(level: str, cap: str) -> bool:
     """Whether numpy's dispatch ``level`` passes ``cap``.
 
     Args:
-        level: As :func:`~dfcoa_opt.core.runtime.provenance.numpy_simd` gives it.
+        level: As :func:`numpy_simd` gives it.
         cap: One of :data:`CAPS`.
     """
     return cap != "native" and any(level in _ABOVE[naming][cap] for naming in _ABOVE)
@@ -161,8 +161,6 @@ def check() -> None:
     global _warned
     if _warned or not is_x86():
         return
-    from dfcoa_opt.core.runtime.provenance import numpy_simd
-
     cap, level = requested_cap(), numpy_simd()
     if above_cap(level, cap):
         _warned = True
@@ -171,6 +169,28 @@ def check() -> None:
                       f"import dfcoa_opt first, or start Python with NPY_DISABLE_CPU_FEATURES="
                       f"'{' '.join(targets_above(cap))}'; {CAP_VARIABLE}=native keeps "
                       f"{level}", stacklevel=3)
+
+
+@functools.cache
+def numpy_simd() -> str:
+    """The widest SIMD level numpy dispatches its loops to on this machine, e.g. ``X86_V3``.
+
+    numpy picks, at import, the widest of its compiled targets that the CPU
+    supports (and ``NPY_DISABLE_CPU_FEATURES`` leaves on). Some float64 loops
+    (``sin``, ``cos``, ``arctan2``, ``exp``, ``log``, ``power``) have AVX-512
+    versions that round differently in the last bit, so two machines with
+    different levels can give runs whose digests differ (docs/benchmarking.md,
+    "Across machines"). Returns ``"unknown"`` when numpy does not say. Fixed
+    once numpy is imported, so it is computed once per process.
+    """
+    try:
+        from numpy._core import _multiarray_umath as umath
+    except ImportError:  # numpy < 2
+        return "unknown"
+    found = [f for f in getattr(umath, "__cpu_dispatch__", [])
+             if getattr(umath, "__cpu_features__", {}).get(f)]
+    levels = found or list(getattr(umath, "__cpu_baseline__", []))[-1:]
+    return levels[-1] if levels else "unknown"
 
 
 def describe() -> str:

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-import functools
 import os
 import platform
 from collections.abc import Sequence
 from importlib import metadata
 from pathlib import Path
+
+from dfcoa_opt.core.runtime import dispatch
 
 #: Packages listed in headers (distribution names).
 PACKAGES: tuple[str, ...] = ("dfcoa-opt", "numpy", "scipy", "matplotlib", "osqp", "qpsolvers",
@@ -39,34 +40,11 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
-@functools.cache
-def numpy_simd() -> str:
-    """The widest SIMD level numpy dispatches its loops to on this machine, e.g. ``X86_V3``.
-
-    numpy picks, at import, the widest of its compiled targets that the CPU
-    supports (and ``NPY_DISABLE_CPU_FEATURES`` leaves on). Some float64 loops
-    (``sin``, ``cos``, ``arctan2``, ``exp``, ``log``, ``power``) have AVX-512
-    versions that round differently in the last bit, so two machines with
-    different levels can give runs whose digests differ (docs/benchmarking.md,
-    "Across machines"). Returns ``"unknown"`` when numpy does not say. Fixed
-    once numpy is imported, so it is computed once per process.
-    """
-    try:
-        from numpy._core import _multiarray_umath as umath
-    except ImportError:  # numpy < 2
-        return "unknown"
-    found = [f for f in getattr(umath, "__cpu_dispatch__", [])
-             if getattr(umath, "__cpu_features__", {}).get(f)]
-    levels = found or list(getattr(umath, "__cpu_baseline__", []))[-1:]
-    return levels[-1] if levels else "unknown"
-
-
 def machine() -> str:
     """``<CPU model>, <n> cores, numpy SIMD <level> (cap <cap>)``.
 
-    The level is :func:`numpy_simd`, the cap :func:`dfcoa_opt.core.runtime.dispatch.describe`.
+    The level is :func:`dfcoa_opt.core.runtime.dispatch.numpy_simd`, the cap
+    :func:`dfcoa_opt.core.runtime.dispatch.describe`.
     """
-    from dfcoa_opt.core.runtime.dispatch import describe
-
-    return (f"{cpu_model()}, {os.cpu_count() or '?'} cores, numpy SIMD {numpy_simd()} "
-            f"(cap {describe()})")
+    return (f"{cpu_model()}, {os.cpu_count() or '?'} cores, numpy SIMD "
+            f"{dispatch.numpy_simd()} (cap {dispatch.describe()})")

@@ -28,8 +28,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.core.geometry import wrap_angle
-from dfcoa_opt.scenario.schema import RobotSpec
 from dfcoa_opt.world.robots.actuated import actuated_step
+from dfcoa_opt.world.robots.spec import RobotSpec
 from dfcoa_opt.world.robots.unicycle_kernel import unicycle_step
 
 FloatArray = NDArray[np.float64]

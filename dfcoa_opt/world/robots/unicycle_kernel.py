@@ -73,7 +73,7 @@ def store_row(out, vel, u, i, x, y, th, speed, v, w, disturbance,
 
 @numba.njit(cache=True)
 def unicycle_arc(pose, v, w, dt):  # pragma: no cover - numba
-    """:func:`~dfcoa_opt.world.robots.models.integrate_unicycle` of one ``(3,)`` pose (m, m, rad)."""
+    """:func:`~dfcoa_opt.world.robots.models.integrate_unicycle` of one ``(3,)`` pose (m, rad)."""
     x, y, th = arc(pose[0], pose[1], pose[2], v, w, dt)
     return np.array([x, y, th])
 
