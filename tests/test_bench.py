@@ -18,7 +18,7 @@ import pytest
 import dfcoa_opt
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
-from dfcoa_opt.bench.results import store
+from dfcoa_opt.bench.results import fingerprint
 from dfcoa_opt.bench.runner import DETERMINISTIC_KEYS, execute
 from dfcoa_opt.bench.sweep.expand import RunSpec, canonical, load_sweep
 from dfcoa_opt.cli import main
@@ -363,7 +363,6 @@ def test_process_pool_survives_a_parent_that_ran_parallel_numba(tmp_path):
     script = f"""
 from comparisons.orca.crowd import OrcaCrowd, circle_positions
 import dfcoa_opt
-from dfcoa_opt.bench.results import store
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
 crowd = OrcaCrowd(circle_positions(50, 40.0))
@@ -378,7 +377,7 @@ assert res.failed == 0 and res.ran == 2, res
 
 
 def test_runs_never_import_the_sources_left_out_of_the_fingerprint(tmp_path):
-    """Every controller's run, in a fresh process: no module of store.NOT_RUN is loaded."""
+    """Every controller's run, in a fresh process, loads only fingerprinted modules."""
     scen = (Path(__file__).resolve().parents[1] / "scenarios" / "example_obstacles.toml")
     sweep = tmp_path / "all.toml"
     sweep.write_text(f'scenarios = ["{scen.as_posix()}"]\n'
@@ -400,10 +399,11 @@ def test_runs_never_import_the_sources_left_out_of_the_fingerprint(tmp_path):
     root = Path(dfcoa_opt.__file__).resolve().parents[1]
     used = [Path(f).resolve().relative_to(root).as_posix() for f in out["files"]]
     assert "dfcoa_opt/sim/simulator.py" in used  # the check sees the run's modules
-    assert [u for u in used if store.outside_fingerprint(u)] == []
-    assert store.outside_fingerprint("dfcoa_opt/bench/recipes/ladders.py")
-    assert store.outside_fingerprint("dfcoa_opt/bench/results/store.py")
-    assert not store.outside_fingerprint("dfcoa_opt/bench/runner.py")
+    covered = set(fingerprint.fingerprint_sources())
+    assert [u for u in used if u not in covered] == []
+    assert "dfcoa_opt/bench/recipes/ladders.py" not in covered
+    assert "dfcoa_opt/bench/results/store.py" not in covered
+    assert "dfcoa_opt/bench/runner.py" in covered
 
 
 def test_fingerprint_ignores_docstrings_and_comments_but_not_code():
@@ -414,9 +414,9 @@ def test_fingerprint_ignores_docstrings_and_comments_but_not_code():
     reworded = ('"""Other words."""\nimport math\n\n# a comment\nclass A:\n    """Reworded."""\n'
                 '    def f(self, x):\n        """Doc, longer\n\n        text."""\n'
                 '        return math.sqrt(\n            x)\n\n\ndef g():\n    """Changed."""\n')
-    assert store.executable_source(src) == store.executable_source(reworded)
+    assert fingerprint.executable_source(src) == fingerprint.executable_source(reworded)
     for edit in (src.replace("sqrt", "cbrt"), src.replace("(self, x)", "(self, x=1)"),
                  src.replace('"""Only a docstring."""', '"""Only a docstring."""\n    return 1'),
                  src.replace('        """Doc."""\n', '        "Doc."\n        "another string"\n')):
-        assert store.executable_source(edit) != store.executable_source(src)
-    assert store.executable_source("def (:") == "def (:"  # unparsable: kept whole
+        assert fingerprint.executable_source(edit) != fingerprint.executable_source(src)
+    assert fingerprint.executable_source("def (:") == "def (:"  # unparsable: kept whole

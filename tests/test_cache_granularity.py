@@ -104,7 +104,8 @@ def test_each_controller_has_its_own_fingerprint(edit):
     for a, b in itertools.combinations(IDS, 2):
         assert fps[a] != fps[b], (a, b)
     # ids of one module (parameter presets of one class) share their code
-    assert fingerprint.code_fingerprint("consensus") == fingerprint.code_fingerprint("consensus_ivo")
+    assert (fingerprint.code_fingerprint("consensus")
+            == fingerprint.code_fingerprint("consensus_ivo"))
     assert fps["goto_slot"] != fingerprint.code_fingerprint()  # not everything any more
 
 

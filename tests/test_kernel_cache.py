@@ -1,4 +1,4 @@
-"""numba's kernel cache follows edits of the modules a kernel imports (core.runtime.kernel_cache)."""
+"""numba's kernel cache follows edits of the modules a kernel imports (core.runtime)."""
 
 from __future__ import annotations
 

@@ -16,7 +16,7 @@ import pytest
 import dfcoa_opt as d
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
-from dfcoa_opt.bench.results import store
+from dfcoa_opt.bench.results import fingerprint
 from dfcoa_opt.bench.sweep.expand import load_sweep
 from dfcoa_opt.cli import main
 from dfcoa_opt.control import registry
@@ -142,7 +142,7 @@ def test_a_two_run_sweep_on_two_processes_reruns_when_the_file_changes(tmp_path,
     direct = [d.run(d.load(TINY), "policy:pol.json", seed=s).log.digest() for s in (0, 1)]
     assert [r["digest"] for r in rows] == direct
     code = rows[0]["code"]
-    assert code == store.run_fingerprint("policy:pol.json") != store.code_fingerprint(
+    assert code == fingerprint.run_fingerprint("policy:pol.json") != fingerprint.code_fingerprint(
         "policy:pol.json")
     runs = load_sweep(sweep).runs
     assert res.store.pending(runs) == []
@@ -167,9 +167,11 @@ def test_the_facade_sweep_keeps_policy_files_on_worker_processes(tmp_path, monke
 
 
 def test_the_code_fingerprint_of_a_policy_covers_the_policy_modules_only(tmp_path):
-    core = set(store.fingerprint_sources("goto_slot")) - {"dfcoa_opt/control/goto_slot.py"}
-    own = set(store.fingerprint_sources(f"policy:{linear_policy(tmp_path)}")) - core
-    assert own == {"dfcoa_opt/control/policy/controller.py", "dfcoa_opt/control/policy/file.py"}
+    core = set(fingerprint.fingerprint_sources("goto_slot")) - {"dfcoa_opt/control/goto_slot.py"}
+    own = set(fingerprint.fingerprint_sources(f"policy:{linear_policy(tmp_path)}")) - core
+    assert own == {"dfcoa_opt/control/policy/__init__.py",
+                   "dfcoa_opt/control/policy/controller.py", "dfcoa_opt/control/policy/file.py",
+                   "dfcoa_opt/control/features.py", "dfcoa_opt/control/features_kernel.py"}
 
 
 # -- bad files -----------------------------------------------------------------------------------
