@@ -85,7 +85,8 @@ def heapq_astar(occ: list[list[bool]], start: tuple[int, int],
 
 def s1_grid() -> OccupancyGrid:
     """The dfcoa_s1 scenario's obstacles at 1 cell/m (35 x 35 cells)."""
-    from dfcoa_opt.scenario.loader import read_toml, scenario_from_dict
+    from dfcoa_opt.scenario.loader import scenario_from_dict
+    from dfcoa_opt.scenario.overrides import read_toml
 
     path = sorted((ROOT / "scenarios").rglob("dfcoa_s1.toml"))[0]
     data = read_toml(path)

@@ -11,9 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.timing import REPS, interleave, print_rows, row
-from dfcoa_opt.scenario.schema import LidarSpec
 from dfcoa_opt.world.grid import OccupancyGrid
-from dfcoa_opt.world.lidar import Lidar
+from dfcoa_opt.world.lidar import Lidar, LidarSpec
 from dfcoa_opt.world.shapes import Rectangle
 
 SIZE_M = 35.0

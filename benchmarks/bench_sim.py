@@ -18,11 +18,11 @@ from benchmarks.bench_lidar import make_grid, numpy_sampling_scan
 from benchmarks.timing import blocks, interleave, print_rows, row, time_calls
 from dfcoa_opt.control.registry import make_controller
 from dfcoa_opt.scenario.loader import scenario_from_dict
-from dfcoa_opt.scenario.schema import RobotSpec
 from dfcoa_opt.sim import neighbours
 from dfcoa_opt.sim.simulator import Simulator
 from dfcoa_opt.world.lidar import LaserScan
 from dfcoa_opt.world.robots.models import ActuatedUnicycle, RobotState, Unicycle
+from dfcoa_opt.world.robots.spec import RobotSpec
 
 #: Whole runs per simulator, taken in turns (split into REPS blocks for the ratios).
 RUNS = 10

@@ -110,15 +110,15 @@ _refresh_kernel_cache([_Path(__file__).parent]
                       + ([_Path(_spec.origin).parent] if _spec and _spec.origin else []))
 
 from dfcoa_opt.api import (  # noqa: E402 - after the kernel cache check
-                      Results,
-                      Run,
-                      controllers,
-                      load,
-                      register,
-                      report,
-                      run,
-                      run_batch,
-                      sweep,
+    Results,
+    Run,
+    controllers,
+    load,
+    register,
+    report,
+    run,
+    run_batch,
+    sweep,
 )
 from dfcoa_opt.core.runtime.version import __version__  # noqa: E402
 

@@ -222,8 +222,8 @@ class Run:
         Returns:
             The matplotlib ``Figure`` (shown inline in a notebook).
         """
-        from dfcoa_opt.bench.report.plots import save_png
         from dfcoa_opt.viz import plotting
+        from dfcoa_opt.viz.layout import save_png
 
         sc = self.scenario
         fig = plotting.run_figure(self.log, sc.world.grid, sc.spec.leader.goal,

@@ -23,13 +23,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.control.policy.controller import (
-    PREFIX,
-    LoadedPolicy,
-    PolicyController,
-    file_policy_class,
-    policy_digest,
-)
+from dfcoa_opt.control.policy.controller import PolicyController, file_policy_class
+from dfcoa_opt.control.policy.file import PREFIX, LoadedPolicy, policy_digest
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.core.atomic import file_exists
 from dfcoa_opt.core.errors import ScenarioError

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from dfcoa_opt.control.base import BatchedController, Observation
 from dfcoa_opt.control.features import ObservationSpec, flatten
-from dfcoa_opt.control.policy.controller import LoadedPolicy
+from dfcoa_opt.control.policy.file import LoadedPolicy
 from dfcoa_opt.control.registry import build_controller
 from dfcoa_opt.core.geometry import rotate
 

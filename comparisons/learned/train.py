@@ -37,7 +37,7 @@ import numpy as np
 from comparisons.learned import mlp
 from comparisons.learned.dagger import Mixture, collect
 from dfcoa_opt.control.features import ObservationSpec
-from dfcoa_opt.control.policy.controller import ACTIVATIONS, LoadedPolicy, PolicySpec
+from dfcoa_opt.control.policy.file import ACTIVATIONS, LoadedPolicy, PolicySpec
 from dfcoa_opt.core.params import build
 
 ROOT = Path(__file__).resolve().parents[2]

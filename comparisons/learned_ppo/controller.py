@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from comparisons.learned.controller import ShippedPolicyController, body_gain, shipped_policy
-from dfcoa_opt.control.policy.controller import LoadedPolicy
+from dfcoa_opt.control.policy.file import LoadedPolicy
 from dfcoa_opt.control.registry import register
 from dfcoa_opt.core.params import param
 

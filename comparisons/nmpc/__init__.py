@@ -18,7 +18,8 @@ Notes: ``docs/methods/nmpc.md``.
 
 from typing import Any
 
-from comparisons.nmpc.controller import Nmpc, goto_command
+from comparisons.nmpc.controller import Nmpc
+from comparisons.nmpc.fallback import goto_command
 from dfcoa_opt.core.moved import moved_attribute
 
 __all__ = ["Nmpc", "goto_command"]

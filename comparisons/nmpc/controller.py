@@ -293,7 +293,7 @@ class Nmpc(BatchedController):
         except RuntimeError:
             return None
         if out.success:
-            from comparisons.nmpc.problem import map_multipliers
+            from comparisons.nmpc.formulation import map_multipliers
 
             self.last_rescued[i] = True
             out.lam_x, out.lam_g = map_multipliers(out.lam_x, out.lam_g, self.rescuer.spec,
@@ -302,7 +302,7 @@ class Nmpc(BatchedController):
 
     def _inputs(self, i: int, step: dict, problem: NmpcProblem) -> tuple[FloatArray, ...]:
         """Row ``i``'s ``(w0, p, lbg, lam_x0, lam_g0)`` of this step in ``problem``'s layout."""
-        from comparisons.nmpc.problem import map_lbg, map_multipliers
+        from comparisons.nmpc.formulation import map_lbg, map_multipliers
 
         u0 = step["u0"][i:i + 1]
         x0 = rollout(step["obs"].pose[i:i + 1], u0, self.tau)

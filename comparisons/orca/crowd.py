@@ -26,7 +26,8 @@ from numpy.typing import ArrayLike, NDArray
 from comparisons.orca.lines import agent_lines
 from comparisons.orca.lp import solve_one
 from comparisons.orca.neighbours import bin_points, buckets, knn_one, knn_within
-from comparisons.orca.obstacles import ObstacleSet, obstacle_lines, prepare_obstacles
+from comparisons.orca.obstacle_set import ObstacleSet, prepare_obstacles
+from comparisons.orca.obstacles import obstacle_lines
 from comparisons.orca.velocities import orca_velocities
 from dfcoa_opt.core.runtime.threads import kernel_threads
 

@@ -34,7 +34,7 @@ from typing import Any
 
 from dfcoa_opt.bench.lifecycle import deferred, forkserver_context, init_worker, terminate
 from dfcoa_opt.bench.runner import Outcome, execute_batch
-from dfcoa_opt.bench.sweep.expand import RunSpec
+from dfcoa_opt.bench.sweep.specs import RunSpec
 from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.core.plugins import load_plugins
 from dfcoa_opt.core.plugins import loaded as loaded_plugins
@@ -111,7 +111,7 @@ def _size(run: RunSpec) -> tuple[int, float]:
 
     What cannot be read counts as one robot and one step (the run itself reports it).
     """
-    from dfcoa_opt.scenario.loader import read_toml
+    from dfcoa_opt.scenario.overrides import read_toml
     from dfcoa_opt.scenario.schema import ScenarioSpec
 
     try:

@@ -19,12 +19,12 @@ from dfcoa_opt.bench import precision
 from dfcoa_opt.bench.executors import ExecutorConfig, run_all
 from dfcoa_opt.bench.lifecycle import Interrupted, SweepInterrupted, deferred, interruptible
 from dfcoa_opt.bench.results.store import ResultsStore
-from dfcoa_opt.bench.sweep.expand import (
+from dfcoa_opt.bench.sweep.expand import load_sweep
+from dfcoa_opt.bench.sweep.specs import (
     DICT_SOURCE,
     RunSpec,
     Sweep,
     describe_runs,
-    load_sweep,
     safe_name,
     shorten,
 )

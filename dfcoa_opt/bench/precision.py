@@ -25,7 +25,7 @@ from typing import Any
 
 from dfcoa_opt.bench.report import stats
 from dfcoa_opt.bench.runner import is_success
-from dfcoa_opt.bench.sweep.expand import RunSpec
+from dfcoa_opt.bench.sweep.specs import RunSpec
 
 Cell = tuple[str, str, str, float | None]
 

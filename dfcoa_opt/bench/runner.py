@@ -40,7 +40,7 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from dfcoa_opt.bench.sweep.expand import RunSpec, load_run_scenario
+from dfcoa_opt.bench.sweep.specs import RunSpec, load_run_scenario
 from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.core.runtime import dispatch
 

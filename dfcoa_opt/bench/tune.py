@@ -45,7 +45,8 @@ from dfcoa_opt.bench.report.stats import cvar
 from dfcoa_opt.bench.results.logs import compact_log
 from dfcoa_opt.bench.results.store import ResultsStore, display_path
 from dfcoa_opt.bench.runner import is_success
-from dfcoa_opt.bench.sweep.expand import RunSpec, Sweep, canonical, load_sweep, safe_name
+from dfcoa_opt.bench.sweep.expand import load_sweep
+from dfcoa_opt.bench.sweep.specs import RunSpec, Sweep, canonical, safe_name
 from dfcoa_opt.bench.sweep.variants import Variant
 from dfcoa_opt.core.atomic import atomic_write
 from dfcoa_opt.core.errors import DfcoaError, ScenarioError, did_you_mean

@@ -265,7 +265,7 @@ def seed_list(text: str) -> list[int]:
 def _cmd_run(a: argparse.Namespace) -> int:
     from dfcoa_opt import metrics
     from dfcoa_opt.bench.runner import jsonable
-    from dfcoa_opt.bench.sweep.expand import safe_name
+    from dfcoa_opt.bench.sweep.specs import safe_name
     from dfcoa_opt.cli.text import run_summary
     from dfcoa_opt.metrics.units import units
     from dfcoa_opt.scenario.loader import load_scenario

@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from dfcoa_opt.scenario.schema import RobotSpec
 from dfcoa_opt.world.lidar import LaserScan
 from dfcoa_opt.world.robots.models import CommandKind
+from dfcoa_opt.world.robots.spec import RobotSpec
 
 if TYPE_CHECKING:
     from dfcoa_opt.scenario.scenario import Scenario

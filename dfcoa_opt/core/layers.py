@@ -42,7 +42,8 @@ TOOLS: tuple[str, ...] = ("comparisons.learned.dagger", "comparisons.learned.eva
 ROOMS: dict[str, str] = {
     "dfcoa_opt.core": "errors, typed parameters, geometry, the registry class, runtime pins",
     "dfcoa_opt.world": "maps, obstacles, generated worlds, LiDAR; robots/: models and drives",
-    "dfcoa_opt.planning": "A* (traditional, improved, clearance), post-processing, pure pursuit",
+    "dfcoa_opt.planning": "A\\* (traditional, improved, clearance), post-processing, "
+                          "pure pursuit",
     "dfcoa_opt.scenario": "the scenario file: schema, loader, checks, formation slots",
     "dfcoa_opt.control": "the Controller / SafetyFilter contract, registry API, observation "
                          "vector, the DFCOA controller",

@@ -102,7 +102,8 @@ def env_scenario(scenario: Scenario | str | Path, stop_on_deadlock: bool = True,
         ScenarioError: A bad file or key.
         DfcoaError: Overrides for a scenario built without its file's data.
     """
-    from dfcoa_opt.scenario.loader import apply_overrides, load_scenario, scenario_from_dict
+    from dfcoa_opt.scenario.loader import load_scenario, scenario_from_dict
+    from dfcoa_opt.scenario.overrides import apply_overrides
 
     keys = {k.replace("__", "."): v for k, v in (overrides or {}).items()}
     keys.update({"stop_on_collision": True, "leader.wait_for_formation": True,

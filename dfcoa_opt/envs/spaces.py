@@ -10,8 +10,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dfcoa_opt.control.features import ObservationSpec
-from dfcoa_opt.scenario.schema import RobotSpec
 from dfcoa_opt.world.robots.models import CommandKind
+from dfcoa_opt.world.robots.spec import RobotSpec
 
 FloatArray = NDArray[np.float64]
 

@@ -24,15 +24,15 @@ its shape ignores, a moving disc that cannot move, ``range_min >= range_max``).
 A ``[world.generate]`` world is drawn until a passage one robot wide joins the
 leader's start and goal and the planner finds its path (:func:`_generated`).
 Sizes are bounded so that no legal-looking number exhausts memory or overflows:
-a map of at most :data:`MAX_CELLS` cells, and every position and length within
-:data:`MAX_EXTENT` m of the origin (``team.n`` <= 100,000 is a schema bound).
+a map of at most :data:`~dfcoa_opt.scenario.budget.MAX_CELLS` cells, and every position
+and length within :data:`~dfcoa_opt.scenario.budget.MAX_EXTENT` m of the origin (``team.n``
+<= 100,000 is a schema bound).
 """
 
 from __future__ import annotations
 
 import copy
 import math
-import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -45,6 +45,7 @@ from dfcoa_opt.scenario.budget import MAX_EXTENT, check_budget, check_cells, che
 from dfcoa_opt.scenario.formation import formation_offsets, slot_positions
 from dfcoa_opt.scenario.map_files import grid_cells, map_file
 from dfcoa_opt.scenario.names import check_names, check_waypoints
+from dfcoa_opt.scenario.overrides import apply_overrides, read_toml
 from dfcoa_opt.scenario.placement import (
     check_connected,
     check_free,
@@ -57,42 +58,12 @@ from dfcoa_opt.scenario.placement import (
     final_leader_poses,
 )
 from dfcoa_opt.scenario.scenario import Scenario, World
-from dfcoa_opt.scenario.schema import ObstacleSpec, ScenarioSpec
+from dfcoa_opt.scenario.schema import ScenarioSpec
 from dfcoa_opt.world.clutter import random_discs
 from dfcoa_opt.world.dynamic import DynamicObstacles, MovingDisc
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.shapes import Circle, Polygon, Rectangle, Shape
-from dfcoa_opt.world.spec import check_map_yaml_keys
-
-_INDEX = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)\[(\d+)\]$")
-
-try:
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
-
-
-def read_toml(path: str | Path) -> dict[str, Any]:
-    """Read a TOML file, turning every failure into a one-line :class:`ScenarioError`."""
-    path = Path(path)
-    src = str(path)
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        raise ScenarioError(src, "", "file not found") from None
-    except IsADirectoryError:
-        raise ScenarioError(src, "", "is a directory, expected a .toml file") from None
-    except PermissionError:
-        raise ScenarioError(src, "", "permission denied") from None
-    except UnicodeDecodeError as exc:
-        raise ScenarioError(src, "", f"is not UTF-8 text ({exc.reason} at byte {exc.start})"
-                            ) from None
-    if not text.strip():
-        raise ScenarioError(src, "", "file is empty")
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(src, "", f"not valid TOML: {exc}") from None
+from dfcoa_opt.world.spec import ObstacleSpec, check_map_yaml_keys
 
 
 def load_scenario(path: str | Path, seed: int | None = None,
@@ -116,46 +87,6 @@ def load_scenario(path: str | Path, seed: int | None = None,
         data["seed"] = seed
     apply_overrides(data, overrides or {}, str(path))
     return scenario_from_dict(data, str(path), path.parent)
-
-
-def apply_overrides(data: dict[str, Any], overrides: Mapping[str, Any],
-                    source: str = "<overrides>") -> dict[str, Any]:
-    """Set dotted keys in a scenario dict (in place); returns ``data``.
-
-    Args:
-        data: Parsed scenario file.
-        overrides: ``{"world.clutter.density": 0.1, "world.obstacles[0].radius": 1.0}``.
-        source: Name used in error messages.
-
-    Raises:
-        ScenarioError: A path runs through a value that is not a table or an
-            array of tables, or an index is out of range.
-    """
-    for dotted, value in overrides.items():
-        node: Any = data
-        parts = dotted.split(".")
-        for i, part in enumerate(parts):
-            last = i == len(parts) - 1
-            m = _INDEX.match(part)
-            name, idx = (m.group(1), int(m.group(2))) if m else (part, None)
-            if not isinstance(node, dict):
-                raise ScenarioError(source, dotted, f"'{'.'.join(parts[:i])}' is not a table")
-            if idx is None:
-                if last:
-                    node[name] = value
-                else:
-                    node = node.setdefault(name, {})
-                continue
-            seq = node.get(name)
-            if not isinstance(seq, list) or idx >= len(seq):
-                size = len(seq) if isinstance(seq, list) else 0
-                raise ScenarioError(source, dotted, f"index {idx} out of range ({name} has "
-                                                    f"{size} entries)")
-            if last:
-                seq[idx] = value
-            else:
-                node = seq[idx]
-    return data
 
 
 def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",

@@ -14,9 +14,9 @@ from pathlib import Path
 from dfcoa_opt.core.atomic import file_exists
 from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.scenario.budget import MAX_CELLS
-from dfcoa_opt.scenario.schema import WorldSpec
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.map_server import check_image, load_map_yaml
+from dfcoa_opt.world.spec import WorldSpec
 
 
 def grid_cells(ws: WorldSpec) -> float:

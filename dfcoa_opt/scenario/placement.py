@@ -25,9 +25,10 @@ from dfcoa_opt.core.polygons import polygon_defect, segments_intersect
 from dfcoa_opt.planning.pure_pursuit import PurePursuit
 from dfcoa_opt.scenario.formation import slot_positions
 from dfcoa_opt.scenario.scenario import World
-from dfcoa_opt.scenario.schema import ObstacleSpec, ScenarioSpec
+from dfcoa_opt.scenario.schema import ScenarioSpec
 from dfcoa_opt.world.grid import OccupancyGrid
 from dfcoa_opt.world.shapes import Circle, Rectangle, Shape, describe_defect
+from dfcoa_opt.world.spec import ObstacleSpec
 
 
 def check_start_clear(world: World, pose: Any, spec: ScenarioSpec, source: str) -> None:

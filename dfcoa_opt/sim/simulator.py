@@ -29,9 +29,11 @@ from collections.abc import Sequence
 from typing import Any
 
 from dfcoa_opt.control.base import Controller
+from dfcoa_opt.core.errors import ControllerError
 from dfcoa_opt.scenario.scenario import Scenario
-from dfcoa_opt.sim.batch import BatchSimulator, ControllerError, is_batched
+from dfcoa_opt.sim.batch import BatchSimulator
 from dfcoa_opt.sim.log import RunLog
+from dfcoa_opt.sim.stepper import is_batched
 from dfcoa_opt.world.lidar import Lidar
 
 __all__ = ["ControllerError", "Simulator", "batch_controllers", "run_batch_logs", "run_scenario"]

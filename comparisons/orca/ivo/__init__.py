@@ -11,15 +11,8 @@
   and its support function.
 """
 
-from comparisons.orca.ivo.polygons import (
-    BISECT_ITERS,
-    GOLDEN_ITERS,
-    N_REFINE,
-    N_SAMPLES,
-    IvoObstacles,
-    ivo_line,
-    ivo_lines,
-)
+from comparisons.orca.ivo.kernel import BISECT_ITERS, GOLDEN_ITERS, N_REFINE, N_SAMPLES
+from comparisons.orca.ivo.polygons import IvoObstacles, ivo_line, ivo_lines
 
 __all__ = ["BISECT_ITERS", "GOLDEN_ITERS", "N_REFINE", "N_SAMPLES", "IvoObstacles", "ivo_line",
            "ivo_lines"]

@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 
 from dfcoa_opt.bench.recipes import Artefact, recipe
-from dfcoa_opt.bench.report.plots import save_png
 from dfcoa_opt.core.atomic import atomic_write
 from dfcoa_opt.planning.astar import AStarParams, plan
 from dfcoa_opt.planning.improved_astar import (
@@ -31,6 +30,7 @@ from dfcoa_opt.planning.improved_astar import (
 )
 from dfcoa_opt.scenario.loader import load_scenario
 from dfcoa_opt.viz import plotting
+from dfcoa_opt.viz.layout import save_png
 
 #: The DFCOA scenario files whose maps, starts and goals are planned on.
 DFCOA_SCENARIOS = ("dfcoa_s1.toml", "dfcoa_s2.toml")

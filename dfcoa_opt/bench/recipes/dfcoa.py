@@ -19,12 +19,13 @@ import numpy as np
 from dfcoa_opt import metrics
 from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.report.document import aggregate
-from dfcoa_opt.bench.report.plots import as_number, save_png, scenario_for_row, variant_name
+from dfcoa_opt.bench.report.plots import as_number, scenario_for_row, variant_name
 from dfcoa_opt.bench.results.logs import read_log
 from dfcoa_opt.bench.results.store import ResultsStore
 from dfcoa_opt.core.atomic import atomic_write
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.viz import plotting
+from dfcoa_opt.viz.layout import save_png
 
 #: Eq 11 normalised by the peak of R(t) over the S1 and S2 runs of the same seed and mode:
 #: (summary key, label, the paper's row).

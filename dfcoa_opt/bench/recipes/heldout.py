@@ -38,7 +38,7 @@ from dfcoa_opt.bench.report.tables import md_escape, ranking_table, rate_cell
 from dfcoa_opt.bench.report.trajectories import panels_figure
 from dfcoa_opt.bench.results.store import ResultsStore
 from dfcoa_opt.bench.runner import is_success
-from dfcoa_opt.bench.sweep.expand import safe_name
+from dfcoa_opt.bench.sweep.specs import safe_name
 from dfcoa_opt.core.atomic import atomic_write
 from dfcoa_opt.metrics.outcome import OUTCOMES
 from dfcoa_opt.viz.layout import save_png
@@ -156,7 +156,7 @@ def _gap_and_defaults(methods: Sequence[str], rows: Sequence[Mapping[str, Any]],
 
 def _variant_files(store: ResultsStore) -> list[Path]:
     """The sweep's variants files (``variant_files``, relative to the sweep file)."""
-    from dfcoa_opt.scenario.loader import read_toml
+    from dfcoa_opt.scenario.overrides import read_toml
 
     sweep_file = Path(str(store.manifest().get("sweep_file", "")))
     patterns = read_toml(store.root / "sweep.toml").get("variant_files", [])

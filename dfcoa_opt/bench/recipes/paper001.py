@@ -20,12 +20,13 @@ from matplotlib.patches import Circle as CirclePatch
 
 from dfcoa_opt import metrics
 from dfcoa_opt.bench.recipes import Artefact, recipe
-from dfcoa_opt.bench.report.plots import ok_runs, save_png, scenario_for_row
+from dfcoa_opt.bench.report.plots import ok_runs, scenario_for_row
 from dfcoa_opt.bench.results.store import ResultsStore
 from dfcoa_opt.core.atomic import atomic_write
 from dfcoa_opt.metrics.robots import leader_follower_position_error
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.viz import plotting
+from dfcoa_opt.viz.layout import save_png
 
 #: A robot has reached its target within this distance, m.
 REACH_TOL = 0.1

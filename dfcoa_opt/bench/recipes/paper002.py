@@ -18,7 +18,7 @@ from matplotlib.patches import Circle as CirclePatch
 
 from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.report import failures, trajectories
-from dfcoa_opt.bench.report.plots import ok_runs, save_png, scenario_for_row
+from dfcoa_opt.bench.report.plots import ok_runs, scenario_for_row
 from dfcoa_opt.bench.results.store import ResultsStore
 from dfcoa_opt.core.atomic import atomic_write
 from dfcoa_opt.metrics.robots import (
@@ -29,6 +29,7 @@ from dfcoa_opt.metrics.robots import (
 )
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.viz import plotting
+from dfcoa_opt.viz.layout import save_png
 
 #: The leader robot (the paper's Robot 1) has reached its target within this distance, m:
 #: the scenarios' virtual leader stops 0.05 m from the goal and ``lf_vo`` holds a robot

@@ -26,7 +26,7 @@ import numpy as np
 from matplotlib.patches import Circle as CirclePatch
 
 from dfcoa_opt.bench.recipes import Artefact, recipe
-from dfcoa_opt.bench.report.plots import ok_runs, save_png, scenario_for_row
+from dfcoa_opt.bench.report.plots import ok_runs, scenario_for_row
 from dfcoa_opt.bench.results.store import ResultsStore
 from dfcoa_opt.core.atomic import atomic_write
 from dfcoa_opt.metrics.robots import (
@@ -37,6 +37,7 @@ from dfcoa_opt.metrics.robots import (
 )
 from dfcoa_opt.sim.log import RunLog
 from dfcoa_opt.viz import plotting
+from dfcoa_opt.viz.layout import save_png
 
 #: Formation sizes and dynamic-obstacle counts of the sweep.
 SIZES = (5, 10, 15, 20)

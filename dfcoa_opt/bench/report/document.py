@@ -28,7 +28,7 @@ import numpy as np
 from scipy.stats import t as student_t
 
 from dfcoa_opt.bench.report import failures, ladders, paired, plots, stats, tables, trajectories
-from dfcoa_opt.bench.sweep.expand import safe_name
+from dfcoa_opt.bench.sweep.specs import safe_name
 from dfcoa_opt.core.atomic import atomic_write
 from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.core.runtime import provenance

@@ -16,7 +16,7 @@ from typing import Any
 
 from dfcoa_opt.bench.report import plots, trajectories
 from dfcoa_opt.bench.results.logs import LogCompacted
-from dfcoa_opt.bench.sweep.expand import KEY_MAX, safe_name, shorten
+from dfcoa_opt.bench.sweep.specs import KEY_MAX, safe_name, shorten
 from dfcoa_opt.core.errors import DfcoaError
 
 Row = Mapping[str, Any]

@@ -186,7 +186,7 @@ def bin_of(value: float, bins: Sequence[tuple[float, float]]) -> int:
 
 def read_tuned(paths: Sequence[Path]) -> dict[str, dict[str, Any]]:
     """The ``[tuned]`` tables of variants files, by tuned variant name."""
-    from dfcoa_opt.scenario.loader import read_toml
+    from dfcoa_opt.scenario.overrides import read_toml
 
     out = {}
     for p in paths:

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from dfcoa_opt.bench.report import failures, plots, tables
-from dfcoa_opt.bench.sweep.expand import KEY_MAX, safe_name, shorten
+from dfcoa_opt.bench.sweep.specs import KEY_MAX, safe_name, shorten
 
 
 def sections(groups: Sequence[Mapping[str, Any]], manifest: Mapping[str, Any],

@@ -21,15 +21,15 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle as CirclePatch
 from matplotlib.patches import Patch
 
-from dfcoa_opt.bench.report.plots import save_png, scenario_for_row, variant_name
+from dfcoa_opt.bench.report.plots import scenario_for_row, variant_name
 from dfcoa_opt.bench.results.logs import LogCompacted, read_log
 from dfcoa_opt.bench.results.store import file_sha256
-from dfcoa_opt.bench.sweep.expand import safe_name
+from dfcoa_opt.bench.sweep.specs import safe_name
 from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.metrics import outcome
 from dfcoa_opt.metrics.contacts import contacts_at, describe, first_contact_step, robot_radius
 from dfcoa_opt.sim.log import RunLog
-from dfcoa_opt.viz.layout import legend_and_fit, map_figure, new_figure, wrap_text
+from dfcoa_opt.viz.layout import legend_and_fit, map_figure, new_figure, save_png, wrap_text
 from dfcoa_opt.viz.plotting import (
     CONTACT_COLOR,
     LEADER_STYLE,

@@ -39,7 +39,7 @@ from typing import Any
 
 from dfcoa_opt.bench.results.fingerprint import run_fingerprint
 from dfcoa_opt.bench.runner import Outcome
-from dfcoa_opt.bench.sweep.expand import RunSpec, Sweep
+from dfcoa_opt.bench.sweep.specs import RunSpec, Sweep
 from dfcoa_opt.core.atomic import atomic_write, remove_partials
 from dfcoa_opt.core.errors import DfcoaError
 

@@ -47,7 +47,8 @@ The package's modules:
 Every public name of them is re-exported here.
 """
 
-from dfcoa_opt.bench.sweep.expand import (  # noqa: F401
+from dfcoa_opt.bench.sweep.expand import check_split, expand_sweep, load_sweep, sweep_from_dict
+from dfcoa_opt.bench.sweep.specs import (
     DICT_SOURCE,
     KEY_MAX,
     MAX_RUNS,
@@ -57,14 +58,10 @@ from dfcoa_opt.bench.sweep.expand import (  # noqa: F401
     Sweep,
     SweepSpec,
     canonical,
-    check_split,
     describe_runs,
-    expand_sweep,
     load_run_scenario,
-    load_sweep,
     safe_name,
     shorten,
-    sweep_from_dict,
 )
 
 __all__ = [

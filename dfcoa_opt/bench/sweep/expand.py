@@ -10,7 +10,6 @@ from pathlib import Path
 from typing import Any
 
 from dfcoa_opt.bench.sweep.factors import (
-    flatten,
     grid_of,
     scenario_files,
     variant_seeds_of,
@@ -41,7 +40,7 @@ from dfcoa_opt.bench.sweep.variants import (
 )
 from dfcoa_opt.core.errors import DfcoaError, ScenarioError, did_you_mean
 from dfcoa_opt.core.params import build
-from dfcoa_opt.scenario.loader import read_toml
+from dfcoa_opt.scenario.overrides import read_toml
 from dfcoa_opt.scenario.scenario import Scenario
 
 __all__ = [
@@ -132,7 +131,7 @@ def expand_sweep(data: dict[str, Any], src: str, base: Path, text: str,
     _load_plugins(spec.plugins, src, base)
     variants = variants_of(spec, src, base)
     seeds_of = variant_seeds_of(spec, variants, src)
-    ladders = parse_ladders(spec.ladder, flatten, src)
+    ladders = parse_ladders(spec.ladder, src)
     grid = grid_of(spec, src)
     points, varying = grid.points, grid.varying
     groups: list[tuple[list[Path], Ladder | None]] = []

@@ -22,27 +22,7 @@ from typing import Any
 from dfcoa_opt.bench.sweep.specs import MAX_RUNS, SweepSpec, canonical
 from dfcoa_opt.bench.sweep.variants import Variant, check_value, named_variants, reaches
 from dfcoa_opt.core.errors import ScenarioError, did_you_mean
-from dfcoa_opt.scenario.loader import read_toml
-
-
-def flatten(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    """Nested TOML tables -> dotted keys (``[grid.world] size = ...`` == ``"world.size"``).
-
-    Args:
-        table: The table as read.
-        prefix: Dotted path of ``table`` (ending in ``.``), prepended to its keys.
-
-    Returns:
-        Dotted key -> value (arrays, and the tables inside them, kept as they are).
-    """
-    out: dict[str, Any] = {}
-    for k, v in table.items():
-        key = f"{prefix}{k}"
-        if isinstance(v, Mapping):
-            out.update(flatten(v, key + "."))
-        else:
-            out[key] = v
-    return out
+from dfcoa_opt.scenario.overrides import flatten, read_toml
 
 
 @dataclass(frozen=True)
@@ -130,7 +110,7 @@ def variants_of(spec: SweepSpec, src: str, base: Path) -> list[Variant]:
     from dfcoa_opt.control.registry import available, controller_class
     from dfcoa_opt.core.errors import UnknownNameError
 
-    named = (named_variants(spec.variants, flatten, src)
+    named = (named_variants(spec.variants, src)
              if isinstance(spec.variants, Mapping) else [])
     read: list[Path] = []
     for i, pattern in enumerate(spec.variant_files):
@@ -179,7 +159,7 @@ def _variant_file(path: Path, src: str, key: str) -> list[Variant]:
         if not isinstance(table, Mapping) or not table:
             raise ScenarioError(str(path), "variants", "is required: a table of named variants "
                                                        "([variants.<name>] controller = ...)")
-        return named_variants(table, flatten, str(path))
+        return named_variants(table, str(path))
     except ScenarioError as exc:
         raise ScenarioError(src, key, str(exc)) from None
 

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from dfcoa_opt.core.errors import ScenarioError, did_you_mean
+from dfcoa_opt.scenario.overrides import flatten
 
 #: Characters a variant name may hold (it becomes part of file names).
 _NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_+-.=[],@")
@@ -152,13 +153,11 @@ def _check_name(name: str, src: str, key: str) -> None:
                                       "letters, digits and _ + - . = [ ] , @")
 
 
-def named_variants(table: Mapping[str, Any], flatten: Any, src: str) -> list[Variant]:
+def named_variants(table: Mapping[str, Any], src: str) -> list[Variant]:
     """The ``[variants]`` table: name -> ``{controller = id, dotted key = value, ...}``.
 
     Args:
         table: The table as read.
-        flatten: Nested tables -> dotted keys
-            (:func:`~dfcoa_opt.bench.sweep.factors.flatten`).
         src: Sweep file for messages.
 
     Raises:
@@ -212,7 +211,7 @@ def reaches(key: str, controller: str) -> bool:
     return not key.startswith("controllers.") or key.split(".")[1] in controller.split("+")
 
 
-def parse_ladders(value: Any, flatten: Any, src: str) -> list[Ladder]:
+def parse_ladders(value: Any, src: str) -> list[Ladder]:
     """``[ladder]`` (one table) or ``[[ladder]]`` (an array of tables).
 
     Raises:
@@ -221,9 +220,9 @@ def parse_ladders(value: Any, flatten: Any, src: str) -> list[Ladder]:
     if value is None:
         return []
     if isinstance(value, Mapping):
-        return [_ladder(value, flatten, src, "ladder", single=True)]
+        return [_ladder(value, src, "ladder", single=True)]
     if isinstance(value, list) and value and all(isinstance(v, Mapping) for v in value):
-        return [_ladder(v, flatten, src, f"ladder[{i}]", single=False)
+        return [_ladder(v, src, f"ladder[{i}]", single=False)
                 for i, v in enumerate(value)]
     raise ScenarioError(src, "ladder", "must be a table ([ladder]) or an array of tables "
                                        "([[ladder]])")
@@ -232,7 +231,7 @@ def parse_ladders(value: Any, flatten: Any, src: str) -> list[Ladder]:
 _LADDER_KEYS = ("label", "key", "values", "rungs", "scenarios", "log_x", "variants")
 
 
-def _ladder(data: Mapping[str, Any], flatten: Any, src: str, where: str,
+def _ladder(data: Mapping[str, Any], src: str, where: str,
             single: bool) -> Ladder:
     for k in data:
         if k not in _LADDER_KEYS:
