@@ -311,8 +311,9 @@ def worker_preload() -> tuple[str, ...]:
     controller, filter and estimator entry point. Importing runs no numba
     kernel, so no OpenMP thread exists yet when the server forks.
     """
-    return ("dfcoa_opt.bench.runner", "dfcoa_opt.sim.simulator", "dfcoa_opt.metrics",
-            *CONTROLLERS.modules(), *FILTERS.modules(), *ESTIMATORS.modules())
+    return tuple(dict.fromkeys(("dfcoa_opt.bench.runner", "dfcoa_opt.sim.simulator",
+                                "dfcoa_opt.metrics", *CONTROLLERS.modules(),
+                                *FILTERS.modules(), *ESTIMATORS.modules())))
 
 
 def _dask(runs: Sequence[RunSpec], config: ExecutorConfig) -> Iterator[Outcome]:

@@ -172,8 +172,9 @@ class BatchStall:
 
 
 @numba.njit(cache=True)
-def stalled_at(pose, slots, progress, e, k, lag, advance, settle,
-             displacement):  # pragma: no cover - numba
+def stalled_at(pose: FloatArray, slots: FloatArray, progress: FloatArray, e: int, k: int,
+               lag: int, advance: float, settle: float,
+               displacement: float) -> bool:  # pragma: no cover - numba
     """:func:`stalled` of run ``e`` at instant ``k``, compiled (the environments' pass).
 
     Args:
