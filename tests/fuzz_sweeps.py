@@ -26,7 +26,7 @@ from typing import Any, get_args, get_origin, get_type_hints
 
 from hypothesis import strategies as st
 
-from dfcoa_opt.bench.sweep.expand import MAX_SEEDS, SweepSpec
+from dfcoa_opt.bench.sweep import MAX_SEEDS, SweepSpec
 from dfcoa_opt.control.registry import available
 from dfcoa_opt.scenario.schema import ScenarioSpec
 from tests.fuzz_schema import CONTROLLER_PARAMS, ROOT

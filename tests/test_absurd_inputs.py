@@ -157,7 +157,7 @@ def test_a_missing_policy_names_the_scenario_and_key(tmp_path, capsys):
 
 def test_a_long_scenario_name_runs_under_a_shortened_file_name(tmp_path, capsys):
     """A 250-character name is legitimate: the run's files get a stable, shorter stem."""
-    from dfcoa_opt.bench.sweep.expand import NAME_MAX
+    from dfcoa_opt.bench.sweep import NAME_MAX
 
     (tmp_path / "s.toml").write_text(f'name = "{"n" * 250}"\n' + SCENARIO.read_text())
     out = tmp_path / "out"

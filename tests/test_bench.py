@@ -20,7 +20,7 @@ from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
 from dfcoa_opt.bench.results import fingerprint
 from dfcoa_opt.bench.runner import DETERMINISTIC_KEYS, execute
-from dfcoa_opt.bench.sweep.expand import RunSpec, canonical, load_sweep
+from dfcoa_opt.bench.sweep import RunSpec, canonical, load_sweep
 from dfcoa_opt.cli import main
 from dfcoa_opt.control import registry
 from dfcoa_opt.core.errors import DfcoaError, ScenarioError
@@ -385,7 +385,7 @@ def test_runs_never_import_the_sources_left_out_of_the_fingerprint(tmp_path):
                      '[grid]\nt_max = [0.3]\n')
     code = ("import sys, json\n"
             "from dfcoa_opt.bench.runner import execute\n"
-            "from dfcoa_opt.bench.sweep.expand import load_sweep\n"
+            "from dfcoa_opt.bench.sweep import load_sweep\n"
             f"runs = load_sweep({str(sweep)!r}).runs\n"
             "bad = [o.row['error'] for o in map(execute, runs) if o.row['status'] != 'ok']\n"
             "mods = [m.__file__ for m in list(sys.modules.values())\n"

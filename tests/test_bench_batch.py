@@ -10,7 +10,7 @@ import pytest
 from dfcoa_opt.bench import executors
 from dfcoa_opt.bench.executors import BATCH_ROWS, BATCH_RUNS, batches
 from dfcoa_opt.bench.runner import DETERMINISTIC_KEYS, execute, execute_batch
-from dfcoa_opt.bench.sweep.expand import RunSpec, canonical
+from dfcoa_opt.bench.sweep import RunSpec, canonical
 
 ROOT = Path(__file__).resolve().parents[1]
 CLUTTER = str(ROOT / "scenarios" / "bench" / "clutter.toml")

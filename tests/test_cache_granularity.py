@@ -18,7 +18,7 @@ import dfcoa_opt
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
 from dfcoa_opt.bench.results import fingerprint, store
-from dfcoa_opt.bench.sweep.expand import load_sweep
+from dfcoa_opt.bench.sweep import load_sweep
 from dfcoa_opt.control import registry
 from dfcoa_opt.core.runtime.kernel_cache import module_files
 

@@ -43,8 +43,8 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
+from dfcoa_opt.bench.sweep import KEY_MAX, MAX_RUNS, RunSpec, Sweep, load_sweep, sweep_from_dict
 from dfcoa_opt.bench.sweep import expand as sweep_mod
-from dfcoa_opt.bench.sweep.expand import KEY_MAX, MAX_RUNS, Sweep, load_sweep, sweep_from_dict
 from dfcoa_opt.cli import main
 from dfcoa_opt.core.errors import DfcoaError, ScenarioError
 from dfcoa_opt.scenario.scenario import Scenario
@@ -73,7 +73,7 @@ def cached_loads():
     timer = {"seconds": 0.0}
     real = sweep_mod.load_run_scenario
 
-    def load(run: sweep_mod.RunSpec) -> Scenario:
+    def load(run: RunSpec) -> Scenario:
         key = (run.scenario_file, run.seed, run.overrides)
         if key in _LOADS:
             _LOADS.move_to_end(key)

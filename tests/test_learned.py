@@ -12,7 +12,7 @@ import pytest
 import comparisons.learned  # noqa: F401 - registers 'learned'
 import dfcoa_opt as d
 from comparisons.learned import controller, train
-from dfcoa_opt.control.policy.controller import load_policy, policy_digest
+from dfcoa_opt.control.policy import load_policy, policy_digest
 from dfcoa_opt.core.errors import ScenarioError
 
 ROOT = Path(__file__).resolve().parents[1]

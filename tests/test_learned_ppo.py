@@ -10,7 +10,7 @@ import pytest
 import comparisons.learned_ppo  # noqa: F401 - registers 'learned_ppo'
 import dfcoa_opt as d
 from comparisons.learned_ppo import controller
-from dfcoa_opt.control.policy.controller import load_policy, policy_digest
+from dfcoa_opt.control.policy import load_policy, policy_digest
 from dfcoa_opt.core.errors import ScenarioError
 
 ROOT = Path(__file__).resolve().parents[1]

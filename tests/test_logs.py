@@ -20,7 +20,7 @@ from dfcoa_opt.bench.results.logs import (
 )
 from dfcoa_opt.bench.results.store import ResultsStore
 from dfcoa_opt.bench.runner import execute
-from dfcoa_opt.bench.sweep.expand import RunSpec
+from dfcoa_opt.bench.sweep import RunSpec
 from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.sim.log import RunLog, is_compact, is_pruned
 

@@ -9,7 +9,7 @@ import pytest
 
 from dfcoa_opt.bench.report.stats import cvar
 from dfcoa_opt.bench.runner import execute
-from dfcoa_opt.bench.sweep.expand import RunSpec
+from dfcoa_opt.bench.sweep import RunSpec
 from dfcoa_opt.metrics import world as mw
 from dfcoa_opt.scenario.loader import scenario_from_dict
 from dfcoa_opt.world.dynamic import DynamicObstacles, MovingDisc

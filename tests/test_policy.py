@@ -17,7 +17,7 @@ import dfcoa_opt as d
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.harness import run_sweep
 from dfcoa_opt.bench.results import fingerprint
-from dfcoa_opt.bench.sweep.expand import load_sweep
+from dfcoa_opt.bench.sweep import load_sweep
 from dfcoa_opt.cli import main
 from dfcoa_opt.control import registry
 from dfcoa_opt.control.features import ObservationSpec

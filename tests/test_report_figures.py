@@ -16,7 +16,7 @@ from dfcoa_opt.bench.harness import run_sweep
 from dfcoa_opt.bench.report import document as report
 from dfcoa_opt.bench.report import plots, trajectories
 from dfcoa_opt.bench.results.logs import read_log
-from dfcoa_opt.bench.sweep.expand import load_sweep
+from dfcoa_opt.bench.sweep import load_sweep
 from dfcoa_opt.metrics import contacts
 from dfcoa_opt.viz import layout, plotting
 

@@ -20,8 +20,7 @@ from dfcoa_opt.bench import harness
 from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.lifecycle import SweepInterrupted
 from dfcoa_opt.bench.results.store import ResultsStore
-from dfcoa_opt.bench.sweep import expand as sweep_mod
-from dfcoa_opt.bench.sweep.expand import (
+from dfcoa_opt.bench.sweep import (
     KEY_MAX,
     MAX_RUNS,
     MAX_SEEDS,
@@ -31,6 +30,7 @@ from dfcoa_opt.bench.sweep.expand import (
     safe_name,
     shorten,
 )
+from dfcoa_opt.bench.sweep import expand as sweep_mod
 from dfcoa_opt.cli import main
 from dfcoa_opt.core.errors import ScenarioError
 from dfcoa_opt.scenario.loader import load_scenario

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from dfcoa_opt.bench.executors import ExecutorConfig
-from dfcoa_opt.bench.sweep.expand import load_sweep, sweep_from_dict
+from dfcoa_opt.bench.sweep import load_sweep, sweep_from_dict
 from dfcoa_opt.bench.tune import objective, tune_variant, tuning_sweep
 from dfcoa_opt.cli import main
 from dfcoa_opt.control.registry import available, check_overrides, controller_tunables

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from dfcoa_opt.bench import precision
-from dfcoa_opt.bench.sweep.expand import load_sweep
+from dfcoa_opt.bench.sweep import load_sweep
 from dfcoa_opt.core.errors import ScenarioError
 
 ROOT = Path(__file__).resolve().parents[1]

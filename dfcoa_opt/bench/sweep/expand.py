@@ -17,18 +17,13 @@ from dfcoa_opt.bench.sweep.factors import (
 )
 from dfcoa_opt.bench.sweep.specs import (
     DICT_SOURCE,
-    KEY_MAX,
     MAX_RUNS,
     MAX_SEEDS,
-    NAME_MAX,
     RunSpec,
     Sweep,
     SweepSpec,
     canonical,
-    describe_runs,
     load_run_scenario,
-    safe_name,
-    shorten,
 )
 from dfcoa_opt.bench.sweep.variants import (
     Ladder,
@@ -43,11 +38,7 @@ from dfcoa_opt.core.params import build
 from dfcoa_opt.scenario.overrides import read_toml
 from dfcoa_opt.scenario.scenario import Scenario
 
-__all__ = [
-    "DICT_SOURCE", "KEY_MAX", "MAX_RUNS", "MAX_SEEDS", "NAME_MAX", "RunSpec", "Sweep",
-    "SweepSpec", "canonical", "check_split", "describe_runs", "expand_sweep", "load_run_scenario",
-    "load_sweep", "safe_name", "shorten", "sweep_from_dict",
-]
+__all__ = ["check_split", "expand_sweep", "load_sweep", "sweep_from_dict"]
 
 
 def load_sweep(path: str | Path, seeds: int | None = None,

@@ -23,23 +23,16 @@ from numpy.typing import NDArray
 from dfcoa_opt.control.base import BatchedController, Observation
 from dfcoa_opt.control.features import ObservationSpec, flatten
 from dfcoa_opt.control.policy.file import (
-    ACTIVATIONS,
-    FORMAT,
     PREFIX,
-    VERSION,
     Frame,
     LoadedPolicy,
-    PolicySpec,
     load_policy,
-    policy_digest,
 )
 from dfcoa_opt.core.errors import ControllerError, UnknownNameError
 from dfcoa_opt.core.geometry import rotate
 from dfcoa_opt.world.robots.models import CommandKind
 
-__all__ = ["ACTIVATIONS", "FORMAT", "PREFIX", "VERSION", "FilePolicy", "LoadedPolicy",
-           "PolicyController", "PolicySpec", "callable_policy_class", "file_policy_class",
-           "load_policy", "policy_digest"]
+__all__ = ["FilePolicy", "PolicyController", "callable_policy_class", "file_policy_class"]
 
 FloatArray = NDArray[np.float64]
 
