@@ -84,3 +84,55 @@ def test_register_requires_params_and_unique_ids():
         registry.register("nope")(type("NoParams", (), {}))
     with pytest.raises(ValueError):
         registry.register("goto_slot")(ThirdParty)
+
+
+# -- the built-ins are declared through the entry-point groups --------------------------------
+
+_DECORATORS = {"register": "dfcoa_opt.controllers", "register_filter": "dfcoa_opt.filters",
+               "register_estimator": "dfcoa_opt.estimators",
+               "register_planner": "dfcoa_opt.planners",
+               "register_family": "dfcoa_opt.world_families", "recipe": "dfcoa_opt.recipes"}
+
+
+def _decorated_ids() -> dict[str, set[str]]:
+    """Every id a module of the distribution registers by decorator, by entry-point group."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    found: dict[str, set[str]] = {g: set() for g in _DECORATORS.values()}
+    for path in [*(root / "dfcoa_opt").rglob("*.py"), *(root / "comparisons").rglob("*.py")]:
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            for deco in getattr(node, "decorator_list", []):
+                if not isinstance(deco, ast.Call) or not deco.args:
+                    continue
+                name = getattr(deco.func, "id", None) or getattr(deco.func, "attr", None)
+                arg = deco.args[0]
+                if name in _DECORATORS and isinstance(arg, ast.Constant):
+                    found[_DECORATORS[name]].add(arg.value)
+    return found
+
+
+def test_every_built_in_is_declared_in_its_entry_point_group():
+    """A new controller, filter, planner, estimator, family or recipe is named in pyproject.toml.
+
+    Else no process would import its module, and it would be unknown.
+    """
+    from pathlib import Path
+
+    from dfcoa_opt.scenario.overrides import read_toml
+
+    declared = read_toml(Path(__file__).resolve().parents[1] / "pyproject.toml")[
+        "project"]["entry-points"]
+    for group, ids in _decorated_ids().items():
+        assert ids == set(declared.get(group, {})), group
+
+
+def test_an_uninstalled_checkout_says_how_to_install(monkeypatch):
+    """Without the distribution's metadata no entry point exists: the error says so."""
+    from dfcoa_opt.core.errors import UnknownNameError
+    from dfcoa_opt.core.registry import Registry
+
+    empty = Registry("planner", "dfcoa_opt.no_such_group")
+    with pytest.raises(UnknownNameError, match=r"no planner is registered.*pip install -e \."):
+        empty.get("astar")

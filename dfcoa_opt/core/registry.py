@@ -144,6 +144,11 @@ class Registry(Generic[T]):
         obj = self.find(name)
         if obj is None:
             self.load()
+            if not self._table:
+                raise UnknownNameError(
+                    f"unknown {self.kind} '{name}': no {self.kind} is registered, since no "
+                    f"package declares the entry-point group {self.group}; install dfcoa-opt "
+                    "(pip install -e . in the checkout) rather than running it from its folder")
             raise UnknownNameError(f"unknown {self.kind} '{name}'"
                                    f"{did_you_mean(name, self._table)}; available: "
                                    f"{', '.join(sorted(self._table))}{self.hint}")
