@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from dfcoa_opt.bench.recipes.heldout import _group_tables
+from dfcoa_opt.bench.recipes.heldout import _difficulty_series, _group_tables
 from dfcoa_opt.bench.report import heldout as ho
 
 
@@ -66,7 +69,58 @@ def test_pooled_rows_pair_world_by_world() -> None:
 def test_group_tables_count_each_groups_own_runs() -> None:
     rows = [_row("a", "x", 0, "success"), _row("a", "x", 1, "collision"),
             _row("a", "y", 0, "deadlock"), _row("a", "y", 1, "deadlock")]
-    lines = _group_tables(["a"], rows, lambda r: r["scenario"], ["x", "y"])
+    lines = _group_tables(["a"], rows, lambda r: r["scenario"], {"x": "x", "y": "y"})
     text = "\n".join(lines)
     assert "| a | 50% [9, 91] (1/2) | 0% [0, 66] (0/2) |" in text
     assert "| a | 50/50/0/0 | 0/0/100/0 |" in text
+
+
+def test_bins_that_round_to_one_label_stay_apart_and_coinciding_edges_merge() -> None:
+    """The subset of the report: four quartile edges of 0.291..0.33 read 0.29-0.29 twice."""
+    def ws_of(diffs):
+        rows = [_row("a@tuned", "rooms", s, "success", 90.0, difficulty=d)
+                for s, d in enumerate(diffs)]
+        return ho.worlds(rows, ["a@tuned"])
+
+    bins = ho.difficulty_bins(ws_of([0.2910, 0.2935, 0.2942, 0.31, 0.33]))
+    labels = ho.bin_labels(bins)
+    assert len(bins) == 4 and len(set(labels)) == 4
+    assert ho.difficulty_bins(ws_of([0.3, 0.3, 0.3])) == [(0.3, 0.3)]
+    assert len(ho.difficulty_bins(ws_of([0.1, 0.2]))) == 2  # two worlds: at most two bins
+    assert len(ho.difficulty_bins(ws_of([0.1, 0.1, 0.1, 0.5]))) == 2  # edges 0.1 x3 merge
+
+
+_DIFFS = st.lists(st.sampled_from([0.29, 0.2901, 0.2904, 0.291, 0.2949, 0.2951, 0.30, 0.31,
+                                   0.33, 0.5]), min_size=1, max_size=12)
+
+
+@settings(max_examples=80, deadline=None)
+@given(diffs=_DIFFS, families=st.lists(st.sampled_from(["rooms", "crowd", "cellular"]),
+                                       min_size=12, max_size=12),
+       wins=st.lists(st.booleans(), min_size=24, max_size=24))
+def test_every_table_counts_each_world_once_per_variant(diffs, families, wins) -> None:
+    """Any subset of worlds: the by-family and by-difficulty tables and the figure's data count
+    every world of every variant exactly once, with the totals of the ranking (its runs)."""
+    names = ["a@tuned", "b@tuned"]
+    rows = [_row(v, families[i], i, "success" if wins[2 * i + j] else "deadlock", 90.0,
+                 difficulty=d) for i, d in enumerate(diffs) for j, v in enumerate(names)]
+    ws = ho.worlds(rows, names)
+    bins = ho.difficulty_bins(ws)
+    bin_of = {(w.scenario, w.seed): ho.bin_of(w.metrics["world_difficulty"], bins) for w in ws}
+    tables = {
+        "family": _group_tables(names, rows, lambda r: str(r["scenario"]),
+                                {f: f for f in sorted(set(families[:len(diffs)]))}),
+        "difficulty": _group_tables(names, rows, lambda r: bin_of.get(ho.world_key(r)),
+                                    dict(enumerate(ho.bin_labels(bins)))),
+    }
+    series = _difficulty_series(names, rows, bins, bin_of)
+    for n in names:
+        ranked = [r for r in rows if r["variant"] == n]  # what the ranking counts
+        wins_n = sum(r["metrics"]["outcome"] == "success" for r in ranked)
+        for what, lines in tables.items():
+            line = next(ln for ln in lines if ln.startswith(f"| {n} | ") and "(" in ln)
+            counts = [tuple(map(int, m)) for m in re.findall(r"\((\d+)/(\d+)\)", line)]
+            assert sum(k for k, _ in counts) == wins_n, what
+            assert sum(m for _, m in counts) == len(ranked), what
+        assert sum(p[4] for p in series[ho.method_of(n)]) == len(ranked)
+        assert sum(round(p[1] * p[4]) for p in series[ho.method_of(n)]) == wins_n

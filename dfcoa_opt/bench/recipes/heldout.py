@@ -24,7 +24,7 @@ from __future__ import annotations
 import csv
 import io
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -69,10 +69,18 @@ def _variant_table(names: Sequence[str], rows: Sequence[Mapping[str, Any]]
 
 
 def _group_tables(names: Sequence[str], rows: Sequence[Mapping[str, Any]],
-                  group_of: Callable[[Mapping[str, Any]], str | None],
-                  groups: Sequence[str]) -> list[str]:
-    """Success, and the outcome classes, of each variant in each group of runs (columns)."""
-    head = "| variant | " + " | ".join(md_escape(g) for g in groups) + " |"
+                  group_of: Callable[[Mapping[str, Any]], Hashable],
+                  groups: Mapping[Hashable, str]) -> list[str]:
+    """Success, and the outcome classes, of each variant in each group of runs (columns).
+
+    Args:
+        names: The variants (rows of the tables).
+        rows: Their runs.
+        group_of: A run's group, None for none.
+        groups: Group -> column label, in column order. A run counts in the column
+            of its group only, however the labels read.
+    """
+    head = "| variant | " + " | ".join(md_escape(g) for g in groups.values()) + " |"
     rule = "|---|" + "---|" * len(groups)
     lines, outc = [head, rule], [head.replace("| variant |", "| variant (S/C/D/T %) |"), rule]
     for n in names:
@@ -90,27 +98,40 @@ def _group_tables(names: Sequence[str], rows: Sequence[Mapping[str, Any]],
             "timeout, % of runs):", "", *outc]
 
 
-def _difficulty(names: Sequence[str], rows: Sequence[Mapping[str, Any]],
-                ws: Sequence[ho.World], dest: Path) -> tuple[list[str], Path]:
-    """The tables by quartile of the difficulty index, and success against it (figure)."""
-    bins = ho.difficulty_bins(ws)
-    labels = [f"{a:.2f}–{b:.2f}" for a, b in bins]
-    label_of = {(w.scenario, w.seed): labels[ho.bin_of(w.metrics["world_difficulty"], bins)]
-                for w in ws}
+def _difficulty_series(names: Sequence[str], rows: Sequence[Mapping[str, Any]],
+                       bins: Sequence[tuple[float, float]], bin_of: Mapping[Any, int]
+                       ) -> dict[str, list[tuple[float, float, float, float, int]]]:
+    """The figure's data: per method, ``(bin centre, success, Wilson low, high, runs)`` per bin.
+
+    A run counts in the bin of its world's index (``bin_of``: world key -> bin index).
+    """
     series: dict[str, list[tuple[float, float, float, float, int]]] = {}
     for n in names:
-        for (a, b), label in zip(bins, labels, strict=True):
-            runs = [r for r in rows if variant_name(r) == n
-                    and label_of.get(ho.world_key(r)) == label]
+        for i, (a, b) in enumerate(bins):
+            runs = [r for r in rows if variant_name(r) == n and bin_of.get(ho.world_key(r)) == i]
             if runs:
                 wins = sum(is_success(r) for r in runs)
                 lo, hi = stats.wilson_interval(wins, len(runs))
                 series.setdefault(ho.method_of(n), []).append(
                     ((a + b) / 2, wins / len(runs), lo, hi, len(runs)))
-    path = ladder_figure(series, "difficulty index (bin centre)",
-                         dest / "success_vs_difficulty.png",
+    return series
+
+
+def _difficulty(names: Sequence[str], rows: Sequence[Mapping[str, Any]],
+                ws: Sequence[ho.World], dest: Path) -> tuple[list[str], Path]:
+    """The tables by quartile of the difficulty index, and success against it (figure).
+
+    Runs are grouped by the index of their world's bin (:func:`ho.bin_of`), so a
+    world counts in one bin whatever the bins' labels.
+    """
+    bins = ho.difficulty_bins(ws)
+    bin_of = {(w.scenario, w.seed): ho.bin_of(w.metrics["world_difficulty"], bins) for w in ws}
+    path = ladder_figure(_difficulty_series(names, rows, bins, bin_of),
+                         "difficulty index (bin centre)", dest / "success_vs_difficulty.png",
                          "Tuned methods on the test worlds: success against difficulty")
-    return _group_tables(names, rows, lambda r: label_of.get(ho.world_key(r)), labels), path
+    table = _group_tables(names, rows, lambda r: bin_of.get(ho.world_key(r)),
+                          dict(enumerate(ho.bin_labels(bins))))
+    return table, path
 
 
 def _gap_and_defaults(methods: Sequence[str], rows: Sequence[Mapping[str, Any]],
@@ -213,10 +234,11 @@ def render_heldout(store: ResultsStore, dest: Path) -> list[Artefact]:
                f"Paired over the test worlds against `{baseline}` (McNemar exact, Holm).", ""]
     families = sorted({str(r["scenario"]) for r in tuned_rows})
     md += ["## By family", "", *_group_tables(tuned_names, tuned_rows,
-                                              lambda r: str(r["scenario"]), families), ""]
+                                              lambda r: str(r["scenario"]),
+                                              {f: f for f in families}), ""]
     bins, figure = _difficulty(tuned_names, tuned_rows, ws, dest)
     md += ["## By difficulty", "", "The tuned variants in four bins of the difficulty index "
-           "(quartiles of the test worlds).", "", *bins, "",
+           "(quartiles of the test worlds; bins whose edges coincide merge).", "", *bins, "",
            f"![success against difficulty]({figure.name})", ""]
     gap, dvt = _gap_and_defaults(methods, rows, tuned_info)
     md += ["## Generalisation gap", "", "Training success of the best trial (the tuning "

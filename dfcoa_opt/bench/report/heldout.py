@@ -167,21 +167,37 @@ def spearman(ws: Sequence[World]) -> tuple[float, float, int]:
 
 
 def difficulty_bins(ws: Sequence[World], count: int = 4) -> list[tuple[float, float]]:
-    """``count`` bins of the difficulty index with about as many worlds each (quantile edges).
+    """At most ``count`` bins of the difficulty index with about as many worlds each.
 
-    The last bin is closed on the right; the bins cover every world.
+    The edges are quantiles of the worlds' index; edges that coincide merge, so
+    a subset with fewer distinct values than bins gets fewer bins (one bin
+    ``(v, v)`` when every world has the same index). The last bin is closed on
+    the right; the bins cover every world. A bin is known by its index
+    (:func:`bin_of`), never by its label: two bins can round to one label.
     """
     x = np.sort([w.metrics["world_difficulty"] for w in ws])
-    edges = np.quantile(x, np.linspace(0.0, 1.0, count + 1))
+    edges = np.unique(np.quantile(x, np.linspace(0.0, 1.0, max(1, min(count, len(x))) + 1)))
+    if len(edges) == 1:
+        return [(float(edges[0]), float(edges[0]))]
     return [(float(a), float(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
 
 def bin_of(value: float, bins: Sequence[tuple[float, float]]) -> int:
-    """The bin index of a difficulty value (the last bin takes its right edge)."""
+    """The index of the bin of a difficulty value (the last bin takes its right edge)."""
     for i, (lo, hi) in enumerate(bins):
         if lo <= value < hi or (i == len(bins) - 1 and value == hi):
             return i
     return len(bins) - 1 if value > bins[-1][1] else 0
+
+
+def bin_labels(bins: Sequence[tuple[float, float]]) -> list[str]:
+    """``"lo–hi"`` of each bin, with two decimals, or as many more as tell the bins apart."""
+    labels: list[str] = []
+    for digits in range(2, 17):
+        labels = [f"{a:.{digits}f}–{b:.{digits}f}" for a, b in bins]
+        if len(set(labels)) == len(labels):
+            break
+    return labels
 
 
 def read_tuned(paths: Sequence[Path]) -> dict[str, dict[str, Any]]:
