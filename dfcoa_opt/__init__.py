@@ -122,5 +122,14 @@ from dfcoa_opt.api import (  # noqa: E402 - after the kernel cache check
 )
 from dfcoa_opt.core.runtime.version import __version__  # noqa: E402
 
-__all__ = ["Results", "Run", "__version__", "controllers", "load", "register", "report", "run",
-           "run_batch", "sweep"]
+__all__ = ["Results", "Run", "RunLog", "__version__", "controllers", "load", "register", "report",
+           "run", "run_batch", "sweep"]
+
+
+def __getattr__(name: str) -> object:
+    """``RunLog`` (a run's log: ``RunLog.load(path)``), imported on first use."""
+    if name == "RunLog":
+        from dfcoa_opt.sim.log import RunLog
+
+        return RunLog
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

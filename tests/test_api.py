@@ -180,3 +180,14 @@ def test_trajectories_are_records_with_named_fields():
     np.testing.assert_array_equal(two["slot_y"], r.log.slots[:, 2, 1])
     np.testing.assert_array_equal(two["t"], r.log.t)
     np.testing.assert_array_equal(traj["clearance"][:n], r.log.clearance[0])
+
+
+def test_runlog_is_exported_from_the_package(tmp_path):
+    """The README reads a saved log with ``RunLog.load``: ``from dfcoa_opt import RunLog``."""
+    from dfcoa_opt import RunLog
+    from dfcoa_opt.sim.log import RunLog as Defined
+
+    assert RunLog is Defined and "RunLog" in d.__all__
+    run = d.run(d.load(ROOT / "scenarios" / "example_empty.toml", t_max=1.0), "goto_slot", seed=0)
+    run.log.save(tmp_path / "r.npz")
+    assert RunLog.load(tmp_path / "r.npz").digest() == run.log.digest()

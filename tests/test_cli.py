@@ -88,6 +88,12 @@ def test_list(capsys):
 
 @pytest.mark.parametrize("argv,msg", [
     (["run", "nope.toml"], "nope.toml: file not found"),
+    (["run", str(ROOT / "scenarios" / "example_empty.toml"), "--set", "robots.v_mx=0.5"],
+     "--set: robots.v_mx: unknown key (did you mean 'v_max'?)"),
+    (["run", str(ROOT / "scenarios" / "example_empty.toml"), "--controller", "orca"],
+     "'orca' is a safety filter, which wraps a controller: e.g. 'goto_slot+orca'"),
+    (["run", str(ROOT / "scenarios" / "example_empty.toml"), "--seeds", "0-100000"],
+     "--seeds: '0-100000' names more than 100,000 seeds"),
     (["run", str(ROOT / "scenarios" / "example_empty.toml"), "--controller", "goto_slat"],
      "did you mean 'goto_slot'"),
     (["list", "scenarios", "--dir", "/no/such/dir"], "scenario folder not found"),
@@ -114,3 +120,38 @@ def test_report_baseline_option_checks_the_name(tmp_path, capsys):
     assert main(["report", str(folder), "--baseline", "ctl_b"]) == 0
     md = (folder / "report" / "report.md").read_text()
     assert "Baseline of the paired comparisons: `ctl_b`." in md and "### Ranking" in md
+
+
+def test_run_summary_names_the_robots_and_who_collided(tmp_path, capsys):
+    """The Burger on the crossing: its profile and dynamics in the header, every wheel ratio,
+    and the first contact's parties after its time, as the figures' titles say it."""
+    argv = ["run", str(ROOT / "scenarios" / "bench" / "crossing.toml"), "--controller",
+            "goto_slot", "--set", "robots.profile=turtlebot3_burger", "--set",
+            "robots.dynamics=actuated", "--set", "t_max=25", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    first, *rest = capsys.readouterr().out.splitlines()
+    assert "(unicycle, turtlebot3_burger, actuated)" in first
+    assert "collision at t = " in first and "(robot 0 and moving obstacle 0)" in first
+    assert any(line.startswith("  wheel_accel_ratio ") for line in rest)
+
+
+def test_bench_prints_each_distinct_error_once_with_its_count(tmp_path, capsys):
+    bad = tmp_path / "bad.py"
+    bad.write_text("import numpy as np\nimport dfcoa_opt as d\n"
+                   "from dataclasses import dataclass\n\n"
+                   "@d.register('nan_out')\nclass NanOut:\n    command = 'velocity'\n"
+                   "    @dataclass(frozen=True)\n    class Params:\n        pass\n"
+                   "    def __init__(self, p):\n        pass\n"
+                   "    def reset(self, scenario, rng):\n        pass\n"
+                   "    def act(self, obs):\n        return np.full((obs.n, 2), np.nan)\n")
+    sweep = tmp_path / "s.toml"
+    sweep.write_text(f'scenarios = ["{(ROOT / "scenarios" / "example_empty.toml").as_posix()}"]'
+                     '\ncontrollers = ["nan_out", "goto_slot"]\nseeds = 3\nplugins = ["bad.py"]\n'
+                     '[grid]\nt_max = [0.5]\n')
+    assert main(["bench", str(sweep), "--out", str(tmp_path / "r"), "--no-progress",
+                 "--jobs", "1"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    failed = [ln for ln in lines if ln.startswith("  failed (")]
+    assert any("ran 6 (3 failed)" in ln for ln in lines)
+    assert len(failed) == 1 and failed[0].startswith("  failed (3 runs): ")
+    assert "NaN/inf" in failed[0]

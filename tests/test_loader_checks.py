@@ -88,3 +88,23 @@ def test_start_behind_moves_every_robot_back_along_the_leaders_heading():
 def test_a_start_behind_that_cannot_apply_is_an_error_naming_the_key(team, key):
     with pytest.raises(ScenarioError, match=key.replace(".", r"\.")):
         scenario_from_dict({**BASE, "team": team})
+
+
+def test_every_unknown_key_of_a_file_is_in_one_message(tmp_path):
+    """Nested tables and arrays of tables too, in the file's order, each with its hint."""
+    f = tmp_path / "two.toml"
+    f.write_text('name = "x"\n[robots]\nv_mx = 0.5\n[leader]\nspeeed = 0.3\n'
+                 '[[world.obstacles]]\ntype = "circle"\ncenter = [3.0, 3.0]\nradus = 0.5\n')
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(f)
+    assert str(err.value) == (
+        f"{f}: robots.v_mx: unknown key (did you mean 'v_max'?); also unknown: leader.speeed "
+        "(did you mean 'speed'?), world.obstacles[0].radus (did you mean 'radius'?)")
+
+
+@pytest.mark.parametrize("depth", [600, 5000])
+def test_a_file_nested_too_deeply_is_one_line_naming_it(tmp_path, depth):
+    f = tmp_path / "deep.toml"
+    f.write_text("name = 'x'\n[team]\nposes = " + "[" * depth + "]" * depth + "\n")
+    with pytest.raises(ScenarioError, match=rf"^{f}: arrays or inline tables nested too deeply"):
+        load_scenario(f)

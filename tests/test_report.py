@@ -18,7 +18,7 @@ import pytest
 
 from dfcoa_opt import metrics as run_metrics
 from dfcoa_opt.bench.report import document as report
-from dfcoa_opt.bench.report import plots, stats, tables, trajectories
+from dfcoa_opt.bench.report import paired, plots, stats, tables, trajectories
 from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.core.runtime import dispatch, provenance
 from dfcoa_opt.scenario.loader import read_toml, scenario_from_dict
@@ -181,6 +181,115 @@ def test_paired_risk_leaves_out_and_counts_the_runs_with_a_contact():
     out = list(csv.DictReader(io.StringIO(tables.paired_csv(comps))))
     assert [(r["metric"], r["n"], r["excluded"]) for r in out] == [
         ("success", "5", "0"), ("risk_raw_mean", "3", "2")]
+
+
+# -------------------------------------------------------------------------- rankings
+def world_rows(pattern, names=("a", "b", "c"), scenario="sc"):
+    """One run per variant and world: ``pattern[w][i]`` says whether ``names[i]`` succeeded
+    on world (seed) ``w``; a run that does not succeed times out."""
+    return [row(f"{scenario}_{v}_{w}", controller=v, seed=w, scenario=scenario,
+                outcome="success" if won else "timeout", collisions=0)
+            for w, wins in enumerate(pattern) for v, won in zip(names, wins, strict=True)]
+
+
+def ranking_of(rows, baseline="a"):
+    """The ranking table of one table's rows, as the report builds it."""
+    groups = report.aggregate(rows, ("time_to_goal",))
+    return tables.ranking_table(groups, paired.compare(rows, baseline, ()), baseline,
+                                paired.success_pairs(rows))
+
+
+def ranking_cells(md):
+    """``(rank, variant, worlds to separate from the next)`` of each row of a ranking."""
+    body = [line.split(" | ") for line in md.splitlines()[2:] if line.startswith("| ")]
+    return [(cells[0][2:], cells[1], cells[-1][:-2]) for cells in body]
+
+
+def test_ranking_90_and_88_percent_share_a_rank_and_20_percent_is_alone():
+    """Same 50 worlds: a 45/50, b 44/50, c 10/50."""
+    pattern = ([(1, 1, 1)] * 10 + [(1, 1, 0)] * 33 + [(1, 0, 0)] * 2 + [(0, 1, 0)]
+               + [(0, 0, 0)] * 4)
+    md = ranking_of(world_rows(pattern))
+    # a vs b: only a on 2 of the 50 worlds, only b on 1: p_disc = 3/50 = 0.06, d = 0.02;
+    # n = (1.959964 sqrt(0.06) + 0.841621 sqrt(0.06 - 0.0004))^2 / 0.0004
+    #   = (0.480091 + 0.205466)^2 / 0.0004 = 0.469989 / 0.0004 = 1174.97 -> 1175 worlds.
+    # b vs c (34 worlds only b, none only c) already differ: "—"; c has no next row: "—".
+    assert ranking_cells(md) == [("1-2", "a", "≈ 1175"), ("1-2", "b", "—"), ("3", "c", "—")]
+    assert "all 3 tested pairs of variants of this table Holm-corrected together" in md
+    assert "Inside a shared rank" not in md  # a and b do not differ: nothing to list
+
+
+def test_ranking_of_strongly_different_variants_is_1_2_3():
+    """high 50/50, mid 25/50, low 0/50 on the same worlds; every pair differs (p < 1e-7)."""
+    pattern = [(0, 1, 1)] * 25 + [(0, 1, 0)] * 25
+    md = ranking_of(world_rows(pattern, names=("low", "high", "mid")), baseline="mid")
+    assert ranking_cells(md) == [("1", "high", "—"), ("2", "mid", "—"), ("3", "low", "—")]
+
+
+def test_ranking_groups_use_holm_over_every_pair():
+    """a vs b: p = 0.031 alone, not significant once Holm-corrected with the other two pairs."""
+    pattern = [(1, 1, 1)] * 20 + [(1, 1, 0)] * 3 + [(1, 0, 0)] * 6 + [(0, 0, 0)] * 11
+    rows = world_rows(pattern)
+    pairs = {(p.first, p.second): p for p in paired.success_pairs(rows)}
+    # exact two-sided McNemar p = 2 * 0.5^k with all k discordant worlds on one side:
+    # a-b: k = 6 -> 0.03125; a-c: k = 9 -> 0.00390625; b-c: k = 3 -> 0.25.
+    # Holm, m = 3: 3 * 0.00390625 = 0.01171875; 2 * 0.03125 = 0.0625; max(1 * 0.25, 0.0625).
+    expected = {("a", "b"): (6, 0, 0.03125, 0.0625), ("a", "c"): (9, 0, 0.00390625, 0.01171875),
+                ("b", "c"): (3, 0, 0.25, 0.25)}
+    assert sorted(pairs) == sorted(expected)
+    for k, p in pairs.items():
+        assert (p.only_first, p.only_second, p.p_value, p.p_holm) == pytest.approx(expected[k])
+    assert all(p.worlds == 40 for p in pairs.values())
+    # unadjusted, a would stand alone (it beats b and c at p < 0.05); adjusted, a ~ b and
+    # b ~ c, so no cut is supported anywhere
+    md = ranking_of(rows)
+    assert [r for r, _, _ in ranking_cells(md)] == ["1-3", "1-3", "1-3"]
+    assert "`a` and `c` (p = 0.0117)" in md  # the chain: they differ inside the shared rank
+
+
+def test_rank_groups_never_cut_against_the_tests():
+    """A cut needs every pair across it separated, in the order's direction."""
+    table = ("sc", "", None)
+    strong = paired.SuccessPair(table, "a", "b", 50, 30, 0, 1e-9, 1e-9)
+    assert paired.rank_groups(["a", "b"], [strong]) == [(1, 1), (2, 2)]
+    assert paired.rank_groups(["b", "a"], [strong]) == [(1, 2), (1, 2)]  # b is the worse one
+    assert paired.rank_groups(["a", "b"], []) == [(1, 2), (1, 2)]  # untested: not separated
+    other = paired.SuccessPair(("sc2", "", None), "a", "b", 50, 30, 0, 1e-9, 1e-9)
+    with pytest.raises(ValueError, match="one table"):
+        paired.rank_groups(["a", "b"], [strong, other])
+
+
+def test_success_pairs_pair_by_world_within_each_table():
+    """Only the seeds both ran are paired; each scenario is its own Holm family."""
+    rows = world_rows([(1, 0)] * 8, names=("a", "b"))
+    rows += world_rows([(1, 1)] * 3, names=("a", "b"), scenario="sc2")
+    rows = [r for r in rows if not (r["variant"] == "b" and r["seed"] == 0
+                                    and r["scenario"] == "sc")]
+    by_table = {p.table[0]: p for p in paired.success_pairs(rows)}
+    assert (by_table["sc"].worlds, by_table["sc"].only_first) == (7, 7)
+    assert by_table["sc"].p_holm == by_table["sc"].p_value == 2 * 0.5 ** 7
+    assert (by_table["sc2"].worlds, by_table["sc2"].p_value) == (3, 1.0)
+
+
+def test_pooled_worlds_pair_across_families():
+    """The held-out ranking pools families: seed 0 of two families are two worlds."""
+    from dfcoa_opt.bench.report import heldout as ho
+
+    rows = world_rows([(1, 0)] * 4, names=("a", "b"), scenario="fam1")
+    rows += world_rows([(1, 0)] * 4, names=("a", "b"), scenario="fam2")
+    (pair,) = paired.success_pairs(ho.pooled(rows))
+    assert (pair.table[0], pair.worlds, pair.only_first) == (ho.POOLED, 8, 8)
+
+
+def test_report_ranks_each_scenario(tmp_path):
+    pattern = ([(1, 1, 1)] * 10 + [(1, 1, 0)] * 33 + [(1, 0, 0)] * 2 + [(0, 1, 0)]
+               + [(0, 0, 0)] * 4)
+    folder = write_results(tmp_path / "res", world_rows(pattern))
+    report.make_report(folder, tmp_path / "rep", metrics=("time_to_goal",), baseline="b")
+    md = (tmp_path / "rep" / "report.md").read_text()
+    ranking = md.split("### Ranking")[1].split("### Paired")[0]
+    assert ranking_cells(ranking.strip()) == [("1-2", "a", "≈ 1175"), ("1-2", "b", "—"),
+                                              ("3", "c", "—")]
 
 
 # ----------------------------------------------------------------------- environment

@@ -139,6 +139,32 @@ def test_mcnemar_textbook_example_and_binomial_sum():
 
 
 # --------------------------------------------------------------------------- Holm
+def test_mcnemar_sample_size_by_hand():
+    # p_only_a = 0.20, p_only_b = 0.05: p_disc = 0.25, d = 0.15, d^2 = 0.0225;
+    # z_0.975 sqrt(p_disc)       = 1.959964 * 0.5               = 0.979982
+    # z_0.80 sqrt(p_disc - d^2) = 0.841621 * sqrt(0.2275) = 0.841621 * 0.476970 = 0.401428
+    # n = (0.979982 + 0.401428)^2 / 0.0225 = 1.381410^2 / 0.0225 = 1.908293 / 0.0225 = 84.813
+    assert stats.mcnemar_sample_size(0.20, 0.05) == pytest.approx(84.813, abs=1e-3)
+    assert stats.mcnemar_sample_size(0.05, 0.20) == stats.mcnemar_sample_size(0.20, 0.05)
+    # the worked example of Connor's formula (p10 = 0.05, p01 = 0.45, two-sided 5 %, 80 %
+    # power) in the R code of powerandsamplesize.com's McNemar calculator: 23 pairs
+    assert math.ceil(stats.mcnemar_sample_size(0.05, 0.45)) == 23
+    # more power, a stricter alpha or a smaller difference all need more pairs
+    assert stats.mcnemar_sample_size(0.20, 0.05, power=0.9) > 84.813
+    assert stats.mcnemar_sample_size(0.20, 0.05, alpha=0.01) > 84.813
+    assert stats.mcnemar_sample_size(0.15, 0.05) > 84.813
+
+
+def test_mcnemar_sample_size_has_no_estimate_without_a_difference():
+    assert math.isnan(stats.mcnemar_sample_size(0.1, 0.1))
+    assert math.isnan(stats.mcnemar_sample_size(0.0, 0.0))
+    for bad in ((0.7, 0.5), (-0.1, 0.2), (0.2, 1.5)):
+        with pytest.raises(ValueError, match="discordant"):
+            stats.mcnemar_sample_size(*bad)
+    with pytest.raises(ValueError, match="alpha and power"):
+        stats.mcnemar_sample_size(0.2, 0.1, alpha=0.0)
+
+
 def test_holm_textbook_example():
     assert stats.holm([0.01, 0.04, 0.03, 0.005]) == pytest.approx([0.03, 0.06, 0.06, 0.02])
 

@@ -10,8 +10,9 @@ import contextlib
 import hashlib
 import json
 import sys
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +42,7 @@ class SweepResult:
         failed: Of those, how many failed (their rows say why).
         skipped: Runs already done (resumed, or reused).
         reused: Of those, how many were taken from another store (``reuse``).
+        errors: Each distinct error of the runs that failed now -> how many runs had it.
     """
 
     store: ResultsStore
@@ -49,13 +51,17 @@ class SweepResult:
     failed: int
     skipped: int
     reused: int = 0
+    errors: Mapping[str, int] = field(default_factory=dict)
 
     def summary(self) -> str:
-        """One line for the terminal."""
+        """For the terminal: one line, then each distinct error of the failed runs once."""
         reused = f" ({self.reused} reused from other stores)" if self.reused else ""
-        return (f"{self.sweep.name}: {describe_runs(self.sweep.runs)}; ran {self.ran} "
-                f"({self.failed} failed), {self.skipped} already done{reused} -> "
-                f"{self.store.root}")
+        lines = [f"{self.sweep.name}: {describe_runs(self.sweep.runs)}; ran {self.ran} "
+                 f"({self.failed} failed), {self.skipped} already done{reused} -> "
+                 f"{self.store.root}"]
+        lines += [f"  failed ({n} run{'s' if n > 1 else ''}): {error}"
+                  for error, n in sorted(self.errors.items(), key=lambda e: -e[1])]
+        return "\n".join(lines)
 
 
 def _progress(total: int, desc: str, enabled: bool | None):
@@ -156,6 +162,7 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
     if reused[0]:  # rows taken from other stores are finished runs
         record()
     ran = failed = 0
+    errors: Counter[str] = Counter()
     bar = _progress(len(todo), sw.name, progress)
     try:
         with interruptible():
@@ -166,7 +173,9 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
                             store.write(outcome)
                             record()
                         ran += 1
-                        failed += outcome.row["status"] != "ok"
+                        if outcome.row["status"] != "ok":
+                            failed += 1
+                            errors[str(outcome.row.get("error") or "no message")] += 1
                         bar.update()
                         if failed:
                             bar.set_postfix(failed=failed, refresh=False)
@@ -186,7 +195,7 @@ def run_sweep(sweep: str | Path | Sweep, out: str | Path, config: ExecutorConfig
         bar.close()
         if recorded[0] is not None:  # the rows of the recorded sweep, finished ones only
             store.write_csv()
-    return SweepResult(store, sw, ran, failed, len(sw.runs) - ran, reused[0])
+    return SweepResult(store, sw, ran, failed, len(sw.runs) - ran, reused[0], dict(errors))
 
 
 def _grow(sw: Sweep, store: ResultsStore,

@@ -19,9 +19,14 @@ import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from dfcoa_opt.bench.lifecycle import Interrupted, SweepInterrupted, interruptible
 from dfcoa_opt.core.errors import DfcoaError, RunFailed
+
+if TYPE_CHECKING:
+    from dfcoa_opt.scenario.scenario import Scenario
+    from dfcoa_opt.sim.log import RunLog
 
 EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 1
@@ -243,9 +248,14 @@ def _cmd_report(a: argparse.Namespace) -> int:
 def seed_list(text: str) -> list[int]:
     """The seeds of ``--seeds``: ``0-19``, ``0,3,7`` or both (``0-4,10``), in that order.
 
+    At most :data:`~dfcoa_opt.bench.sweep.specs.MAX_SEEDS`, the bound of a sweep's
+    seeds, counted before any run is built.
+
     Raises:
-        DfcoaError: Not such a list, a seed below 0, or a seed twice.
+        DfcoaError: Not such a list, a seed below 0, a seed twice, or too many seeds.
     """
+    from dfcoa_opt.bench.sweep.specs import MAX_SEEDS
+
     seeds: list[int] = []
     for part in text.split(","):
         lo, dash, hi = part.strip().partition("-")
@@ -256,6 +266,9 @@ def seed_list(text: str) -> list[int]:
         if first < 0 or last < first:
             raise DfcoaError(f"--seeds: '{part.strip()}' must be a seed >= 0 or a range lo-hi "
                              f"with lo <= hi")
+        if len(seeds) + last - first + 1 > MAX_SEEDS:
+            raise DfcoaError(f"--seeds: '{text}' names more than {MAX_SEEDS:,} seeds, the most "
+                             f"a sweep takes; run them as a sweep in parts (dfcoa bench)")
         seeds += range(first, last + 1)
     if len(set(seeds)) != len(seeds):
         raise DfcoaError(f"--seeds: '{text}' names a seed twice")
@@ -266,14 +279,14 @@ def _cmd_run(a: argparse.Namespace) -> int:
     from dfcoa_opt import metrics
     from dfcoa_opt.bench.runner import jsonable
     from dfcoa_opt.bench.sweep.specs import safe_name
-    from dfcoa_opt.cli.text import run_summary
+    from dfcoa_opt.cli.text import robot_text, run_summary
     from dfcoa_opt.metrics.units import units
     from dfcoa_opt.scenario.loader import load_scenario
     from dfcoa_opt.sim.batch import BatchSimulator
     from dfcoa_opt.sim.simulator import batch_controllers
 
     seeds = seed_list(a.seeds) if a.seeds is not None else [a.seed]
-    scenario = load_scenario(a.scenario, seeds[0], _overrides(a.set))
+    scenario = load_scenario(a.scenario, seeds[0], _overrides(a.set), "--set")
     if a.animate and not a.animate.lower().endswith(".gif"):
         raise DfcoaError(f"--animate: '{a.animate}' must end in .gif")
     if a.animate and len(seeds) > 1:
@@ -322,8 +335,17 @@ def _cmd_run(a: argparse.Namespace) -> int:
         files.update({"mcap": a.mcap} if a.mcap else {})
         print(run_summary(f"{sc.name} / {a.controller} / seed {seed}", summary,
                           float(log.t[-1]), float(log.meta["wall_time"]), files,
-                          detail=len(seeds) == 1))
+                          detail=len(seeds) == 1, robots=robot_text(log.meta.get("robots")),
+                          collided=_collided(log, sc)))
     return 0
+
+
+def _collided(log: RunLog, scenario: Scenario) -> str:
+    """Who touched what at a run's first contact (``""`` without one), as figure titles say it."""
+    from dfcoa_opt.metrics.contacts import contacts_at, describe, first_contact_step
+
+    k = first_contact_step(log)
+    return "" if k is None else describe(contacts_at(log, k, scenario.world.grid))
 
 
 def _cmd_list(a: argparse.Namespace) -> int:

@@ -16,14 +16,27 @@ from dfcoa_opt.metrics.units import with_unit
 #: The metrics ``dfcoa run`` prints (every one is in the ``.json`` and with ``--json``).
 RUN_METRICS = ("fce_rms", "time_to_goal", "min_inter_robot_distance", "min_obstacle_clearance",
                "path_length_mean", "collisions", "wheel_speed_peak", "wheel_speed_ratio",
-               "saturated_pct", "robotarium_ok")
+               "wheel_accel_peak", "wheel_accel_ratio", "saturated_pct", "robotarium_ok")
 
 _ROLE = re.compile(r":[a-z]+(?::[a-z]+)?:`(~?)([^`]+)`")  # :func:`~a.b.c`, :py:class:`X`
 _CODE = re.compile(r"``([^`]*)``|`([^`]*)`")  # ``code`` (reST), `code` (Markdown)
 
 
+def robot_text(robots: Mapping[str, Any] | None) -> str:
+    """The robots of a run as the summary names them: ``unicycle, turtlebot3_burger, actuated``.
+
+    Args:
+        robots: The log's ``meta["robots"]`` (model, profile, dynamics, ...); None: "".
+    """
+    if not robots:
+        return ""
+    parts = [robots.get("model"), robots.get("profile") or "no profile", robots.get("dynamics")]
+    return ", ".join(str(p) for p in parts if p)
+
+
 def run_summary(title: str, summary: Mapping[str, Any], simulated: float, wall: float,
-                files: Mapping[str, str], detail: bool = True) -> str:
+                files: Mapping[str, str], detail: bool = True, robots: str = "",
+                collided: str = "") -> str:
     """What ``dfcoa run`` prints for one run: outcome, times, key metrics with units, files.
 
     Args:
@@ -33,12 +46,17 @@ def run_summary(title: str, summary: Mapping[str, Any], simulated: float, wall: 
         wall: Wall time of the simulation, s.
         files: What was written, label -> path (``log``, ``metrics``, ``plot``, ...).
         detail: Print :data:`RUN_METRICS` (False: the outcome line and the files).
+        robots: The robots (:func:`robot_text`), in brackets after the title.
+        collided: Who touched what at the first contact (``"robot 0 and robot 2"``),
+            after a collision's time, as the figures' titles say it.
 
     Returns:
         The lines, without a final newline.
     """
+    if robots:
+        title = f"{title} ({robots})"
     outcome = outcome_text(summary["outcome"], summary["first_contact_time"],
-                           summary["deadlock_time"])
+                           summary["deadlock_time"], collided)
     reached = "reached goal" if summary["reached"] else "did not reach goal"
     lines = [f"{title}: {outcome} ({reached}); {simulated:.1f} s simulated "
              f"({wall:.2f} s wall)"]

@@ -194,6 +194,11 @@ def controller_class(controller_id: str) -> type:
             f"available filters: {', '.join(FILTERS.names())}")
     if base.startswith(POLICY_PREFIX):
         return _policy().file_policy_class(base)
+    if CONTROLLERS.find(base) is None and FILTERS.find(base) is not None:
+        raise UnknownNameError(
+            f"unknown controller '{base}'{did_you_mean(base, CONTROLLERS.names())}: "
+            f"'{base}' is a safety filter, which wraps a controller: e.g. 'goto_slot+{base}' "
+            f"or 'dfcoa+{base}' (dfcoa list controllers)")
     return CONTROLLERS.get(base)
 
 

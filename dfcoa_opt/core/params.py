@@ -198,6 +198,41 @@ def _convert(value: Any, tp: Any, meta: Mapping[str, Any], src: str, key: str) -
     raise TypeError(f"unsupported annotation {tp!r} at {key}")  # programming error
 
 
+def _dataclass_of(tp: Any) -> type | None:
+    """The dataclass a field's annotation holds (itself, or inside ``X | None``), else None."""
+    if get_origin(tp) in (typing.Union, types.UnionType):
+        found = [a for a in get_args(tp) if dataclasses.is_dataclass(a)]
+        return found[0] if found else None
+    return tp if isinstance(tp, type) and dataclasses.is_dataclass(tp) else None
+
+
+def _unknown_keys(cls: type, data: Any, prefix: str) -> typing.Iterator[tuple[str, str]]:
+    """Every key of ``data`` (and of its nested tables) that ``cls`` does not have.
+
+    Yields ``(dotted key, did-you-mean hint)``, in the file's order, so that a
+    file's unknown keys are reported together, not one per attempt.
+    """
+    if not isinstance(data, Mapping):
+        return
+    hints = get_type_hints(cls)
+    fields = {f.name for f in dataclasses.fields(cls) if f.init}
+    for k, v in data.items():
+        key = f"{prefix}.{k}" if prefix else str(k)
+        if k not in fields:
+            yield key, did_you_mean(str(k), fields)
+            continue
+        tp = hints[k]
+        inner = _dataclass_of(tp)
+        if inner is not None:
+            yield from _unknown_keys(inner, v, key)
+        elif get_origin(tp) in (tuple, list) and isinstance(v, list):
+            args = [a for a in get_args(tp) if a is not Ellipsis]
+            element = _dataclass_of(args[0]) if len(args) == 1 else None
+            if element is not None:
+                for i, item in enumerate(v):
+                    yield from _unknown_keys(element, item, f"{key}[{i}]")
+
+
 def build(cls: type[T], data: Mapping[str, Any], src: str, prefix: str = "") -> T:
     """Build dataclass ``cls`` from ``data``, validating every key.
 
@@ -213,11 +248,14 @@ def build(cls: type[T], data: Mapping[str, Any], src: str, prefix: str = "") -> 
     """
     hints = get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    unknown = list(_unknown_keys(cls, data, prefix))
+    if unknown:
+        first, *rest = unknown
+        also = "; also unknown: " + ", ".join(f"{k}{hint}" for k, hint in rest) if rest else ""
+        raise ScenarioError(src, first[0], f"unknown key{first[1]}{also}")
     kwargs: dict[str, Any] = {}
     for k, v in data.items():
         key = f"{prefix}.{k}" if prefix else str(k)
-        if k not in fields:
-            raise ScenarioError(src, key, "unknown key" + did_you_mean(str(k), fields))
         kwargs[k] = _convert(v, hints[k], fields[k].metadata, src, key)
     for name, f in fields.items():
         if name not in kwargs and f.default is _MISSING and f.default_factory is _MISSING:

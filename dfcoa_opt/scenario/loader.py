@@ -67,7 +67,8 @@ from dfcoa_opt.world.spec import ObstacleSpec, check_map_yaml_keys
 
 
 def load_scenario(path: str | Path, seed: int | None = None,
-                  overrides: Mapping[str, Any] | None = None) -> Scenario:
+                  overrides: Mapping[str, Any] | None = None,
+                  overrides_source: str | None = None) -> Scenario:
     """Load and validate a scenario file.
 
     Args:
@@ -76,6 +77,8 @@ def load_scenario(path: str | Path, seed: int | None = None,
         seed: Replaces the file's ``seed`` (seeded parts such as random clutter
             follow it).
         overrides: Dotted keys set before validation (:func:`apply_overrides`).
+        overrides_source: What gave the overrides (``--set``): an error about one
+            of their keys names it instead of the file. None: the file.
 
     Raises:
         ScenarioError: On any problem, with a one-line message.
@@ -85,8 +88,14 @@ def load_scenario(path: str | Path, seed: int | None = None,
     data.setdefault("name", path.stem)
     if seed is not None:
         data["seed"] = seed
-    apply_overrides(data, overrides or {}, str(path))
-    return scenario_from_dict(data, str(path), path.parent)
+    apply_overrides(data, overrides or {}, overrides_source or str(path))
+    try:
+        return scenario_from_dict(data, str(path), path.parent)
+    except ScenarioError as exc:
+        if overrides_source and any(exc.key == k or exc.key.startswith((f"{k}.", f"{k}["))
+                                    for k in overrides or {}):
+            raise ScenarioError(overrides_source, exc.key, exc.problem) from None
+        raise
 
 
 def scenario_from_dict(data: Mapping[str, Any], source: str = "<dict>",

@@ -45,6 +45,9 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(src, "", f"not valid TOML: {exc}") from None
+    except RecursionError:  # tomllib parses nested arrays and inline tables recursively
+        raise ScenarioError(src, "", "arrays or inline tables nested too deeply to read "
+                                     "(hundreds of levels)") from None
 
 
 def apply_overrides(data: dict[str, Any], overrides: Mapping[str, Any],

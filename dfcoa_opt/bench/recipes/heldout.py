@@ -230,8 +230,11 @@ def render_heldout(store: ResultsStore, dest: Path) -> list[Artefact]:
     baseline = str(store.manifest().get("baseline") or "")
     comps = [c for c in paired.compare(pool, baseline, ()) if c.metric == "success"]
     if baseline in tuned_names:
-        md += ["### Ranking", "", ranking_table(groups, comps, baseline),
-               f"Paired over the test worlds against `{baseline}` (McNemar exact, Holm).", ""]
+        md += ["### Ranking", "", ranking_table(groups, comps, baseline,
+                                                paired.success_pairs(pool)),
+               f"Success against `{baseline}`: McNemar exact, Holm. Both it and the shared "
+               "ranks pair the runs by test world (family and seed), over every test world.",
+               ""]
     families = sorted({str(r["scenario"]) for r in tuned_rows})
     md += ["## By family", "", *_group_tables(tuned_names, tuned_rows,
                                               lambda r: str(r["scenario"]),

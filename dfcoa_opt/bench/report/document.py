@@ -360,7 +360,8 @@ def _scenario_section(scen: str, groups: Sequence[Mapping[str, Any]],
     """Markdown of one scenario: outcomes and metrics, ranking, paired table, failures."""
     md = [f"## Scenario `{scen}`", "", tables.markdown_table(groups, metrics, hide=("scenario",))]
     if baseline and comparisons:
-        md += ["### Ranking", "", tables.ranking_table(groups, comparisons, baseline),
+        md += ["### Ranking", "", tables.ranking_table(groups, comparisons, baseline,
+                                                       paired.success_pairs(rows)),
                f"### Paired differences against `{baseline}`", "",
                tables.paired_table(comparisons, paired.PAIRED_METRICS, baseline)]
     deploy = tables.deploy_table(groups, DEPLOY_KEYS, hide=("scenario",))

@@ -12,6 +12,10 @@ baseline are compared seed by seed (:mod:`dfcoa_opt.bench.report.stats`):
 
 Within one table (a scenario, or one rung of a ladder) every p-value is Holm
 corrected, and each cell is marked better, worse or no difference at 5 %.
+
+For rankings, :func:`success_pairs` tests success between every two variants
+of a table the same way (Holm over all the pairs of the table), and
+:func:`rank_groups` turns those tests into shared ranks.
 """
 
 from __future__ import annotations
@@ -85,6 +89,21 @@ def _by_seed(rows: Sequence[Row]) -> dict[tuple[tuple[str, str, float | None], s
     return out
 
 
+def _shared_seeds(mine: Mapping[int, Row], other: Mapping[int, Row]) -> list[int]:
+    """The seeds (worlds) both variants ran, in increasing order."""
+    return sorted(set(mine) & set(other))
+
+
+def _success_test(mine: Mapping[int, Row], other: Mapping[int, Row],
+                  seeds: Sequence[int]) -> stats.McNemar:
+    """McNemar's exact test of success of ``mine`` against ``other`` on ``seeds``.
+
+    ``b10`` of the result counts the seeds where only ``mine`` succeeded.
+    """
+    return stats.mcnemar_exact([is_success(mine[s]) for s in seeds],
+                               [is_success(other[s]) for s in seeds])
+
+
 def compare(rows: Sequence[Row], baseline: str,
             metrics: Sequence[str] = PAIRED_METRICS, seed: int = 0) -> list[Comparison]:
     """Every variant against ``baseline``, per table, Holm-corrected within each table.
@@ -110,12 +129,10 @@ def compare(rows: Sequence[Row], baseline: str,
         for (t, variant), mine in groups.items():
             if t != table or variant == baseline:
                 continue
-            seeds = sorted(set(mine) & set(base))
+            seeds = _shared_seeds(mine, base)
             if not seeds:
                 continue
-            a = [is_success(mine[s]) for s in seeds]
-            b = [is_success(base[s]) for s in seeds]
-            mc = stats.mcnemar_exact(a, b)
+            mc = _success_test(mine, base, seeds)
             cells.append(Comparison(table, variant, "success", mc.n, mc.difference, math.nan,
                                     math.nan, mc.p_value))
             for metric in metrics:
@@ -136,3 +153,168 @@ def _metric(row: Row, metric: str) -> float:
     if row.get("status") != "ok":
         return math.nan
     return as_number((row.get("metrics") or {}).get(metric))
+
+
+#: Significance level of the rank groups (Holm-adjusted McNemar p-values).
+RANK_ALPHA = 0.05
+
+
+@dataclass(frozen=True)
+class SuccessPair:
+    """McNemar's exact test of success between two variants of one table.
+
+    Attributes:
+        table: ``(scenario, ladder, ladder_value)`` as in :class:`Comparison`.
+        first: One variant's name.
+        second: The other's.
+        worlds: Seeds (worlds) both ran; the test uses these only.
+        only_first: Worlds where ``first`` succeeded and ``second`` did not.
+        only_second: Worlds where ``second`` succeeded and ``first`` did not.
+        p_value: Exact two-sided McNemar p-value (1 without a discordant world, NaN
+            without a shared world).
+        p_holm: ``p_value`` Holm-corrected over every pair of the table (NaN stays NaN
+            and is not counted).
+    """
+
+    table: tuple[str, str, float | None]
+    first: str
+    second: str
+    worlds: int
+    only_first: int
+    only_second: int
+    p_value: float
+    p_holm: float = math.nan
+
+    def flipped(self) -> SuccessPair:
+        """The same test seen from ``second``."""
+        return replace(self, first=self.second, second=self.first,
+                       only_first=self.only_second, only_second=self.only_first)
+
+
+def success_pairs(rows: Sequence[Row]) -> list[SuccessPair]:
+    """McNemar's exact test of success between every two variants, per table.
+
+    Runs are paired by seed within a table exactly as in :func:`compare` (same
+    scenario, ladder rung and seed = same world). The p-values of all the pairs of
+    one table are Holm-corrected together.
+
+    Args:
+        rows: Result rows.
+
+    Returns:
+        One :class:`SuccessPair` per table and pair of variants (variants in
+        first-seen order, ``first`` seen before ``second``), including pairs without
+        a shared world (``worlds == 0``, NaN p-values).
+    """
+    by_seed = _by_seed(rows)
+    out: list[SuccessPair] = []
+    for table in dict.fromkeys(t for t, _ in by_seed):
+        names = [v for t, v in by_seed if t == table]
+        cells = []
+        for i, first in enumerate(names):
+            for second in names[i + 1:]:
+                mine, other = by_seed[(table, first)], by_seed[(table, second)]
+                seeds = _shared_seeds(mine, other)
+                mc = _success_test(mine, other, seeds)
+                cells.append(SuccessPair(table, first, second, len(seeds), mc.b10, mc.b01,
+                                         mc.p_value))
+        adjusted = stats.holm([c.p_value for c in cells])
+        out += [replace(c, p_holm=float(p)) for c, p in zip(cells, adjusted, strict=True)]
+    return out
+
+
+def pair_index(pairs: Sequence[SuccessPair]) -> dict[tuple[str, str], SuccessPair]:
+    """``(a, b) -> the test of a against b``, seen from ``a``, for both orders of each pair.
+
+    Raises:
+        ValueError: The pairs come from more than one table.
+    """
+    tables = {p.table for p in pairs}
+    if len(tables) > 1:
+        raise ValueError(f"pairs of one table expected, got {len(tables)} tables")
+    out: dict[tuple[str, str], SuccessPair] = {}
+    for p in pairs:
+        out[(p.first, p.second)] = p
+        out[(p.second, p.first)] = p.flipped()
+    return out
+
+
+def separated(upper: str, lower: str, index: Mapping[tuple[str, str], SuccessPair],
+              alpha: float = RANK_ALPHA) -> bool:
+    """Whether ``upper`` succeeds significantly more often than ``lower``.
+
+    Holm-adjusted McNemar p below ``alpha`` and more worlds where only ``upper``
+    succeeded; an untested pair (no shared world, not in ``index``) is not separated.
+    """
+    test = index.get((upper, lower))
+    return (test is not None and test.p_holm < alpha
+            and test.only_first > test.only_second)
+
+
+def rank_groups(order: Sequence[str], pairs: Sequence[SuccessPair],
+                alpha: float = RANK_ALPHA) -> list[tuple[int, int]]:
+    """Shared ranks of variants in a given order: the ranks the paired tests support.
+
+    Rule: the order is cut between positions ``i`` and ``i + 1`` only when *every*
+    variant at or above ``i`` succeeds significantly more often than *every*
+    variant below it (:func:`separated`: Holm-adjusted McNemar p < ``alpha``, on
+    the worlds the two share). The pieces between cuts are the rank groups, and a
+    variant's rank is its group's span of positions (1-based). Equivalently, any
+    two variants the tests cannot order end up in one group together with every
+    variant between them.
+
+    Why this rule: a distinct rank then claims only what was tested -- every
+    variant ranked above is significantly better than every variant ranked below
+    -- so no numbered order outruns the worlds. It depends only on the order and on
+    the pairwise tests (not on the direction of a walk through the list, unlike
+    "start a new group when the variant differs from the group's first or from
+    all of its members"), it is deterministic, and the groups are contiguous, so a
+    rank is a number or a span (``2-4``) rather than the overlapping letters of a
+    compact letter display. Its price: a chain of small steps (a ~ b, b ~ c, but a
+    better than c) keeps a, b and c in one group although a and c differ; such
+    pairs are listed by :func:`differ_within`.
+
+    Args:
+        order: Variant names, best first (ties already broken).
+        pairs: The tests of the table (:func:`success_pairs`), one table only.
+        alpha: Significance level of the Holm-adjusted p-values.
+
+    Returns:
+        ``(first, last)`` rank positions (1-based) of each variant of ``order``, in
+        that order; ``first == last`` for a variant alone in its rank.
+    """
+    index = pair_index(pairs)
+    k = len(order)
+    cut_after = [all(separated(order[a], order[b], index, alpha)
+                     for a in range(i + 1) for b in range(i + 1, k)) for i in range(k - 1)]
+    spans: list[tuple[int, int]] = []
+    start = 0
+    for i in range(k):
+        if i == k - 1 or cut_after[i]:
+            spans += [(start + 1, i + 1)] * (i + 1 - start)
+            start = i + 1
+    return spans
+
+
+def differ_within(order: Sequence[str], spans: Sequence[tuple[int, int]],
+                  pairs: Sequence[SuccessPair],
+                  alpha: float = RANK_ALPHA) -> list[SuccessPair]:
+    """Pairs inside one rank group that do differ significantly (chains of small steps).
+
+    Args:
+        order: Variant names, best first.
+        spans: Their ranks (:func:`rank_groups`).
+        pairs: The tests of the table.
+        alpha: Significance level of the Holm-adjusted p-values.
+
+    Returns:
+        The tests (seen from the higher-placed variant), in the order of ``order``.
+    """
+    index = pair_index(pairs)
+    out = []
+    for i, upper in enumerate(order):
+        for j in range(i + 1, len(order)):
+            test = index.get((upper, order[j]))
+            if spans[i] == spans[j] and test is not None and test.p_holm < alpha:
+                out.append(test)
+    return out

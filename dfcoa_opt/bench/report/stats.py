@@ -13,7 +13,9 @@ are compared seed by seed (paired). Conventions:
   seeds with equal values carry no sign information and are dropped);
 - paired success is tested with McNemar's exact test (a binomial test on the
   discordant seeds, :func:`scipy.stats.binomtest`);
-- the p-values of one table are corrected together by Holm's step-down method.
+- the p-values of one table are corrected together by Holm's step-down method;
+- the pairs McNemar's test would need at observed discordant proportions come
+  from Connor's (1987) normal approximation.
 
 Everything is deterministic: the bootstrap draws from a ``np.random.Generator``
 seeded by the caller.
@@ -186,6 +188,50 @@ def mcnemar_exact(a: Sequence[bool], b: Sequence[bool]) -> McNemar:
         return McNemar(0, 0, 0, math.nan, math.nan)
     p = 1.0 if b01 + b10 == 0 else float(sps.binomtest(b10, b01 + b10, 0.5).pvalue)
     return McNemar(n, b01, b10, p, (b10 - b01) / n)
+
+
+def mcnemar_sample_size(p_only_a: float, p_only_b: float, alpha: float = 0.05,
+                        power: float = 0.8) -> float:
+    """Pairs McNemar's test needs to tell two paired success rates apart (Connor 1987).
+
+    Connor's normal approximation (R. J. Connor, "Sample size for testing
+    differences in proportions for the paired-sample design", Biometrics 43(1),
+    1987, 207-211, p. 209), two-sided::
+
+        n = (z_{1-alpha/2} sqrt(p_disc) + z_{power} sqrt(p_disc - d^2))^2 / d^2
+
+    with ``p_disc = p_only_a + p_only_b`` the proportion of discordant pairs and
+    ``d = p_only_a - p_only_b`` their difference (= the difference of the two
+    success rates). At alpha 0.05 and power 0.8, ``z`` are 1.95996 and 0.84162.
+
+    Args:
+        p_only_a: Proportion of the pairs (worlds) where only ``a`` succeeded, in [0, 1].
+        p_only_b: Proportion where only ``b`` succeeded; ``p_only_a + p_only_b <= 1``.
+        alpha: Two-sided significance level of the test, in (0, 1).
+        power: Probability of a significant result at these proportions, in (0, 1).
+
+    Returns:
+        The number of pairs (worlds), not rounded (round up for a plan); NaN when
+        ``d == 0`` (no difference to detect, no estimate).
+
+    Raises:
+        ValueError: A proportion outside [0, 1], their sum above 1, or ``alpha`` or
+            ``power`` outside (0, 1).
+    """
+    if not (0.0 <= p_only_a <= 1.0 and 0.0 <= p_only_b <= 1.0
+            and p_only_a + p_only_b <= 1.0 + 1e-12):
+        raise ValueError(f"discordant proportions must be in [0, 1] with a sum <= 1, got "
+                         f"{p_only_a} and {p_only_b}")
+    if not (0.0 < alpha < 1.0 and 0.0 < power < 1.0):
+        raise ValueError(f"alpha and power must be in (0, 1), got {alpha} and {power}")
+    d = p_only_a - p_only_b
+    if d == 0.0:
+        return math.nan
+    p_disc = p_only_a + p_only_b
+    z_alpha, z_power = _z(1.0 - alpha), float(sps.norm.ppf(power))
+    # p_disc >= |d| >= d^2, so the root is real; max() only absorbs rounding
+    root = z_alpha * math.sqrt(p_disc) + z_power * math.sqrt(max(0.0, p_disc - d * d))
+    return root * root / (d * d)
 
 
 def holm(p_values: Sequence[float]) -> NDArray[np.float64]:

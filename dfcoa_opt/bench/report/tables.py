@@ -1,7 +1,9 @@
 """Markdown and CSV tables of a report: outcomes, metrics, paired comparisons, rankings.
 
-Inputs are the groups of :func:`dfcoa_opt.bench.report.document.aggregate` and the
-comparisons of :func:`dfcoa_opt.bench.report.paired.compare`; nothing here reads files.
+Inputs are the groups of :func:`dfcoa_opt.bench.report.document.aggregate`, the
+comparisons of :func:`dfcoa_opt.bench.report.paired.compare` and, for rankings, the
+pairwise tests of :func:`dfcoa_opt.bench.report.paired.success_pairs`; nothing here
+reads files.
 """
 
 from __future__ import annotations
@@ -13,8 +15,8 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
-from dfcoa_opt.bench.report import plots
-from dfcoa_opt.bench.report.paired import HIGHER_IS_BETTER, Comparison
+from dfcoa_opt.bench.report import paired, plots, stats
+from dfcoa_opt.bench.report.paired import HIGHER_IS_BETTER, Comparison, SuccessPair
 from dfcoa_opt.metrics.outcome import OUTCOMES
 
 _MAX_ERRORS = 5  # distinct error messages listed under a table
@@ -220,12 +222,66 @@ def paired_table(comparisons: Sequence[Comparison], metrics: Sequence[str],
     return "\n".join(lines) + "\n"
 
 
-def ranking_table(groups: Sequence[Mapping[str, Any]],
-                  comparisons: Sequence[Comparison], baseline: str) -> str:
-    """Markdown ranking of the variants of one table.
+def rank_label(span: tuple[int, int]) -> str:
+    """``"3"`` for a variant alone in its rank, ``"2-4"`` for a rank shared by positions 2 to 4."""
+    first, last = span
+    return str(first) if first == last else f"{first}-{last}"
+
+
+def worlds_to_separate(test: SuccessPair | None, alpha: float = paired.RANK_ALPHA,
+                       power: float = 0.8) -> float:
+    """Worlds a McNemar test would need to separate two variants at their observed rates.
+
+    The observed proportions of the shared worlds where only one of them
+    succeeded go into Connor's (1987) formula
+    (:func:`dfcoa_opt.bench.report.stats.mcnemar_sample_size`, two-sided ``alpha``
+    for this one pair, before any Holm correction, so a rough lower figure).
+
+    Args:
+        test: The pair's test (:class:`SuccessPair`), or None when it was not tested.
+        alpha: Two-sided significance level.
+        power: Power of the planned test.
+
+    Returns:
+        Worlds (pairs of runs), not rounded; NaN when the pair was not tested, had no
+        shared world, already differs (Holm-adjusted p < ``alpha``) or succeeded
+        equally often (no estimate).
+    """
+    if test is None or test.worlds == 0 or test.p_holm < alpha:
+        return math.nan
+    return stats.mcnemar_sample_size(test.only_first / test.worlds,
+                                     test.only_second / test.worlds, alpha, power)
+
+
+def ranking_table(groups: Sequence[Mapping[str, Any]], comparisons: Sequence[Comparison],
+                  baseline: str, pairs: Sequence[SuccessPair]) -> str:
+    """Markdown ranking of the variants of one table, with the ranks the tests support.
 
     Order: success rate (high first), then collision rate (low first), then mean
-    time to goal (short first; undefined last).
+    time to goal (short first; undefined last). Ranks: :func:`paired.rank_groups`
+    (the order is cut only where every variant above succeeds significantly more
+    often than every variant below: McNemar exact, Holm over all the pairs of the
+    table, p < 0.05); variants of one group share the span of their positions
+    (``2-4``). The last column gives, for each variant and the next one in the
+    order, the worlds a McNemar test would need to separate them at the observed
+    rates (:func:`worlds_to_separate`, Connor 1987, alpha 0.05, power 0.8). A
+    sentence under the table says what a shared rank means and how many pairs were
+    tested, then the pairs of one group that do differ, if any.
+
+    Args:
+        groups: The table's groups (:func:`dfcoa_opt.bench.report.document.aggregate`,
+            one per variant).
+        comparisons: Success of each variant against ``baseline``
+            (:func:`paired.compare`; other metrics are ignored).
+        baseline: The baseline variant's name.
+        pairs: Success between every two variants of this table
+            (:func:`paired.success_pairs` of the table's rows; one table only).
+
+    Returns:
+        The Markdown text, ending with a newline.
+
+    Raises:
+        ValueError: ``pairs`` from more than one table.
     """
     verdict = {c.variant: c for c in comparisons if c.metric == "success"}
 
@@ -233,17 +289,49 @@ def ranking_table(groups: Sequence[Mapping[str, Any]],
         ttg = float(g["stats"].get("time_to_goal", {}).get("mean", math.nan))
         return (-g["success_rate"], g["collision_rate"], ttg if math.isfinite(ttg) else math.inf)
 
+    ranked = sorted(groups, key=key)
+    order = [str(g["variant"]) for g in ranked]
+    index = paired.pair_index(pairs)
+    spans = paired.rank_groups(order, pairs)
     lines = ["| rank | variant | success | most frequent failure | success vs "
-             f"{md_escape(baseline) or 'baseline'} |", "|---|---|---|---|---|"]
-    for i, g in enumerate(sorted(groups, key=key), start=1):
-        v = str(g["variant"])
+             f"{md_escape(baseline) or 'baseline'} | worlds to separate from the next |",
+             "|---|---|---|---|---|---|"]
+    for i, g in enumerate(ranked):
+        v = order[i]
         c = verdict.get(v)
         vs = "baseline" if v == baseline else (_diff_cell(c) if c else "—")
         fail = g.get("dominant_failure")
         fail_text = (f"{fail} ({100 * g[f'{fail}_rate']:.0f}%)" if fail in OUTCOMES
                      else f"{fail}" if fail else "—")
         rate = rate_cell(g["success_rate"], g["success_ci"], g["outcomes"]["success"], g["runs"])
-        lines.append(f"| {i} | {md_escape(v)} | {rate} | {fail_text} | {vs} |")
+        need = (worlds_to_separate(index.get((v, order[i + 1])))
+                if i + 1 < len(order) else math.nan)
+        need_text = f"≈ {math.ceil(need)}" if math.isfinite(need) else "—"
+        lines.append(f"| {rank_label(spans[i])} | {md_escape(v)} | {rate} | {fail_text} | {vs} "
+                     f"| {need_text} |")
+    names = set(order)
+    tested = sum(math.isfinite(p.p_value) for p in pairs
+                 if p.first in names and p.second in names)
+    plural = "" if tested == 1 else "s"
+    lines += ["", "Rank: variants share a rank (`2-4`: anywhere from 2nd to 4th) when the "
+              "worlds cannot order their success. The rank changes between two rows only "
+              "where every variant above succeeds significantly more often than every variant "
+              "below: McNemar's exact test on the worlds both ran (same scenario and seed), "
+              f"with the p-values of all {tested} tested pair{plural} of variants of this "
+              "table Holm-corrected together, p < 0.05. Within a shared rank the rows follow "
+              "the observed rates only. The column against the baseline is Holm-corrected over "
+              "its own set of tests, so it can call a difference the ranks do not.",
+              "", "Worlds to separate from the next: the worlds (pairs of runs) a McNemar test "
+              "would need to tell this variant from the next row with 80 % power at 5 % "
+              "(two-sided, this pair alone, before Holm), at the observed shares of the worlds "
+              "where only one of the two succeeded (Connor 1987); — : they already differ, "
+              "share no world, never succeed on different worlds, or there is no next row."]
+    inside = paired.differ_within(order, spans, pairs)
+    if inside:
+        lines += ["", "Inside a shared rank, significantly different (linked by variants "
+                  "between them that neither differs from): " + "; ".join(
+                      f"`{md_escape(t.first)}` and `{md_escape(t.second)}` (p = {t.p_holm:.3g})"
+                      for t in inside) + "."]
     return "\n".join(lines) + "\n"
 
 
