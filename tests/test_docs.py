@@ -266,3 +266,92 @@ def test_no_list_runs_into_a_paragraph_when_rendered(path: Path) -> None:
     marker = re.compile(r"\n[ \t]*(?:[-*+]|\d+\.)[ \t]+\S[^\n]*")
     glued = [m[0].strip()[:80] for text in texts for m in marker.finditer(text)]
     assert not glued, f"{path.relative_to(ROOT)}:\n" + "\n".join(glued)
+
+
+# --- formulas and links of the method notes and the reference pages ------------------
+
+# These pages write their formulas as LaTeX for the site's MathJax ($...$ inline, $$...$$
+# display: pymdownx.arithmatex) and their links as the target page's title.
+MATHS_PAGES = [*sorted((ROOT / "docs" / "methods").glob("*.md")),
+               *(ROOT / "docs" / f"{name}.md" for name in (
+                   "reproduction", "metrics", "comms", "envs", "policies", "robots",
+                   "heldout", "bench_scenarios"))]
+CODE_SPAN = re.compile(r"(?<!`)(`+)(?!`)(.+?)(?<!`)\1(?!`)", flags=re.S)
+TEX_MARK = re.compile(r"\^|_\{|\|\||sqrt\(|argmin|sum_|[‖√Σ∑²³]")
+RELATION = re.compile(r"[=<>≤≥≠]")
+CODE_LIKE = re.compile(
+    r""""|'\w[^']*'|\\|==|!=|[-+*/]=|\*\*"""       # a string, an escape, a Python operator
+    r"|^(?:dfcoa|python|pip|make)\b"               # a command line
+    r"|^[A-Za-z_]\w*(?:\.\w+|\[[^\]]*\])+\s*="     # a dotted key, attribute or item, assigned
+    r"|\w\(.*\b\w+="                               # a call with a keyword argument
+    r"|^[A-Za-z_][\w.]*\s*=\s*(?:[-+]?[\d.]+(?:e[-+]?\d+)?(?:\s+\S+)?|true|false"
+    r"|\[[^\]]*\])$")                              # a key set to a literal (with a unit)
+FILE_NAME_LINK = re.compile(r"(?<!!)\[\s*(`?)([\w./-]+\.md(?:#[\w-]*)?)\1\s*\]\(")
+
+
+def _prose_text(text: str) -> str:
+    """The text with the lines of code fences and $$ blocks blanked (line numbers kept)."""
+    return "\n".join(line or "" for _, line in _prose(text))
+
+
+def pseudo_tex(text: str) -> list[tuple[int, str]]:
+    """(line, span) of the code spans outside fences that are formulas in pseudo-TeX.
+
+    A code span is a formula when it holds a TeX-like mark (``^``, ``_{``, ``||``,
+    ``sqrt(``, ``argmin``, ``sum_``, or one of ‖ √ Σ ∑ ² ³) and a relation (``=``, ``<``,
+    ``>``, ≤, ≥, ≠), and is not code: no string (a ``"``, or ``'`` before a word), no
+    backslash, no Python operator (``==``, ``!=``, ``+=`` and the like, ``**``), not a
+    command line (``dfcoa``, ``python``, ``pip``, ``make``), not a dotted key, attribute
+    or item being assigned (``world.clutter.density = …``, ``obs.slot[i] = …``), not a call
+    with a keyword argument (``param(…, tune=(…))``), and not a key set to a literal
+    (``a_max = 1000 m/s²``, ``alpha = 0``, ``particle_limits = [500, 5000]``).
+    """
+    prose = _prose_text(text)
+    found = []
+    for match in CODE_SPAN.finditer(prose):
+        span = " ".join(match[2].split())
+        if TEX_MARK.search(span) and RELATION.search(span) and not CODE_LIKE.search(span):
+            found.append((prose.count("\n", 0, match.start()) + 1, span))
+    return found
+
+
+def file_name_links(text: str) -> list[tuple[int, str]]:
+    """(line, text) of the Markdown links outside code whose text is a bare ``*.md`` name."""
+    found = []
+    for number, line in _prose(text):
+        if line is not None:
+            bare = re.sub(r"(`+).*?\1", lambda m: m[0] if m[0].endswith(".md`") else "", line)
+            found += [(number, m[2]) for m in FILE_NAME_LINK.finditer(bare)]
+    return found
+
+
+def test_the_formula_and_link_checks_catch_what_they_look_for() -> None:
+    formulas = ("`V_IVO = argmin_{IVOA+} ||v − v_pref||` and\n"
+                "`p = z_hit exp(-d^2 / (2 sigma^2)) + z_rand / z_max`, `w = 1/d_i^2`,\n"
+                "`E_s = sqrt((Σ_i u_x)² + (Σ_i u_y)²)`, `‖v(0)‖ > v_max`\n")
+    assert [n for n, _ in pseudo_tex(formulas)] == [1, 2, 2, 3, 3]
+    code = ("`world.clutter.density = 0.2`, `dfcoa bench x.toml --set 'a=1'`, `y == x**2`,\n"
+            "`a_max = 1000 m/s²`, `obs.slot[i] = x_L + R(θ)^2`, `param(1.0, tune=(0.2, 5.0))`,\n"
+            "`formation_centroid_error`, `E_c`, $E_c = \\lVert X_c - X_c^* \\rVert$\n"
+            "```\n`E = ||x||`\n```\n")
+    assert pseudo_tex(code) == []
+    links = ("[orca_ivo.md](orca_ivo.md), [`x.md`](x.md) and\n"
+             "[docs/metrics.md](metrics.md#risk), [../reproduction.md](../reproduction.md)\n"
+             "[Metrics](metrics.md), `[a.md](a.md)`, ![a.md](a.png), [the file a.md](a.md)\n")
+    assert file_name_links(links) == [(1, "orca_ivo.md"), (1, "x.md"), (2, "docs/metrics.md"),
+                                      (2, "../reproduction.md")]
+
+
+@pytest.mark.parametrize("path", MATHS_PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_formulas_are_latex_not_code_font_pseudo_tex(path: Path) -> None:
+    found = [f"{path.relative_to(ROOT)}:{n}: `{span}`" for n, span in
+             pseudo_tex(path.read_text(encoding="utf-8"))]
+    assert not found, ("write these formulas as LaTeX maths, $...$ or $$...$$ "
+                       "(in a table, \\lvert/\\lVert for |):\n" + "\n".join(found))
+
+
+@pytest.mark.parametrize("path", MATHS_PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_links_read_as_page_titles_not_file_names(path: Path) -> None:
+    found = [f"{path.relative_to(ROOT)}:{n}: [{name}](…)" for n, name in
+             file_name_links(path.read_text(encoding="utf-8"))]
+    assert not found, "let each link read as its page's title:\n" + "\n".join(found)

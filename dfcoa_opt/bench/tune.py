@@ -45,7 +45,7 @@ from dfcoa_opt.bench.report.stats import cvar
 from dfcoa_opt.bench.results.logs import compact_log
 from dfcoa_opt.bench.results.store import ResultsStore, display_path
 from dfcoa_opt.bench.runner import is_success
-from dfcoa_opt.bench.sweep.expand import load_sweep
+from dfcoa_opt.bench.sweep.expand import load_sweep, sweep_from_dict
 from dfcoa_opt.bench.sweep.specs import RunSpec, Sweep, canonical, safe_name
 from dfcoa_opt.bench.sweep.variants import Variant
 from dfcoa_opt.core.atomic import atomic_write
@@ -129,7 +129,25 @@ def tuning_sweep(path: str | Path, trials: int | None = None) -> tuple[Sweep, Tu
         ScenarioError: Not ``split = "train"``, a seed outside the training
             range, or a bad ``[tune]`` table (one line, naming the file and key).
     """
-    sweep = load_sweep(path)
+    sweep, spec = _checked(load_sweep(path))
+    return sweep, (spec if trials is None else replace(spec, trials=trials))
+
+
+def tuning_sweep_of(data: Mapping[str, Any], path: Path) -> tuple[Sweep, TuneSpec]:
+    """:func:`tuning_sweep` of a tuning sweep's contents, as if read from ``path``.
+
+    ``dfcoa compare --tune`` gives the contents of the published tuning sweep
+    with its own controller as the only variant: the same seeds, settings and
+    ``[tune]`` budget.
+
+    Raises:
+        ScenarioError: As :func:`tuning_sweep`.
+    """
+    return _checked(replace(sweep_from_dict(data, path.parent), source=str(path)))
+
+
+def _checked(sweep: Sweep) -> tuple[Sweep, TuneSpec]:
+    """The sweep, checked to run on training seeds, and its ``[tune]`` table built."""
     src = sweep.source
     if sweep.spec.split != "train":
         raise ScenarioError(src, "split", f"dfcoa tune tunes on training seeds only: set "
@@ -138,8 +156,7 @@ def tuning_sweep(path: str | Path, trials: int | None = None) -> tuple[Sweep, Tu
     if not isinstance(table, Mapping):
         raise ScenarioError(src, "tune", "is required: a [tune] table (trials, sampler_seed, "
                                          "out)")
-    spec = build(TuneSpec, table, src, "tune")
-    return sweep, (spec if trials is None else replace(spec, trials=trials))
+    return sweep, build(TuneSpec, table, src, "tune")
 
 
 def tunables_of(variant: Variant) -> list[Tunable]:

@@ -90,6 +90,24 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("--baseline", help="variant to compare the others with (default: the "
                                        "sweep's baseline; '' for none)")
 
+    c = sub.add_parser("compare", help="put a controller among the published methods of a "
+                       "recipe (heldout, comparison): simulate only it, on their worlds")
+    c.add_argument("recipe", help="heldout or comparison")
+    c.add_argument("--controller", required=True, help="controller id (a --plugin's too)")
+    c.add_argument("--tune", action="store_true", help="tune it first with the published "
+                   "methods' budget on the training seeds (scenarios/sweeps/tune.toml)")
+    c.add_argument("--families", help="only these scenarios, comma-separated (e.g. "
+                   "rooms,crowd)")
+    c.add_argument("--seeds", type=int, help="only the first N worlds of each scenario")
+    c.add_argument("--verify", choices=("sample", "all", "none"), default="sample",
+                   help="simulate again one published run of each variant (sample, the "
+                        "default), every one (all) or none, and compare the digests")
+    c.add_argument("--out", help="results folder (default ./results/compare_<recipe>_<id>)")
+    c.add_argument("--scenarios", default="scenarios", help="scenario root holding sweeps/")
+    c.add_argument("--published", default="paper_figures", help="folder of the published runs "
+                   "(default paper_figures)")
+    _executor_args(c)
+
     f = sub.add_parser("figures", help="regenerate every paper table and figure (make figures)")
     f.add_argument("--out", default="paper_figures", help="output folder (default paper_figures)")
     f.add_argument("--scenarios", default="scenarios", help="scenario root holding sweeps/")
@@ -100,7 +118,7 @@ def _parser() -> argparse.ArgumentParser:
                    "cache (default: prune the logs figures read to the fields read, compact "
                    "the others)")
     _executor_args(f)
-    for name in ("run", "list", "bench", "tune", "report", "figures"):
+    for name in ("run", "list", "bench", "tune", "report", "compare", "figures"):
         sub.choices[name].add_argument(
             "--plugin", action="append", default=[], metavar="FILE.py|MODULE",
             help="import a controller file or module first (repeatable; also "
@@ -223,6 +241,23 @@ def _cmd_tune(a: argparse.Namespace) -> int:
             print(f"{name}: best trial {best.number} of {len(result.trials)}: "
                   f"{best.successes}/{best.runs} succeeded on training seeds (defaults: "
                   f"{first.successes}/{first.runs}); ran {result.ran} runs -> {result.path}")
+    return 0
+
+
+def _cmd_compare(a: argparse.Namespace) -> int:
+    from dfcoa_opt.bench.compare import compare
+    from dfcoa_opt.bench.executors import kept_workers
+    from dfcoa_opt.bench.sweep.specs import safe_name
+
+    config = _executor(a)
+    out = a.out or f"results/compare_{a.recipe}_{safe_name(a.controller)}"
+    families = [f.strip() for f in a.families.split(",") if f.strip()] if a.families else None
+    with kept_workers(config):  # one pool for the tuning, the runs and the check
+        result = compare(a.recipe, a.controller, out, scenarios=a.scenarios,
+                         figures=a.published, plugin_files=a.plugin, tune=a.tune,
+                         families=families, seeds=a.seeds, verify=a.verify, config=config,
+                         progress=a.progress)
+    print(result.summary())
     return 0
 
 
@@ -402,10 +437,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     handlers = {"run": _cmd_run, "list": _cmd_list, "schema": _cmd_schema,
                 "bench": _cmd_bench, "tune": _cmd_tune, "report": _cmd_report,
-                "figures": _cmd_figures}
+                "compare": _cmd_compare, "figures": _cmd_figures}
     # bench and figures: SIGTERM too stops them with one line (and SIGINT raises
     # Interrupted rather than KeyboardInterrupt) from the start, imports included
-    stoppable = (interruptible() if args.cmd in ("bench", "tune", "figures")
+    stoppable = (interruptible() if args.cmd in ("bench", "tune", "compare", "figures")
                  else contextlib.nullcontext())
     try:
         with stoppable:

@@ -204,6 +204,12 @@ def difficulty_index(values: Mapping[str, Any]) -> float:
     return float(np.mean(parts))
 
 
+#: The keys of :func:`world_difficulty`, in its order.
+WORLD_KEYS = ("world_clearance", "world_visibility", "world_dispersion",
+              "world_characteristic_dimension", "world_tortuosity", "world_narrowest_ratio",
+              "world_narrow_passages", "world_crossings", "world_difficulty",
+              "world_path_length", "world_reference_time")
+
 _CACHE: weakref.WeakKeyDictionary[Scenario, dict[str, float]] = weakref.WeakKeyDictionary()
 
 

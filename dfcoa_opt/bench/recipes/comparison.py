@@ -2,16 +2,23 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from dfcoa_opt.bench.recipes import Artefact, recipe
-from dfcoa_opt.bench.report.document import make_report
+from dfcoa_opt.bench.report.document import DEFAULT_METRICS, make_report
+from dfcoa_opt.bench.report.paired import PAIRED_METRICS
 from dfcoa_opt.bench.report.shared_open import shared_open_table
+from dfcoa_opt.bench.results.published import RUNS_FILE, published_rows
 from dfcoa_opt.bench.results.store import ResultsStore
 from dfcoa_opt.core.atomic import atomic_write
+from dfcoa_opt.metrics.deploy import DEPLOY_KEYS
 
 #: The two variants compared on shared open stretches (docs/methods/reshape.md).
 SHARED_OPEN = ("reshape", "goto_slot+cbf")
+#: The summary keys the report reads (besides the outcome's): the published runs keep them.
+METRICS = tuple(dict.fromkeys((*DEFAULT_METRICS, *DEPLOY_KEYS, *PAIRED_METRICS)))
 
 
 @recipe("comparison", sweep="sweeps/comparison.toml",
@@ -22,7 +29,10 @@ def render_comparison(store: ResultsStore, dest: Path) -> list[Artefact]:
     Also ``shared_open.md``: ``reshape`` against ``goto_slot+cbf`` over the instants
     open in both runs of a seed (their formation error where both can track).
     """
-    arts = report_artefacts(store, dest, "paper 000 Table 6 (qualitative there)")
+    rows = published_rows(store.rows(), dest / RUNS_FILE, METRICS, "comparison")
+    arts = report_artefacts(store, dest, "paper 000 Table 6 (qualitative there)", rows)
+    arts.append(Artefact(RUNS_FILE, "-", "every run: variant, scenario, seed, outcome, the "
+                                         "metrics the report reads, log digest (dfcoa compare)"))
     table = shared_open_table(store.root, *SHARED_OPEN)
     if table:
         atomic_write(dest / "shared_open.md", table)
@@ -49,16 +59,18 @@ _TABLES = {
 }
 
 
-def report_artefacts(store: ResultsStore, dest: Path, paper: str) -> list[Artefact]:
+def report_artefacts(store: ResultsStore, dest: Path, paper: str,
+                     rows: Sequence[Mapping[str, Any]] | None = None) -> list[Artefact]:
     """The cross-method report of a sweep (:func:`make_report`) as artefacts.
 
     Args:
         store: The sweep's results.
         dest: Output folder.
         paper: What the main table corresponds to in the papers.
+        rows: The runs to report (default: the store's).
     """
     arts = []
-    for p in make_report(store.root, dest):
+    for p in make_report(store.root, dest, rows=rows):
         rel = p.relative_to(dest).as_posix()
         if p.name in _TABLES:
             arts.append(Artefact(rel, paper if p.name == "report.md" else "-", _TABLES[p.name]))

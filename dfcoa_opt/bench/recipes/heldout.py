@@ -36,11 +36,13 @@ from dfcoa_opt.bench.report.failures import run_outcome
 from dfcoa_opt.bench.report.plots import ladder_figure, variant_name
 from dfcoa_opt.bench.report.tables import md_escape, ranking_table, rate_cell
 from dfcoa_opt.bench.report.trajectories import panels_figure
+from dfcoa_opt.bench.results.published import RUNS_FILE, published_rows
 from dfcoa_opt.bench.results.store import ResultsStore
 from dfcoa_opt.bench.runner import is_success
 from dfcoa_opt.bench.sweep.specs import safe_name
 from dfcoa_opt.core.atomic import atomic_write
 from dfcoa_opt.metrics.outcome import OUTCOMES
+from dfcoa_opt.metrics.world import WORLD_KEYS
 from dfcoa_opt.viz.layout import save_png
 
 
@@ -190,16 +192,43 @@ def _csv(rows: Sequence[Sequence[Any]]) -> str:
     return buf.getvalue()
 
 
+#: The summary keys the held-out tables read (besides the outcome's): the published runs keep
+#: them (``runs.csv``).
+METRICS = ("fce_rms", *WORLD_KEYS)
+
+
 @recipe("heldout", sweep="sweeps/heldout.toml",
         title="Held-out benchmark: generated worlds, test seeds, every method tuned alike")
 def render_heldout(store: ResultsStore, dest: Path) -> list[Artefact]:
-    """The tables and figures of the module docstring."""
-    rows = store.rows()
+    """The tables and figures of the module docstring, from the published runs (``runs.csv``)."""
+    rows = published_rows(store.rows(), dest / RUNS_FILE, METRICS, "heldout")
+    arts = heldout_report(rows, dest, str(store.manifest().get("baseline") or ""),
+                          ho.read_tuned(_variant_files(store)),
+                          environment_header(store.root).rstrip("\n"), store.root)
+    return [*arts, Artefact(RUNS_FILE, "-", "every run: variant, world, outcome, the metrics "
+                                            "these tables read, log digest (dfcoa compare)")]
+
+
+def heldout_report(rows: Sequence[Mapping[str, Any]], dest: Path, baseline: str,
+                   tuned_info: Mapping[str, Mapping[str, Any]], header: str,
+                   logs: Path | None, ranked: Sequence[str] = ()) -> list[Artefact]:
+    """Write ``heldout.md``, its CSVs and figures from the runs of the held-out sweep.
+
+    Args:
+        rows: Every run (published, and a compared controller's).
+        dest: Output folder.
+        baseline: The variant the ranking pairs the others with.
+        tuned_info: The ``[tuned]`` tables of the variants files, by tuned variant.
+        header: The report's provenance lines (machine, packages, dates).
+        logs: The results folder of the rows' logs, for the trajectory panels; None
+            draws none (published runs come without logs).
+        ranked: Variants ranked beside the tuned ones (a compared controller, tuned
+            or not).
+    """
     names = list(dict.fromkeys(variant_name(r) for r in rows))
-    tuned_names = [n for n in names if ho.is_tuned(n)]
+    tuned_names = [n for n in names if ho.is_tuned(n) or n in ranked]
     methods = [ho.method_of(n) for n in tuned_names if ho.method_of(n) in names]
     tuned_rows = [r for r in rows if variant_name(r) in tuned_names]
-    tuned_info = ho.read_tuned(_variant_files(store))
     ws = ho.worlds(rows, tuned_names)
     rho, p_rho, n_rho = ho.spearman(ws)
     per_scen = {}
@@ -207,7 +236,7 @@ def render_heldout(store: ResultsStore, dest: Path) -> list[Artefact]:
         per_scen.setdefault(str(r["scenario"]), set()).add(int(r["seed"]))
     defaults_worlds = {ho.world_key(r) for r in rows if not ho.is_tuned(variant_name(r))}
     md = ["# Held-out benchmark: unseen generated worlds", "",
-          environment_header(store.root).rstrip("\n"), "",
+          header, "",
           "Every method runs on test seeds of the generated families (scenarios/heldout/, "
           "docs/heldout.md), which no tuning saw: with its defaults, and as `<method>@tuned`, "
           "the best of the same tuning budget on training seeds (`dfcoa tune`, "
@@ -227,7 +256,6 @@ def render_heldout(store: ResultsStore, dest: Path) -> list[Artefact]:
            "that succeeded).", ""]
     pool = ho.pooled(tuned_rows)
     groups = aggregate(pool, ("time_to_goal",))
-    baseline = str(store.manifest().get("baseline") or "")
     comps = [c for c in paired.compare(pool, baseline, ()) if c.metric == "success"]
     if baseline in tuned_names:
         md += ["### Ranking", "", ranking_table(groups, comps, baseline,
@@ -252,11 +280,11 @@ def render_heldout(store: ResultsStore, dest: Path) -> list[Artefact]:
     md += ["### Defaults over their test worlds", "", *default_table, ""]
     arts = [Artefact("success_vs_difficulty.png", "-", "success against the difficulty "
                      "index, one line per tuned method (Wilson 95 %)")]
-    for scen, seeds in sorted(per_scen.items()):
+    for scen, seeds in sorted(per_scen.items()) if logs is not None else ():
         first = min(seeds)
         chosen = [r for r in tuned_rows if str(r["scenario"]) == scen and int(r["seed"]) == first]
         name = f"traj_{safe_name(scen)}_s{first}.png"
-        save_png(panels_figure(chosen, store.root), dest / name)
+        save_png(panels_figure(chosen, logs), dest / name)
         md += [f"![{scen}]({name})", ""]
         arts.append(Artefact(name, "-", f"every tuned variant on the first test world of "
                                         f"{scen}"))

@@ -284,7 +284,8 @@ LEGEND = ("Outcome of every run (docs/metrics.md, outcomes): **success** = the g
 
 def make_report(results_dir: str | Path, out_dir: str | Path | None = None,
                 metrics: Sequence[str] = DEFAULT_METRICS,
-                overlay_seed: int | None = None, baseline: str | None = None) -> list[Path]:
+                overlay_seed: int | None = None, baseline: str | None = None,
+                rows: Sequence[Mapping[str, Any]] | None = None) -> list[Path]:
     """Write ``report.md``, ``report.csv`` and the figures of a results folder.
 
     Reads only rows, logs and scenario files (for map backgrounds); never simulates.
@@ -297,6 +298,9 @@ def make_report(results_dir: str | Path, out_dir: str | Path | None = None,
             default: each scenario's smallest seed with a log.
         baseline: Variant to compare the others to; default the sweep's ``baseline``
             (manifest), none when empty.
+        rows: The runs to report; default the folder's rows. A row without a ``log``
+            (a published run, :mod:`dfcoa_opt.bench.results.published`) enters the
+            tables and no figure that reads logs.
 
     Returns:
         The written files: report.md, report.csv (ladders.csv, paired.csv when there
@@ -308,7 +312,7 @@ def make_report(results_dir: str | Path, out_dir: str | Path | None = None,
     """
     results_dir = Path(results_dir)
     out_dir = results_dir / "report" if out_dir is None else Path(out_dir)
-    rows = load_rows(results_dir)
+    rows = load_rows(results_dir) if rows is None else list(rows)
     out_dir.mkdir(parents=True, exist_ok=True)
     manifest = _read_manifest(results_dir)
     baseline = str(manifest.get("baseline") or "") if baseline is None else baseline
