@@ -70,7 +70,7 @@ def test_the_training_script_reproduces_the_shipped_files_from_seed_0(tmp_path):
     """The full budget: the same bytes as the shipped files.
 
     Paper-scale (6 min on an idle core of the 2-core Intel Xeon, 7 min beside the rest of
-    the suite): run by ``make figures``, not ``make test``; the short training above checks
+    the suite): run by ``make check-training``, not ``make test``; the short training above checks
     the same code.
     """
     proc = subprocess.run([sys.executable, "-m", "comparisons.learned.train", "--seed", "0",
