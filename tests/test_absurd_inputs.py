@@ -78,7 +78,7 @@ def test_refused_before_any_allocation(capsys, sets, key, words):
 
 
 def test_a_batch_too_big_is_refused(capsys):
-    _refused(capsys, [str(SCENARIO), "--seeds", "0-100000"], "t_max", "100001 runs")
+    _refused(capsys, [str(SCENARIO), "--seeds", "0-99999"], "t_max", "100000 runs")
 
 
 def test_load_raises_dfcoa_error_not_overflow():

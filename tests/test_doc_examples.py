@@ -62,7 +62,7 @@ BLOCKS = _blocks()
 
 def test_the_pages_have_their_examples() -> None:
     ids = [p.id for p in BLOCKS]
-    assert sum(i.startswith("README.md:") for i in ids) >= 3, ids
+    assert sum(i.startswith("README.md:") for i in ids) >= 2, ids  # the rest is in docs/
     assert any(i.startswith("docs/python.md:") for i in ids), ids
     assert any(i.startswith("docs/methods/") for i in ids), ids
 

@@ -449,3 +449,15 @@ def test_boxplot_without_finite_values_still_writes(tmp_path):
     assert path.read_bytes()[:8] == PNG_MAGIC
     path = plots.metric_boxplots([], "fce_rms", tmp_path / "empty.png")
     assert path.read_bytes()[:8] == PNG_MAGIC
+
+
+def test_success_matrix_counts_each_variant_on_each_scenario():
+    def row(v, s, seed, outcome, status="ok"):
+        return {"key": f"{s}__{v}__s{seed}", "variant": v, "controller": v, "scenario": s,
+                "seed": seed, "status": status, "metrics": {"outcome": outcome}}
+
+    rows = [row("a", "x", 0, "success"), row("a", "x", 1, "collision"),
+            row("a", "y", 0, "deadlock"), row("b", "x", 0, "success", status="failed"),
+            row("b", "y", 0, "success"), row("b", "y", 1, "success")]
+    assert tables.success_matrix(rows).splitlines() == [
+        "| variant | x | y |", "|---|---|---|", "| a | **1/2** | 0/1 |", "| b | 0/1 | **2/2** |"]

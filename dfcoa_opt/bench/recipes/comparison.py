@@ -10,6 +10,7 @@ from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.report.document import DEFAULT_METRICS, make_report
 from dfcoa_opt.bench.report.paired import PAIRED_METRICS
 from dfcoa_opt.bench.report.shared_open import shared_open_table
+from dfcoa_opt.bench.report.tables import success_matrix
 from dfcoa_opt.bench.results.published import RUNS_FILE, published_rows
 from dfcoa_opt.bench.results.store import ResultsStore
 from dfcoa_opt.core.atomic import atomic_write
@@ -17,6 +18,11 @@ from dfcoa_opt.metrics.deploy import DEPLOY_KEYS
 
 #: The two variants compared on shared open stretches (docs/methods/reshape.md).
 SHARED_OPEN = ("reshape", "goto_slot+cbf")
+#: The successes of every variant on every scenario (docs/bench_scenarios.md includes it).
+MATRIX_FILE = "success_by_scenario.md"
+MATRIX_LEGEND = ("Collision-free successes over the seeds of the comparison, per variant and "
+                 "common scenario; bold: at least half. A scenario where every method fails, "
+                 "or every one succeeds, tells them apart by nothing but their metrics.")
 #: The summary keys the report reads (besides the outcome's): the published runs keep them.
 METRICS = tuple(dict.fromkeys((*DEFAULT_METRICS, *DEPLOY_KEYS, *PAIRED_METRICS)))
 
@@ -33,6 +39,10 @@ def render_comparison(store: ResultsStore, dest: Path) -> list[Artefact]:
     arts = report_artefacts(store, dest, "paper 000 Table 6 (qualitative there)", rows)
     arts.append(Artefact(RUNS_FILE, "-", "every run: variant, scenario, seed, outcome, the "
                                          "metrics the report reads, log digest (dfcoa compare)"))
+    atomic_write(dest / MATRIX_FILE, "# Successes by scenario\n\n" + MATRIX_LEGEND + "\n\n"
+                 + success_matrix(rows))
+    arts.append(Artefact(MATRIX_FILE, "-", "successes of every variant on every common "
+                                           "scenario (docs/bench_scenarios.md shows it)"))
     table = shared_open_table(store.root, *SHARED_OPEN)
     if table:
         atomic_write(dest / "shared_open.md", table)

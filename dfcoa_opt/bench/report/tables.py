@@ -384,3 +384,29 @@ def paired_csv(comparisons: Sequence[Comparison]) -> str:
                     c.n, c.excluded, *(repr(v) if math.isfinite(v) else "" for v in
                            (c.estimate, c.ci_low, c.ci_high, c.p_value, c.p_holm)), c.verdict])
     return buf.getvalue()
+
+
+def success_matrix(rows: Sequence[Mapping[str, Any]]) -> str:
+    """Markdown: successes of every variant (rows) on every scenario (columns), ``k/n``.
+
+    What a reader picking scenarios wants first: which ones separate the
+    methods they compare, and which every method fails. A bold cell is a
+    success rate of at least 50 %.
+    """
+    scen = sorted({str(r["scenario"]) for r in rows})
+    names = sorted({plots.variant_name(r) for r in rows})
+    count: dict[tuple[str, str], list[int]] = {}
+    for r in rows:
+        c = count.setdefault((plots.variant_name(r), str(r["scenario"])), [0, 0])
+        c[0] += r.get("status") == "ok" and (r.get("metrics") or {}).get("outcome") == "success"
+        c[1] += 1
+    lines = ["| variant | " + " | ".join(md_escape(s) for s in scen) + " |",
+             "|---|" + "---|" * len(scen)]
+    for n in names:
+        cells = []
+        for s in scen:
+            k, total = count.get((n, s), (0, 0))
+            cell = f"{k}/{total}" if total else "—"
+            cells.append(f"**{cell}**" if total and 2 * k >= total else cell)
+        lines.append(f"| {md_escape(n)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
