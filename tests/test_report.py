@@ -215,7 +215,7 @@ def test_ranking_90_and_88_percent_share_a_rank_and_20_percent_is_alone():
     #   = (0.480091 + 0.205466)^2 / 0.0004 = 0.469989 / 0.0004 = 1174.97 -> 1175 worlds.
     # b vs c (34 worlds only b, none only c) already differ: "—"; c has no next row: "—".
     assert ranking_cells(md) == [("1-2", "a", "≈ 1175"), ("1-2", "b", "—"), ("3", "c", "—")]
-    assert "all 3 tested pairs of variants of this table Holm-corrected together" in md
+    assert "all 3 tested pairs of variants of the table Holm-corrected together" in md
     assert "Inside a shared rank" not in md  # a and b do not differ: nothing to list
 
 

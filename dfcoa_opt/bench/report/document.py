@@ -323,7 +323,8 @@ def make_report(results_dir: str | Path, out_dir: str | Path | None = None,
     md = [f"# Benchmark report: {manifest.get('name', results_dir.name)}", "",
           environment_header(results_dir).rstrip("\n"), "", LEGEND, ""]
     if baseline:
-        md += [f"Baseline of the paired comparisons: `{baseline}`.", ""]
+        md += [f"Baseline of the paired comparisons: `{baseline}`.", "",
+               tables.ranking_legend(), ""]
     written: list[Path] = []
     trajs, notes = trajectories.overlay_figures(plain, results_dir, out_dir, overlay_seed)
     for scen in sorted({str(g["scenario"]) for g in groups}):
@@ -365,7 +366,7 @@ def _scenario_section(scen: str, groups: Sequence[Mapping[str, Any]],
     md = [f"## Scenario `{scen}`", "", tables.markdown_table(groups, metrics, hide=("scenario",))]
     if baseline and comparisons:
         md += ["### Ranking", "", tables.ranking_table(groups, comparisons, baseline,
-                                                       paired.success_pairs(rows)),
+                                                       paired.success_pairs(rows), legend=False),
                f"### Paired differences against `{baseline}`", "",
                tables.paired_table(comparisons, paired.PAIRED_METRICS, baseline)]
     deploy = tables.deploy_table(groups, DEPLOY_KEYS, hide=("scenario",))

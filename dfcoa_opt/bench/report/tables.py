@@ -253,8 +253,31 @@ def worlds_to_separate(test: SuccessPair | None, alpha: float = paired.RANK_ALPH
                                      test.only_second / test.worlds, alpha, power)
 
 
+def ranking_legend(tested: int | None = None) -> str:
+    """How to read a ranking's shared ranks and its last column (Markdown, one paragraph each).
+
+    Args:
+        tested: The pairs tested in the table, or None for a legend of several tables.
+    """
+    pairs = ("all the tested pairs" if tested is None
+             else f"all {tested} tested pair{'' if tested == 1 else 's'}")
+    return ("Rank: variants share a rank (`2-4`: anywhere from 2nd to 4th) when the worlds "
+            "cannot order their success. The rank changes between two rows only where every "
+            "variant above succeeds significantly more often than every variant below: "
+            "McNemar's exact test on the worlds both ran (same scenario and seed), with the "
+            f"p-values of {pairs} of variants of the table Holm-corrected together, p < 0.05. "
+            "Within a shared rank the rows follow the observed rates only. The column against "
+            "the baseline is Holm-corrected over its own set of tests, so it can call a "
+            "difference the ranks do not.\n\nWorlds to separate from the next: the worlds "
+            "(pairs of runs) a McNemar test would need to tell this variant from the next row "
+            "with 80 % power at 5 % (two-sided, this pair alone, before Holm), at the observed "
+            "shares of the worlds where only one of the two succeeded (Connor 1987); — : they "
+            "already differ, share no world, never succeed on different worlds, or there is no "
+            "next row.")
+
+
 def ranking_table(groups: Sequence[Mapping[str, Any]], comparisons: Sequence[Comparison],
-                  baseline: str, pairs: Sequence[SuccessPair]) -> str:
+                  baseline: str, pairs: Sequence[SuccessPair], legend: bool = True) -> str:
     """Markdown ranking of the variants of one table, with the ranks the tests support.
 
     Order: success rate (high first), then collision rate (low first), then mean
@@ -276,6 +299,8 @@ def ranking_table(groups: Sequence[Mapping[str, Any]], comparisons: Sequence[Com
         baseline: The baseline variant's name.
         pairs: Success between every two variants of this table
             (:func:`paired.success_pairs` of the table's rows; one table only).
+        legend: Put :func:`ranking_legend` under the table; False: one line with the
+            count of tested pairs (a report of several rankings prints the legend once).
 
     Returns:
         The Markdown text, ending with a newline.
@@ -313,19 +338,11 @@ def ranking_table(groups: Sequence[Mapping[str, Any]], comparisons: Sequence[Com
     tested = sum(math.isfinite(p.p_value) for p in pairs
                  if p.first in names and p.second in names)
     plural = "" if tested == 1 else "s"
-    lines += ["", "Rank: variants share a rank (`2-4`: anywhere from 2nd to 4th) when the "
-              "worlds cannot order their success. The rank changes between two rows only "
-              "where every variant above succeeds significantly more often than every variant "
-              "below: McNemar's exact test on the worlds both ran (same scenario and seed), "
-              f"with the p-values of all {tested} tested pair{plural} of variants of this "
-              "table Holm-corrected together, p < 0.05. Within a shared rank the rows follow "
-              "the observed rates only. The column against the baseline is Holm-corrected over "
-              "its own set of tests, so it can call a difference the ranks do not.",
-              "", "Worlds to separate from the next: the worlds (pairs of runs) a McNemar test "
-              "would need to tell this variant from the next row with 80 % power at 5 % "
-              "(two-sided, this pair alone, before Holm), at the observed shares of the worlds "
-              "where only one of the two succeeded (Connor 1987); — : they already differ, "
-              "share no world, never succeed on different worlds, or there is no next row."]
+    if legend:
+        lines += ["", ranking_legend(tested)]
+    else:
+        lines += ["", f"Shared ranks: {tested} tested pair{plural} of variants, Holm-corrected "
+                      "together (how to read the ranking: above the tables)."]
     inside = paired.differ_within(order, spans, pairs)
     if inside:
         lines += ["", "Inside a shared rank, significantly different (linked by variants "
