@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from dfcoa_opt.bench.recipes import Artefact, recipe
-from dfcoa_opt.bench.report.document import DEFAULT_METRICS, make_report
+from dfcoa_opt.bench.report.document import DEFAULT_METRICS, load_rows, make_report
 from dfcoa_opt.bench.report.paired import PAIRED_METRICS
 from dfcoa_opt.bench.report.shared_open import shared_open_table
 from dfcoa_opt.bench.report.tables import success_matrix
@@ -35,7 +35,7 @@ def render_comparison(store: ResultsStore, dest: Path) -> list[Artefact]:
     Also ``shared_open.md``: ``reshape`` against ``goto_slot+cbf`` over the instants
     open in both runs of a seed (their formation error where both can track).
     """
-    rows = published_rows(store.rows(), dest / RUNS_FILE, METRICS, "comparison")
+    rows = published_rows(load_rows(store.root), dest / RUNS_FILE, METRICS, "comparison")
     arts = report_artefacts(store, dest, "paper 000 Table 6 (qualitative there)", rows)
     arts.append(Artefact(RUNS_FILE, "-", "every run: variant, scenario, seed, outcome, the "
                                          "metrics the report reads, log digest (dfcoa compare)"))
