@@ -44,14 +44,29 @@ _TEXT = ("key", "variant", "controller", "scenario", "scenario_file", "ladder", 
          "digest", "code", "log")
 
 
+#: What a run's numbers depend on in the checkout: a change here marks the commit modified.
+CODE_PATHS = ("dfcoa_opt", "comparisons", "scenarios", "pyproject.toml")
+
+
 def source_commit(root: Path | str = ".") -> str:
-    """``git describe --always --dirty`` of the checkout at ``root``; ``unknown`` without git."""
-    try:
-        out = subprocess.run(["git", "describe", "--always", "--dirty", "--abbrev=12"],
-                             cwd=root, capture_output=True, text=True, timeout=30)
-    except (OSError, subprocess.SubprocessError):
+    """The checkout's commit (12 hex digits), ``-modified`` when its code differs; else ``unknown``.
+
+    Only :data:`CODE_PATHS` count: the figures a run of ``make figures`` is
+    rewriting do not make the code modified.
+    """
+    def git(*args: str) -> str | None:
+        try:
+            out = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True,
+                                 timeout=30)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        return out.stdout.strip() if out.returncode == 0 else None
+
+    head = git("rev-parse", "--short=12", "HEAD")
+    if not head:
         return "unknown"
-    return out.stdout.strip() if out.returncode == 0 and out.stdout.strip() else "unknown"
+    changed = git("status", "--porcelain", "--", *CODE_PATHS)
+    return head + ("-modified" if changed else "")
 
 
 def _cell(value: Any) -> str:
