@@ -355,3 +355,17 @@ def test_links_read_as_page_titles_not_file_names(path: Path) -> None:
     found = [f"{path.relative_to(ROOT)}:{n}: [{name}](…)" for n, name in
              file_name_links(path.read_text(encoding="utf-8"))]
     assert not found, "let each link read as its page's title:\n" + "\n".join(found)
+
+
+def test_the_scenario_table_is_the_committed_comparison() -> None:
+    """docs/bench_scenarios.md shows the successes of paper_figures/comparison/runs.csv."""
+    from dfcoa_opt.bench.report.tables import success_matrix
+    from dfcoa_opt.bench.results.published import read_runs
+
+    rows, _ = read_runs(ROOT / "paper_figures" / "comparison" / "runs.csv")
+    text = (ROOT / "docs" / "bench_scenarios.md").read_text(encoding="utf-8")
+    block = re.search(r"<!-- success-by-scenario -->\n(.*?)\n<!-- /success-by-scenario -->",
+                      text, re.S)
+    assert block, "docs/bench_scenarios.md: no <!-- success-by-scenario --> block"
+    assert block.group(1) + "\n" == success_matrix(rows), (
+        "copy the table of paper_figures/comparison/success_by_scenario.md into the block")
