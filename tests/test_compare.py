@@ -159,9 +159,11 @@ def test_a_malformed_published_file_is_one_line_naming_the_line(tmp_path):
 
 def test_compare_heldout_tunes_and_ranks_a_plugin_among_the_published(heldout):
     tmp, scen, figures = heldout
-    result = compare("heldout", "capped_goto", tmp / "out", scenarios=scen, figures=figures,
-                     plugin_files=[str(tmp / "capped.py")], tune=True, config=SERIAL,
-                     progress=False)
+    with pytest.MonkeyPatch.context() as mp:  # a relative results folder, as from the CLI
+        mp.chdir(tmp)
+        result = compare("heldout", "capped_goto", "out", scenarios=scen, figures=figures,
+                         plugin_files=[str(tmp / "capped.py")], tune=True, config=SERIAL,
+                         progress=False)
     assert result.variant == "capped_goto@tuned" and result.tuned_file is not None
     assert result.tuned_file.parent == tmp / "out" / "tuned"  # not into the repository
     assert not (scen / "sweeps" / "tuned" / "capped_goto.toml").exists()

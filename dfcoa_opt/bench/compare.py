@@ -257,7 +257,7 @@ def compare(recipe: str, controller: str, out: str | Path, *, scenarios: str | P
         raise DfcoaError(f"--verify: '{verify}' must be sample, all or none")
     if seeds is not None and seeds < 1:
         raise DfcoaError(f"--seeds: must be >= 1, got {seeds}")
-    out, scenarios, config = Path(out), Path(scenarios), config or ExecutorConfig()
+    out, scenarios, config = Path(out).resolve(), Path(scenarios), config or ExecutorConfig()
     plugin_paths = [str(Path(p).resolve()) for p in plugin_files]
     plugins.load_plugins(plugin_paths)
     from dfcoa_opt.control.registry import controller_class
