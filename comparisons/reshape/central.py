@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from comparisons.reshape import planner
+from comparisons.reshape.progress import STUCK, ProgressMonitor
 from comparisons.reshape.region import grow_region, shape_segments, swept_disc_segments
 from comparisons.reshape.routes import (
     ConfigurationSpace,
@@ -174,6 +175,11 @@ class CentralPlanner:
         self._waypoint: dict[int, FloatArray] = {}
         self._carried: FloatArray | None = None  # the targets in the leader's frame
         self.counters = {"replans": 0, "shrinks": 0, "waits": 0, "switches": 0, "unsticks": 0}
+        self._route_until = -math.inf  # coordinate: on the route up to this progress, m
+        self._recover_until = -math.inf  # coordinate: on a route until then, s
+        self._progress = ProgressMonitor(p.stuck_window, 0.1, 0.1)
+        if p.coordinate:
+            self.counters["recoveries"] = 0
         self.plan_times: list[float] = []
         self.history: list[tuple[float, str | None, float]] = []
 
@@ -252,9 +258,11 @@ class CentralPlanner:
         s_c = float(self._path.arc_length(centroid[None])[0])
         s_l = float(self._path.arc_length(obs.leader[None, :2])[0])
         k = heading_bin(self._tangent(s_c + self.p.lookahead))
-        if self._path_blocked(s_c, k) and self._follow_route(obs, pos, centroid, k):
-            self.plan_times.append(time.perf_counter() - t0)
-            return
+        self._watch(obs, s_c, pos)
+        if self._path_blocked(s_c, k) or self._holding(obs.t, s_c):
+            if self._follow_route(obs, pos, centroid, k):
+                self.plan_times.append(time.perf_counter() - t0)
+                return
         self._routes.clear()
         if s_c + self.p.lookahead >= s_l and self._nominal_fits(obs, s_l):
             self._nominal_plan(obs, pos)  # nothing in the way: the scenario's formation
@@ -320,7 +328,52 @@ class CentralPlanner:
         s = np.append(np.arange(max(s_c, 0.0), end, 2.0 * self._guide.inflated.cell_size), end)
         lead = self._path.points_at(s)
         centres = lead + rotate(self._centre, bin_heading(k))
-        return not bool(self._cspace.free_at(centres, float(self._scales[-1]), k).all())
+        free = self._cspace.free_at(centres, float(self._scales[-1]), k)
+        if self.p.coordinate and not free.all():  # on the route until past the last block
+            self._route_until = max(self._route_until, float(s[~free][-1]) + self._extent)
+        return not bool(free.all())
+
+    def _watch(self, obs: Observation, s_c: float, pos: FloatArray) -> None:
+        """Judge the team's progress (``coordinate``); a stuck team starts a recovery.
+
+        A team that is stuck (:class:`~comparisons.reshape.progress.ProgressMonitor`)
+        follows a route for ``recover_time``, with the leader cap off: the route
+        is searched over the whole map, so it leaves the pocket that a region
+        cannot, and a route whose points run ahead of the leader's path no
+        longer holds the team where it stands.
+        """
+        if not self.p.coordinate:
+            return
+        if self._progress.update(obs.t, s_c, pos, bool(obs.obstacles.mask.any())) == STUCK:
+            self.counters["recoveries"] += 1
+            self._recover_until = obs.t + self.p.recover_time
+            self._progress.clear()
+
+    def _holding(self, t: float, s_c: float) -> bool:
+        """Whether the coordination layer keeps the formation on a route at ``t`` (s).
+
+        On a route it stays until its progress ``s_c`` (m) passes the last
+        blocked stretch of the leader's path by the formation's extent: without
+        this, a formation at the edge of a blocked stretch switches between the
+        route and the region at every plan, and never commits to either. A
+        recovering team (:meth:`_watch`) stays on a route too.
+        """
+        return self.p.coordinate and (s_c < self._route_until or self._recovering(t))
+
+    def _recovering(self, t: float) -> bool:
+        """Whether a recovery (:meth:`_watch`) is under way at ``t`` (s)."""
+        return t < self._recover_until
+
+    def _uncapped(self, obs: Observation, centroid: FloatArray) -> bool:
+        """Whether the route's leader cap is off: a recovering team far behind its slots.
+
+        Far: the centroid more than ``lookahead`` from the centre of the
+        leader's slots. A team that near could only get ahead of its leader,
+        and stand there.
+        """
+        if not self._recovering(obs.t):
+            return False
+        return float(np.hypot(*(obs.slot.mean(axis=0) - centroid))) > self.p.lookahead
 
     def _follow_route(self, obs: Observation, pos: FloatArray, centroid: FloatArray,
                       k: int) -> bool:
@@ -335,16 +388,21 @@ class CentralPlanner:
             return False
         here = way.project(centroid)
         head = 0.0 if way_scale is not None else 0.5 * self._spacing * (self._n - 1)
-        centre, leader_near = self._route_centre(way, here, obs.leader)
+        if self.p.coordinate and way_scale is None:
+            here = self._front(way, pos, here + head) - head
+        centre, leader_near = self._route_centre(way, here, obs.leader,
+                                                 self._uncapped(obs, centroid))
         ahead = centre + head
         if here + self.p.route_lead + head >= way.length and leader_near:
-            # the goal within reach: the formation of the goal, if free
-            if not self._cspace.free_at(self._goal_centre[None], 1.0,
-                                        heading_bin(self._goal_heading))[0]:
-                return False
             template, scale = "scenario", 1.0
-            slots = self._goal_centre + rotate(self._offsets - self._centre,
-                                               self._goal_heading)
+            if self.p.coordinate:  # the goal's formation where the leader stops
+                slots = obs.slot.copy()
+            elif not self._cspace.free_at(self._goal_centre[None], 1.0,
+                                          heading_bin(self._goal_heading))[0]:
+                return False  # the goal within reach: the formation of the goal, if free
+            else:
+                slots = self._goal_centre + rotate(self._offsets - self._centre,
+                                                   self._goal_heading)
         elif way_scale is not None:  # the scenario's shape, rigid, at the route's scale
             template, scale = "scenario", way_scale
             slots = way.point_at(ahead) + scale * rotate(self._offsets - self._centre,
@@ -361,7 +419,8 @@ class CentralPlanner:
         self._waypoint = self._waypoints(obs.t, pos)
         return True
 
-    def _route_centre(self, way: Route, here: float, leader: FloatArray) -> tuple[float, bool]:
+    def _route_centre(self, way: Route, here: float, leader: FloatArray,
+                      uncapped: bool = False) -> tuple[float, bool]:
         """Arc length (m) along the route where the formation's centre is sent.
 
         ``route_lead`` beyond ``here`` (the centroid's projection on the route,
@@ -374,10 +433,14 @@ class CentralPlanner:
         leader's formation is within ``route_lead`` of the goal (the leader
         stops up to its settle tolerance short of the path's end), the cap is off.
 
+        ``uncapped``: no cap (a recovering team, :meth:`_watch`).
+
         Returns:
             The arc length, and whether the cap is off (so the formation may take
             its goal slots).
         """
+        if uncapped:
+            return here + self.p.route_lead, False
         nominal = leader[:2] + rotate(self._centre, float(leader[2]))
         cap = float(self._path.arc_length(nominal[None])[0])
         arcs = here + np.linspace(0.0, self.p.route_lead, 9)
@@ -386,6 +449,17 @@ class CentralPlanner:
             return float(arcs[-1]), True
         within = np.flatnonzero(progress[:-1] <= cap + 1e-9)
         return (float(arcs[within[-1]]) if within.size else here), False
+
+    def _front(self, way: Route, pos: FloatArray, default: float) -> float:
+        """Arc length (m) along ``way`` of the column's front robot.
+
+        The farthest projection of the robots within one spacing of the route;
+        ``default`` when none is. A column placed around its centroid stands
+        still where the route bends back: the centroid of its targets is the
+        centroid it was placed from. Led by its front robot, it moves on.
+        """
+        near = [way.project(p) for p in pos if way.distance(p) <= self._spacing]
+        return max(near) if near else default
 
     # -------------------------------------------------------------- nominal mode
     def _nominal_plan(self, obs: Observation, pos: FloatArray) -> None:

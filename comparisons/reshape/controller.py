@@ -50,6 +50,7 @@ the run alone (``tests/test_batch.py``).
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -231,13 +232,29 @@ class Reshape(BatchedController):
                 self.runs[int(e)].counters["unsticks"] += int(count)
         speed = np.hypot(u[:, 0], u[:, 1])
         u = u * np.minimum(1.0, self._v_max / np.maximum(speed, 1e-12))[:, None]
-        res = self.safety.filter(obs, u)
+        res = self.safety.filter(self._yielding(obs), u)
         speed = np.hypot(res.command[:, 0], res.command[:, 1])
         over = speed > self._v_max
         if over.any():
             res.command[over] *= (self._v_max / speed[over])[:, None]
         self.last_result = res
         return res.command
+
+    def _yielding(self, obs: Observation) -> Observation:
+        """``obs`` with each sensed moving disc grown by its speed times ``yield_time``.
+
+        The filter then keeps a robot farther from a fast disc than from a slow
+        one, so the robot gives way before the disc is on it (``yield_time`` 0:
+        ``obs`` itself).
+        """
+        if self.p.yield_time <= 0.0 or not obs.obstacles.mask.any():
+            return obs
+        mv = obs.obstacles
+        speed = np.hypot(mv.velocity[..., 0], mv.velocity[..., 1])
+        grown = MovingObstacles(mv.position, mv.velocity,
+                                np.where(mv.mask, mv.radius + self.p.yield_time * speed, 0.0),
+                                mv.mask)
+        return replace(obs, obstacles=grown)
 
     def _heard(self, obs: Observation, rows: NDArray[np.intp]) -> Plan:
         """The plan each row follows: its run's as of the leader broadcast the row holds.

@@ -65,5 +65,17 @@ class ReshapeParams:
                                 unit="s", gt=0.0)
     unstick_angle: float = param(math.pi / 3, doc="A stuck robot's command is turned by "
                                                   "this (counter-clockwise).", unit="rad")
+    coordinate: bool = param(False, doc="The coordination layer of ``reshape_passage`` "
+                                        "(docs/methods/reshape_passage.md): a column led by its "
+                                        "front robot, the leader cap by remaining length, "
+                                        "the goal's formation on the stopped leader.")
+    yield_time: float = param(0.0, doc="The tracking filter grows each sensed moving disc "
+                                        "by its speed times this: robots give way earlier "
+                                        "to faster discs.", unit="s", ge=0.0)
+    stuck_window: float = param(4.0, doc="coordinate: a team whose progress and robots "
+                                         "stood still this long is stuck.", unit="s",
+                                gt=0.0)
+    recover_time: float = param(10.0, doc="coordinate: a stuck team follows a route this "
+                                          "long.", unit="s", gt=0.0)
     route_period: float = param(2.0, doc="Time between two route searches while the "
                                          "formation stays on its route.", unit="s", gt=0.0)
