@@ -1,4 +1,4 @@
-"""`reshape_passage`: reshape's coordination layer (deadlock detection, queues, recovery, yielding)."""
+"""`reshape_passage`: the coordination layer (deadlock test, queues, recovery, yielding)."""
 
 from pathlib import Path
 

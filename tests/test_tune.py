@@ -9,8 +9,10 @@ from pathlib import Path
 import pytest
 
 from dfcoa_opt.bench.executors import ExecutorConfig
+from dfcoa_opt.bench.results.store import ResultsStore
+from dfcoa_opt.bench.runner import is_success
 from dfcoa_opt.bench.sweep import load_sweep, sweep_from_dict
-from dfcoa_opt.bench.tune import objective, tune_variant, tuning_sweep
+from dfcoa_opt.bench.tune import objective, tune_variant, tuning_sweep, validation_runs
 from dfcoa_opt.cli import main
 from dfcoa_opt.control.registry import available, check_overrides, controller_tunables
 from dfcoa_opt.core.errors import DfcoaError, ScenarioError
@@ -174,6 +176,43 @@ def test_tune_is_reproducible_and_resumes(tmp_path: Path) -> None:
     assert text["variants"]["goto_slot+cbf@tuned"] == {"controller": "goto_slot+cbf",
                                                        **best.params}
     assert len({json.dumps(t.params, sort_keys=True) for t in one.trials}) == 4
+
+
+def test_the_best_training_trials_are_chosen_again_on_validation_seeds(tmp_path: Path) -> None:
+    sweep_path = _mini(tmp_path, 4)
+    body = read_toml(sweep_path)
+    body["tune"]["validation_trials"] = 2
+    sweep_path.write_text(_toml(body))
+    sweep, spec = tuning_sweep(sweep_path)
+    res = tune_variant(sweep, spec, "goto_slot+cbf", tmp_path / "a", ExecutorConfig("serial"),
+                       tmp_path / "o")
+    # the budget: 2 training trials and 2 finalists, each 2 runs
+    assert len(res.trials) == 2 and len(res.validated) == 2 and res.ran == 8
+    assert sorted(t.number for t in res.validated) == [0, 1]
+    train = {t.number: t for t in res.trials}
+    chosen = max(res.validated, key=lambda t: (t.value, train[t.number].value, -t.number))
+    assert res.best.number == chosen.number and res.best.params == chosen.params
+    text = read_toml(res.path)
+    assert text["tuned"]["validation_trials"] == 2
+    assert text["tuned"]["validation_seeds"] == "10000-10001"  # cellular's validation range
+    assert text["tuned"]["validation_success"] == chosen.successes
+    assert text["tuned"]["best_trial"] == chosen.number
+    # the validation rows are the finalists' parameters on validation seeds
+    runs = validation_runs([r for r in sweep.runs if r.variant_name == "goto_slot+cbf"],
+                           "goto_slot+cbf", chosen)
+    assert [r.seed for r in runs] == [10000, 10001]
+    rows = [ResultsStore(tmp_path / "a" / "goto_slot+cbf").read_row(r.key) for r in runs]
+    assert sum(is_success(r) for r in rows) == chosen.successes
+    assert objective(rows)[0] == chosen.value
+    # resumed: nothing is simulated again, and the same file is written
+    again = tune_variant(sweep, spec, "goto_slot+cbf", tmp_path / "a", ExecutorConfig("serial"),
+                         tmp_path / "o2")
+    assert again.ran == 0 and again.path.read_text() == res.path.read_text()
+    body["tune"]["validation_trials"] = 4
+    sweep_path.write_text(_toml(body))
+    with pytest.raises(ScenarioError, match=r"tune\.validation_trials: 4 leaves no training "
+                                            r"trial of the 4 trials"):
+        tuning_sweep(sweep_path)
 
 
 def test_tune_names_an_unknown_variant(tmp_path: Path) -> None:

@@ -27,9 +27,13 @@ __all__ = ["Passage", "PassageParams"]
 
 @dataclass(frozen=True)
 class PassageParams(ReshapeParams):
-    """Parameters of ``reshape_passage`` (``[controllers.reshape_passage]``): ``reshape``'s, layer on."""
+    """Parameters of ``reshape_passage`` (``[controllers.reshape_passage]``).
 
-    coordinate: bool = param(True, doc="The coordination layer (docs/methods/reshape_passage.md).")
+    ``reshape``'s, with the coordination layer on.
+    """
+
+    coordinate: bool = param(True, doc="The coordination layer "
+                                       "(docs/methods/reshape_passage.md).")
     yield_time: float = param(1.0, doc="The tracking filter grows each sensed moving disc "
                                        "by its speed times this: robots give way earlier "
                                        "to faster discs.", unit="s", ge=0.0, tune=(0.0, 2.0))

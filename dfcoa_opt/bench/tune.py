@@ -24,6 +24,10 @@ every trial of that variant simulates. For each variant:
    variant ``<variant>@tuned`` in the variants file ``<out>/<variant>.toml``
    (:func:`variants_file_text`), with the budget, the seeds and the training
    success that produced it. Sweeps name it through ``variant_files``.
+   With ``validation_trials = k`` the last ``k`` trials' worth of runs go to
+   validation instead: the ``k`` best training trials run again on the
+   scenarios' validation seeds, and the best there is chosen
+   (:func:`validation_runs`).
 
 Every variant gets ``trials x runs per trial`` simulated runs: the budget is
 counted in runs, not in seconds (docs/heldout.md).
@@ -70,6 +74,12 @@ class TuneSpec:
                                        "(the defaults' trial included).", ge=1)
     out: str = param("../heldout/tuned", doc="Folder of the variants files, relative to the "
                                              "sweep file.")
+    validation_trials: int = param(0, doc="The best this many training trials run again on "
+                                          "as many validation seeds (the scenarios' [splits] "
+                                          "validation range, from its start), and the best "
+                                          "there is chosen. Their runs count in the budget: "
+                                          "trials - validation_trials trials train. 0: the "
+                                          "best training trial is chosen.", ge=0)
 
 
 @dataclass(frozen=True)
@@ -102,6 +112,7 @@ class TuneResult:
     best: Trial
     path: Path
     ran: int
+    validated: tuple[Trial, ...] = ()
 
 
 def objective(rows: Sequence[Mapping[str, Any]]) -> tuple[float, int, float]:
@@ -156,7 +167,12 @@ def _checked(sweep: Sweep) -> tuple[Sweep, TuneSpec]:
     if not isinstance(table, Mapping):
         raise ScenarioError(src, "tune", "is required: a [tune] table (trials, sampler_seed, "
                                          "out)")
-    return sweep, build(TuneSpec, table, src, "tune")
+    spec = build(TuneSpec, table, src, "tune")
+    if spec.validation_trials >= spec.trials:
+        raise ScenarioError(src, "tune.validation_trials",
+                            f"{spec.validation_trials} leaves no training trial of the "
+                            f"{spec.trials} trials: use fewer than trials")
+    return sweep, spec
 
 
 def tunables_of(variant: Variant) -> list[Tunable]:
@@ -276,17 +292,91 @@ def tune_variant(sweep: Sweep, spec: TuneSpec, name: str, results: str | Path,
     root = Path(results) / safe_name(name)
     store = ResultsStore(root)
     identity = _identity(sweep, variant, params, spec)
-    done = _read_journal(root, identity)[:spec.trials]
+    training = replace(spec, trials=spec.trials - spec.validation_trials)
+    done = _read_journal(root, identity)[:training.trials]
     config = config or ExecutorConfig()
+    validated: list[Trial] = []
     with kept_workers(config):
-        ran = _trials(spec, name, params, base, done, replace(sweep, runs=()), root, store,
+        ran = _trials(training, name, params, base, done, replace(sweep, runs=()), root, store,
                       identity, config, progress)
-    best = max(done, key=lambda t: (t.value, -t.number))
+        best = max(done, key=lambda t: (t.value, -t.number))
+        if spec.validation_trials:
+            validated, vran = _validate(sweep, spec, name, done, base, root, store, config,
+                                        progress)
+            ran += vran
+            train_value = {t.number: t.value for t in done}
+            chosen = max(validated, key=lambda t: (t.value, train_value[t.number], -t.number))
+            best = next(t for t in done if t.number == chosen.number)
     folder = Path(out) if out is not None else Path(sweep.source).parent / spec.out
     path = folder / f"{safe_name(name)}.toml"
     folder.mkdir(parents=True, exist_ok=True)
-    atomic_write(path, variants_file_text(sweep, spec, variant, params, done, best))
-    return TuneResult(name, tuple(done), best, path, ran)
+    atomic_write(path, variants_file_text(sweep, spec, variant, params, done, best, validated))
+    return TuneResult(name, tuple(done), best, path, ran, tuple(validated))
+
+
+def validation_runs(base: Sequence[RunSpec], variant: str, trial: Trial) -> list[RunSpec]:
+    """A training trial's runs moved to validation seeds, under their own name.
+
+    Run ``k`` of the training seeds (from the lowest) becomes the ``k``-th seed
+    of its scenario's ``[splits]`` validation range, so a finalist is scored on
+    as many worlds of each scenario as it trained on, none of them a training
+    or test world.
+
+    Raises:
+        ScenarioError: A scenario declares no validation range.
+    """
+    from dfcoa_opt.bench.sweep.expand import check_split
+    from dfcoa_opt.scenario.loader import load_scenario
+
+    first: dict[str, int] = {}
+    lowest: dict[str, int] = {}
+    for r in base:
+        lowest[r.scenario_file] = min(lowest.get(r.scenario_file, r.seed), r.seed)
+    out = []
+    for r in base:
+        if r.scenario_file not in first:
+            scenario = load_scenario(r.scenario_file)
+            bounds = scenario.spec.splits.range_of("validation")
+            if bounds is None:
+                raise ScenarioError(r.scenario_file, "splits.validation",
+                                    "is required by tune.validation_trials")
+            first[r.scenario_file] = int(bounds[0])
+            seeds = [first[r.scenario_file] + s.seed - lowest[r.scenario_file]
+                     for s in base if s.scenario_file == r.scenario_file]
+            check_split(scenario, "validation", seeds, r.scenario_file)
+        seed = first[r.scenario_file] + r.seed - lowest[r.scenario_file]
+        out.append(replace(r, seed=seed, variant=f"{variant}@validation{trial.number:03d}",
+                           overrides=canonical({**r.overrides_dict, **trial.params})))
+    return out
+
+
+def _validate(sweep: Sweep, spec: TuneSpec, name: str, done: Sequence[Trial],
+              base: Sequence[RunSpec], root: Path, store: ResultsStore, config: ExecutorConfig,
+              progress: bool | None) -> tuple[list[Trial], int]:
+    """Score the best ``validation_trials`` training trials on validation seeds.
+
+    Finished validation runs are kept in the store like the trials' runs, so
+    a resumed ``dfcoa tune`` simulates only what is missing.
+
+    Returns:
+        One :class:`Trial` per finalist (its number and parameters, the
+        validation score), best training trial first; the runs simulated.
+    """
+    finalists = sorted(done, key=lambda t: (-t.value, t.number))[:spec.validation_trials]
+    runs = {t.number: validation_runs(base, name, t) for t in finalists}
+    result = run_sweep(replace(sweep, runs=tuple(r for rs in runs.values() for r in rs)), root,
+                       config, progress=progress)
+    out = []
+    for t in finalists:
+        rows = [store.read_row(r.key) for r in runs[t.number]]
+        if any(r is None for r in rows):
+            raise DfcoaError(f"{root}: the validation of trial {t.number} has runs without "
+                             "a row")
+        value, wins, tail = objective(rows)  # type: ignore[arg-type]
+        out.append(Trial(t.number, t.params, value, wins, len(rows), tail))
+        print(f"{name}: trial {t.number} on validation seeds: {wins}/{len(rows)} succeeded",
+              file=sys.stderr)
+    return out, result.ran
 
 
 def _trials(spec: TuneSpec, name: str, params: Sequence[Tunable], base: Sequence[RunSpec],
@@ -336,8 +426,13 @@ def _seed_text(runs: Iterable[RunSpec]) -> str:
 
 
 def variants_file_text(sweep: Sweep, spec: TuneSpec, variant: Variant,
-                       params: Sequence[Tunable], trials: Sequence[Trial], best: Trial) -> str:
-    """The variants file of a tuned variant: ``[variants."<name>@tuned"]`` and how it was made."""
+                       params: Sequence[Tunable], trials: Sequence[Trial], best: Trial,
+                       validated: Sequence[Trial] = ()) -> str:
+    """The variants file of a tuned variant: ``[variants."<name>@tuned"]`` and how it was made.
+
+    With ``validated`` (the finalists' validation scores) the file also says
+    how many trials were re-scored and the chosen one's validation success.
+    """
     base = _base_runs(sweep, variant.name)
     default = trials[0]
     scen = sorted({r.scenario for r in base})
@@ -366,6 +461,17 @@ def variants_file_text(sweep: Sweep, spec: TuneSpec, variant: Variant,
         f"train_success = {best.successes}",
         f"train_runs = {best.runs}",
         f"default_train_success = {default.successes}",
+    ]
+    if validated:
+        chosen = next(t for t in validated if t.number == best.number)
+        runs = validation_runs(base, variant.name, chosen)
+        lines += [
+            f"validation_trials = {len(validated)}",
+            f"validation_seeds = {_toml_value(_seed_text(runs))}",
+            f"validation_success = {chosen.successes}",
+            f"validation_runs = {chosen.runs}",
+        ]
+    lines += [
         f"tuned = {_toml_value([t.key for t in params])}",
         "",
         f"[variants.\"{variant.name}{TUNED}\"]",
