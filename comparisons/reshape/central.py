@@ -433,20 +433,26 @@ class CentralPlanner:
         leader's formation is within ``route_lead`` of the goal (the leader
         stops up to its settle tolerance short of the path's end), the cap is off.
 
-        ``uncapped``: no cap (a recovering team, :meth:`_watch`).
+        ``uncapped`` (a recovering team far behind, :meth:`_watch`): the cap
+        by the path's arc length is off, and the target only keeps at least as
+        much of the route ahead as the leader's formation has of its path. A
+        route of another way than the leader's path can then no longer hold
+        the team where it stands, and the team still cannot overtake.
 
         Returns:
             The arc length, and whether the cap is off (so the formation may take
             its goal slots).
         """
-        if uncapped:
-            return here + self.p.route_lead, False
         nominal = leader[:2] + rotate(self._centre, float(leader[2]))
         cap = float(self._path.arc_length(nominal[None])[0])
         arcs = here + np.linspace(0.0, self.p.route_lead, 9)
         progress = self._path.arc_length(np.vstack([way.along(arcs), self._goal_centre]))
         if cap + self.p.route_lead >= progress[-1]:
             return float(arcs[-1]), True
+        if uncapped:  # by the length left to the goal, which no other way changes
+            behind = np.flatnonzero(way.length - arcs >= self._path.length - cap - 1e-9)
+            if behind.size:
+                return float(arcs[behind[-1]]), False
         within = np.flatnonzero(progress[:-1] <= cap + 1e-9)
         return (float(arcs[within[-1]]) if within.size else here), False
 
