@@ -177,7 +177,7 @@ class CentralPlanner:
         self.counters = {"replans": 0, "shrinks": 0, "waits": 0, "switches": 0, "unsticks": 0}
         self._route_until = -math.inf  # coordinate: on the route up to this progress, m
         self._recover_until = -math.inf  # coordinate: on a route until then, s
-        self._progress = ProgressMonitor(p.stuck_window, 0.1, 0.1)
+        self._progress = ProgressMonitor(p.stuck_window)
         if p.coordinate:
             self.counters["recoveries"] = 0
         self.plan_times: list[float] = []
@@ -337,10 +337,9 @@ class CentralPlanner:
         """Judge the team's progress (``coordinate``); a stuck team starts a recovery.
 
         A team that is stuck (:class:`~comparisons.reshape.progress.ProgressMonitor`)
-        follows a route for ``recover_time``, with the leader cap off: the route
-        is searched over the whole map, so it leaves the pocket that a region
-        cannot, and a route whose points run ahead of the leader's path no
-        longer holds the team where it stands.
+        follows a route for ``recover_time``: the route is searched over the
+        whole map, so it leaves the pocket that a region cannot. Far behind its
+        slots, the team is not held by the leader cap (:meth:`_uncapped`).
         """
         if not self.p.coordinate:
             return
@@ -449,7 +448,7 @@ class CentralPlanner:
         progress = self._path.arc_length(np.vstack([way.along(arcs), self._goal_centre]))
         if cap + self.p.route_lead >= progress[-1]:
             return float(arcs[-1]), True
-        if uncapped:  # by the length left to the goal, which no other way changes
+        if uncapped:  # as much route ahead as the leader's formation has path
             behind = np.flatnonzero(way.length - arcs >= self._path.length - cap - 1e-9)
             if behind.size:
                 return float(arcs[behind[-1]]), False

@@ -35,12 +35,13 @@ class ProgressMonitor:
 
     Args:
         window: Length of the history judged, s.
-        advance: Least growth of the team's progress that counts as moving, m.
+        advance: Least growth of the team's progress that counts as moving, m
+            (0.1: half the stall test's ``metrics.deadlock_advance``).
         displacement: Least net displacement of one robot that counts as
             waiting (someone is getting through), m.
     """
 
-    def __init__(self, window: float, advance: float, displacement: float) -> None:
+    def __init__(self, window: float, advance: float = 0.1, displacement: float = 0.1) -> None:
         self.window, self.advance, self.displacement = window, advance, displacement
         self._history: deque[tuple[float, float, FloatArray]] = deque()
 
