@@ -67,8 +67,9 @@ class ReshapeParams:
                                                   "this (counter-clockwise).", unit="rad")
     coordinate: bool = param(False, doc="The coordination layer of ``reshape_passage`` "
                                         "(docs/methods/reshape_passage.md): a column led by its "
-                                        "front robot, the leader cap by remaining length, "
-                                        "the goal's formation on the stopped leader.")
+                                        "front robot, a route kept past the blocked stretch, "
+                                        "a stuck team's recovery route, the goal's formation "
+                                        "on the stopped leader.")
     yield_time: float = param(0.0, doc="The tracking filter grows each sensed moving disc "
                                         "by its speed times this: robots give way earlier "
                                         "to faster discs.", unit="s", ge=0.0)
