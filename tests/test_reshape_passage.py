@@ -10,7 +10,6 @@ from comparisons.reshape.passage import Passage, PassageParams
 from comparisons.reshape.progress import MOVING, STUCK, WAITING, ProgressMonitor
 from comparisons.reshape.routes import Route
 from dfcoa_opt.control.base import MovingObstacles, Observation
-from dfcoa_opt.control.registry import build_controller
 
 ROOT = Path(__file__).resolve().parents[1]
 HELDOUT = ROOT / "scenarios" / "heldout"
@@ -76,13 +75,9 @@ def test_the_column_is_led_by_its_front_robot():
     """The front robot's projection on the route, among the robots near it."""
     xs = np.linspace(0.0, 10.0, 101)  # a route is a polyline of cell centres
     way = Route(np.column_stack([xs, np.zeros_like(xs)]), xs)
-    sc = d.load(HELDOUT / "rooms_10.toml", seed=36, overrides=JUDGED)
-    ctrl = build_controller("reshape_passage", sc.spec.controllers, sc.source)
-    ctrl.reset_batch([sc], [np.random.default_rng(0)])  # one planner
-    planner = ctrl.runs[0]
     pos = np.array([[1.0, 0.2], [3.0, -0.3], [8.0, 5.0]])  # the third is off the route
-    assert planner._front(way, pos, -1.0) == pytest.approx(3.0)
-    assert planner._front(way, pos[2:], -1.0) == -1.0
+    assert way.front(pos, 1.0, -1.0) == pytest.approx(3.0)
+    assert way.front(pos[2:], 1.0, -1.0) == -1.0
 
 
 def test_passage_is_reshape_with_the_layer_on():

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from comparisons.reshape import planner
-from comparisons.reshape.progress import STUCK, ProgressMonitor
+from comparisons.reshape.coordination import Coordination
 from comparisons.reshape.region import grow_region, shape_segments, swept_disc_segments
 from comparisons.reshape.routes import (
     ConfigurationSpace,
@@ -175,10 +175,9 @@ class CentralPlanner:
         self._waypoint: dict[int, FloatArray] = {}
         self._carried: FloatArray | None = None  # the targets in the leader's frame
         self.counters = {"replans": 0, "shrinks": 0, "waits": 0, "switches": 0, "unsticks": 0}
-        self._route_until = -math.inf  # coordinate: on the route up to this progress, m
-        self._recover_until = -math.inf  # coordinate: on a route until then, s
-        self._progress = ProgressMonitor(p.stuck_window)
-        if p.coordinate:
+        self._coord = (Coordination(p.stuck_window, p.recover_time, p.lookahead, self._extent)
+                       if p.coordinate else None)  # reshape_passage's layer
+        if self._coord is not None:
             self.counters["recoveries"] = 0
         self.plan_times: list[float] = []
         self.history: list[tuple[float, str | None, float]] = []
@@ -258,8 +257,10 @@ class CentralPlanner:
         s_c = float(self._path.arc_length(centroid[None])[0])
         s_l = float(self._path.arc_length(obs.leader[None, :2])[0])
         k = heading_bin(self._tangent(s_c + self.p.lookahead))
-        self._watch(obs, s_c, pos)
-        if self._path_blocked(s_c, k) or self._holding(obs.t, s_c):
+        coord = self._coord
+        if coord is not None and coord.watch(obs.t, s_c, pos, bool(obs.obstacles.mask.any())):
+            self.counters["recoveries"] += 1
+        if self._path_blocked(s_c, k) or (coord is not None and coord.holding(obs.t, s_c)):
             if self._follow_route(obs, pos, centroid, k):
                 self.plan_times.append(time.perf_counter() - t0)
                 return
@@ -329,50 +330,9 @@ class CentralPlanner:
         lead = self._path.points_at(s)
         centres = lead + rotate(self._centre, bin_heading(k))
         free = self._cspace.free_at(centres, float(self._scales[-1]), k)
-        if self.p.coordinate and not free.all():  # on the route until past the last block
-            self._route_until = max(self._route_until, float(s[~free][-1]) + self._extent)
+        if self._coord is not None and not free.all():  # on the route past the last block
+            self._coord.blocked_to(float(s[~free][-1]))
         return not bool(free.all())
-
-    def _watch(self, obs: Observation, s_c: float, pos: FloatArray) -> None:
-        """Judge the team's progress (``coordinate``); a stuck team starts a recovery.
-
-        A team that is stuck (:class:`~comparisons.reshape.progress.ProgressMonitor`)
-        follows a route for ``recover_time``: the route is searched over the
-        whole map, so it leaves the pocket that a region cannot. Far behind its
-        slots, the team is not held by the leader cap (:meth:`_uncapped`).
-        """
-        if not self.p.coordinate:
-            return
-        if self._progress.update(obs.t, s_c, pos, bool(obs.obstacles.mask.any())) == STUCK:
-            self.counters["recoveries"] += 1
-            self._recover_until = obs.t + self.p.recover_time
-            self._progress.clear()
-
-    def _holding(self, t: float, s_c: float) -> bool:
-        """Whether the coordination layer keeps the formation on a route at ``t`` (s).
-
-        On a route it stays until its progress ``s_c`` (m) passes the last
-        blocked stretch of the leader's path by the formation's extent: without
-        this, a formation at the edge of a blocked stretch switches between the
-        route and the region at every plan, and never commits to either. A
-        recovering team (:meth:`_watch`) stays on a route too.
-        """
-        return self.p.coordinate and (s_c < self._route_until or self._recovering(t))
-
-    def _recovering(self, t: float) -> bool:
-        """Whether a recovery (:meth:`_watch`) is under way at ``t`` (s)."""
-        return t < self._recover_until
-
-    def _uncapped(self, obs: Observation, centroid: FloatArray) -> bool:
-        """Whether the route's leader cap is off: a recovering team far behind its slots.
-
-        Far: the centroid more than ``lookahead`` from the centre of the
-        leader's slots. A team that near could only get ahead of its leader,
-        and stand there.
-        """
-        if not self._recovering(obs.t):
-            return False
-        return float(np.hypot(*(obs.slot.mean(axis=0) - centroid))) > self.p.lookahead
 
     def _follow_route(self, obs: Observation, pos: FloatArray, centroid: FloatArray,
                       k: int) -> bool:
@@ -387,10 +347,11 @@ class CentralPlanner:
             return False
         here = way.project(centroid)
         head = 0.0 if way_scale is not None else 0.5 * self._spacing * (self._n - 1)
-        if self.p.coordinate and way_scale is None:
-            here = self._front(way, pos, here + head) - head
-        centre, leader_near = self._route_centre(way, here, obs.leader,
-                                                 self._uncapped(obs, centroid))
+        coord = self._coord
+        if coord is not None and way_scale is None:  # the column led by its front robot
+            here = way.front(pos, self._spacing, here + head) - head
+        centre, leader_near = self._route_centre(
+            way, here, obs.leader, coord is not None and coord.uncapped(obs.t, obs.slot, centroid))
         ahead = centre + head
         if here + self.p.route_lead + head >= way.length and leader_near:
             template, scale = "scenario", 1.0
@@ -432,7 +393,8 @@ class CentralPlanner:
         leader's formation is within ``route_lead`` of the goal (the leader
         stops up to its settle tolerance short of the path's end), the cap is off.
 
-        ``uncapped`` (a recovering team far behind, :meth:`_watch`): the cap
+        ``uncapped`` (a recovering team far behind,
+        :meth:`~comparisons.reshape.coordination.Coordination.uncapped`): the cap
         by the path's arc length is off, and the target only keeps at least as
         much of the route ahead as the leader's formation has of its path. A
         route of another way than the leader's path can then no longer hold
@@ -454,17 +416,6 @@ class CentralPlanner:
                 return float(arcs[behind[-1]]), False
         within = np.flatnonzero(progress[:-1] <= cap + 1e-9)
         return (float(arcs[within[-1]]) if within.size else here), False
-
-    def _front(self, way: Route, pos: FloatArray, default: float) -> float:
-        """Arc length (m) along ``way`` of the column's front robot.
-
-        The farthest projection of the robots within one spacing of the route;
-        ``default`` when none is. A column placed around its centroid stands
-        still where the route bends back: the centroid of its targets is the
-        centroid it was placed from. Led by its front robot, it moves on.
-        """
-        near = [way.project(p) for p in pos if way.distance(p) <= self._spacing]
-        return max(near) if near else default
 
     # -------------------------------------------------------------- nominal mode
     def _nominal_plan(self, obs: Observation, pos: FloatArray) -> None:

@@ -68,6 +68,18 @@ class Route:
         """Distance (m) from ``p`` to the nearest route point."""
         return float(np.sqrt(np.min(np.sum((self.points - p) ** 2, axis=1))))
 
+    def front(self, points: FloatArray, within: float, default: float) -> float:
+        """Arc length (m) of the farthest projection of ``points`` ``(N, 2)`` within ``within``.
+
+        Only points within ``within`` (m) of the route count; ``default`` when
+        none does. ``reshape_passage`` leads its column from its front robot:
+        a column placed around its centroid stands still where the route bends
+        back, since the centroid of its targets is the centroid it was placed
+        from.
+        """
+        near = [self.project(p) for p in points if self.distance(p) <= within]
+        return max(near) if near else default
+
     def along(self, arcs: FloatArray) -> FloatArray:
         """``(K, 2)`` points at arc lengths ``arcs`` (m); before the start, straight back.
 
