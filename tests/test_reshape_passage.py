@@ -13,6 +13,8 @@ from dfcoa_opt.control.base import MovingObstacles, Observation
 
 ROOT = Path(__file__).resolve().parents[1]
 HELDOUT = ROOT / "scenarios" / "heldout"
+#: hand-made worlds of the passage tests (their headers draw them)
+WORLDS = ROOT / "tests" / "data" / "passage"
 #: the held-out settings under which every method is judged (scenarios/sweeps/heldout.toml)
 JUDGED = {"stop_on_collision": True, "stop_on_deadlock": True, "controllers.cbf.solver": "exact"}
 
@@ -97,6 +99,65 @@ def test_yielding_grows_each_sensed_disc_by_its_speed():
     assert grown.radius[0, 0] == pytest.approx(0.25 + 1.5 * 0.5)
     assert grown.radius[0, 1] == 0.0
     assert Passage(PassageParams(yield_time=0.0))._yielding(obs) is obs
+
+
+def _crossings(x, line):
+    """Steps at which ``x`` ``(T,)`` crosses ``line`` eastward, and westward."""
+    side = np.sign(x - line)
+    step = np.flatnonzero(np.diff(side) != 0)
+    return step[side[step + 1] > 0], step[side[step + 1] < 0]
+
+
+def _free_run(run):
+    """The run succeeded, without a contact of any kind."""
+    m = run.metrics
+    assert m["outcome"] == "success"
+    assert m["collisions"] == 0 and m["robot_contact_steps"] == 0
+    assert m["obstacle_contact_steps"] == 0
+
+
+def test_two_robots_meeting_in_a_one_robot_passage_both_get_through_front_first():
+    """Robot 0 follows the leader east into a 3 m one-robot passage; robot 1 came
+    in from the east towards its slot behind robot 0. They stand nose to nose,
+    the team is stuck, and the recovery's route orders the passage by where the
+    robots stand along it: the robot ahead (robot 1) takes the front slot and
+    leaves by the far end first; robot 0 follows it through. Both then take
+    their own slots at the goal.
+    """
+    sc = d.load(WORLDS / "doorway_two_sides.toml", overrides=JUDGED)
+    run = d.run(sc, "reshape_passage", seed=0)
+    _free_run(run)
+    assert run.metrics["ctl_recoveries"] >= 1
+    x = np.asarray(run.log.pose)[:, :, 0]
+    east0, _ = _crossings(x[:, 0], 8.5)  # the passage's far end
+    east1, west1 = _crossings(x[:, 1], 8.5)
+    assert len(west1) == 1 and len(east0) >= 1 and len(east1) >= 1  # robot 1 came in once
+    assert east1[-1] < east0[0]  # the stated order: robot 1 out first, robot 0 after it
+    deepest = float(x[:, 1].min())
+    assert deepest < 7.5  # robot 1 was well inside: they met there
+
+
+@pytest.mark.parametrize("outside", [False, True])
+def test_a_dead_end_leads_to_backing_off_and_another_way(outside):
+    """The leader's straight line runs into a pocket closed by a wall.
+
+    From inside the pocket the team backs away from the goal out of its mouth
+    (x < 5) and goes around it (more than 3 m off the line); from outside it
+    goes around without entering, where ``reshape`` stands at the mouth.
+    """
+    ov = dict(JUDGED, **({"leader.start": [2.0, 5.0]} if outside else {}))
+    sc = d.load(WORLDS / "dead_end.toml", overrides=ov)
+    run = d.run(sc, "reshape_passage", seed=0)
+    _free_run(run)
+    centroid = np.asarray(run.log.pose)[:, :, :2].mean(axis=1)
+    assert float(np.abs(centroid[:, 1] - 5.0).max()) > 3.0  # around the pocket
+    if outside:
+        assert d.run(sc, "reshape", seed=0).metrics["outcome"] == "deadlock"
+        inside = (centroid[:, 0] > 5.0) & (centroid[:, 0] < 8.0) & \
+            (np.abs(centroid[:, 1] - 5.0) < 2.5)
+        assert not inside.any()  # never entered it
+    else:
+        assert centroid[0, 0] > 6.0 and float(centroid[:, 0].min()) < 5.0  # backed out
 
 
 @pytest.mark.parametrize(("family", "seed"), [("rooms_10", 43), ("cellular", 38)])

@@ -373,7 +373,11 @@ class CentralPlanner:
         if template != self._template and self._template is not None:
             self.counters["switches"] += 1
         self.history.append((obs.t, template, scale))
-        self._assign = self._assignment(pos, slots, template)
+        reorder = coord is not None and coord.recovering(obs.t)  # who stands nearest goes
+        before, self._assign = self._assign, self._assignment(pos, slots, template, reorder)
+        if reorder and template == self._template and np.any(before != self._assign):
+            traded = np.flatnonzero(before != self._assign)  # new targets: not stuck on them
+            self._stuck.restart(obs.t, self._rows.start + traded)
         self._template, self._nominal, self._carried = template, False, None
         self._targets = slots[self._assign]
         self._waypoint = self._waypoints(obs.t, pos)
@@ -439,10 +443,11 @@ class CentralPlanner:
         return self._guide.waypoints(pos, self._targets, self._stuck.stuck(t, self._rows),
                                      self._keep, self._stuck.freed(t, self._rows))
 
-    def _assignment(self, pos: FloatArray, slots: FloatArray, template: str) -> NDArray[np.intp]:
+    def _assignment(self, pos: FloatArray, slots: FloatArray, template: str,
+                    reorder: bool = False) -> NDArray[np.intp]:
         """Robot i -> slot index (:func:`~comparisons.reshape.planner.assign`)."""
         return planner.assign(pos, slots, template, self._template, self._assign,
-                              self.p.hysteresis)
+                              self.p.hysteresis, reorder)
 
 
 def heard_positions(obs: Observation) -> FloatArray:

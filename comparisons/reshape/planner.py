@@ -132,7 +132,8 @@ def choose(region: Region, templates: Mapping[str, FloatArray], template_cost: M
 
 
 def assign(pos: FloatArray, slots: FloatArray, template: str, previous_template: str | None,
-           previous: NDArray[np.intp], hysteresis: float) -> NDArray[np.intp]:
+           previous: NDArray[np.intp], hysteresis: float,
+           reorder: bool = False) -> NDArray[np.intp]:
     """Robot i -> slot index: its own in the scenario's template, else Hungarian.
 
     The Hungarian assignment on squared distances; the previous one is kept,
@@ -145,12 +146,15 @@ def assign(pos: FloatArray, slots: FloatArray, template: str, previous_template:
         previous_template: The template of the previous plan, or None.
         previous: ``(N,)`` the previous assignment.
         hysteresis: A new assignment must be this fraction cheaper.
+        reorder: The scenario's template too by the Hungarian assignment
+            (``reshape_passage``'s recovering team: robots that met head-on in
+            a passage trade slots instead of pushing).
 
     Returns:
         ``(N,)`` the slot of each robot.
     """
     n = len(pos)
-    if template == "scenario":
+    if template == "scenario" and not reorder:
         return np.arange(n)
     cost = np.sum((pos[:, None, :] - slots[None]) ** 2, axis=2)
     from scipy.optimize import linear_sum_assignment  # here: ~0.15 s to import

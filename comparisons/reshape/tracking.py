@@ -277,6 +277,14 @@ class StuckMonitor:
         left = self.left if rows is None else self.left[rows]
         return np.flatnonzero(t - left < FREED_MEMORY)
 
+    def restart(self, t: float, rows: NDArray[np.intp]) -> None:
+        """Start the still clock of ``rows`` again at ``t`` (s): their targets changed.
+
+        A robot given a new target is not stuck on it yet, so its command is not
+        turned until it has stood ``after`` s on the new one.
+        """
+        self.since[rows] = t
+
     def turn(self, t: float, ids: NDArray[np.intp], pos: FloatArray, target: FloatArray,
              u: FloatArray) -> tuple[FloatArray, int]:
         """Commands with the stuck robots' turned, and how many were turned.
