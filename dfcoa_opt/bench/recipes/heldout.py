@@ -16,6 +16,8 @@ per family for the pictures) and writes ``paper_figures/heldout/``:
   per tuned method;
 - ``traj_<family>_s<seed>.png``: every tuned variant on the first test world of
   each family;
+- ``fail_<family>_s<seed>.png``: where the first-ranked tuned variant fails, a
+  snapshot of each failing test world (first contact, deadlock onset or end);
 - ``heldout.csv``, ``by_family.csv``, ``worlds.csv``: the numbers of the tables.
 """
 
@@ -32,10 +34,10 @@ from dfcoa_opt.bench.recipes import Artefact, recipe
 from dfcoa_opt.bench.report import heldout as ho
 from dfcoa_opt.bench.report import paired, stats
 from dfcoa_opt.bench.report.document import aggregate, environment_header
-from dfcoa_opt.bench.report.failures import run_outcome
+from dfcoa_opt.bench.report.failures import run_outcome, snapshot_time
 from dfcoa_opt.bench.report.plots import ladder_figure, variant_name
 from dfcoa_opt.bench.report.tables import md_escape, ranking_table, rate_cell
-from dfcoa_opt.bench.report.trajectories import panels_figure
+from dfcoa_opt.bench.report.trajectories import panels_figure, snapshot_figure
 from dfcoa_opt.bench.results.published import RUNS_FILE, published_rows
 from dfcoa_opt.bench.results.store import ResultsStore
 from dfcoa_opt.bench.runner import is_success
@@ -177,6 +179,46 @@ def _gap_and_defaults(methods: Sequence[str], rows: Sequence[Mapping[str, Any]],
     return gap, dvt
 
 
+def _failures(names: Sequence[str], rows: Sequence[Mapping[str, Any]], logs: Path,
+              dest: Path) -> tuple[list[str], list[Artefact]]:
+    """Where the first-ranked tuned variant fails: each failing test world, by family.
+
+    First-ranked: the most successes over every test world (ties: the name).
+    Each failing world gets a snapshot at its first contact, at the onset of
+    its deadlock, or at its end (:func:`~dfcoa_opt.bench.report.failures.snapshot_time`).
+
+    Returns:
+        The section's lines, and its pictures.
+    """
+    wins = {n: sum(is_success(r) for r in rows if variant_name(r) == n) for n in names}
+    best = min(names, key=lambda n: (-wins[n], n))
+    mine = [r for r in rows if variant_name(r) == best]
+    lines = ["## Where the first-ranked variant fails", "",
+             f"`{best}` ({wins[best]} of {len(mine)} test worlds): each world it did not "
+             "succeed in, by family, with the map and the robots at the first contact, at "
+             "the onset of the deadlock, or at the end of the run.", ""]
+    arts: list[Artefact] = []
+    for scen in sorted({str(r["scenario"]) for r in mine}):
+        failed = sorted((r for r in mine if str(r["scenario"]) == scen and not is_success(r)),
+                        key=lambda r: int(r["seed"]))
+        ran = sum(str(r["scenario"]) == scen for r in mine)
+        lines += [f"### {scen}: {len(failed)} of {ran} failed", ""]
+        for r in failed:
+            t = snapshot_time(r)
+            when = f" at {t:.1f} s" if math.isfinite(t) else ""
+            text = f"- seed {r['seed']}: {run_outcome(r)}{when}"
+            if not r.get("log"):
+                lines.append(f"{text} (no log)")
+                continue
+            name = f"fail_{safe_name(scen)}_s{r['seed']}.png"
+            snapshot_figure(r, logs, dest / name, t)
+            lines.append(f"{text}: [snapshot]({name})")
+            arts.append(Artefact(name, "-", f"{best} on {scen} seed {r['seed']}: "
+                                            f"{run_outcome(r)}"))
+        lines.append("")
+    return lines, arts
+
+
 def _variant_files(store: ResultsStore) -> list[Path]:
     """The sweep's variants files (``variant_files``, relative to the sweep file)."""
     from dfcoa_opt.scenario.overrides import read_toml
@@ -194,7 +236,7 @@ def _csv(rows: Sequence[Sequence[Any]]) -> str:
 
 #: The summary keys the held-out tables read (besides the outcome's): the published runs keep
 #: them (``runs.csv``).
-METRICS = ("fce_rms", *WORLD_KEYS)
+METRICS = ("fce_rms", "first_contact_time", "deadlock_time", *WORLD_KEYS)
 
 
 @recipe("heldout", sweep="sweeps/heldout.toml",
@@ -220,7 +262,8 @@ def heldout_report(rows: Sequence[Mapping[str, Any]], dest: Path, baseline: str,
         baseline: The variant the ranking pairs the others with.
         tuned_info: The ``[tuned]`` tables of the variants files, by tuned variant.
         header: The report's provenance lines (machine, packages, dates).
-        logs: The results folder of the rows' logs, for the trajectory panels; None
+        logs: The results folder of the rows' logs, for the trajectory panels and the
+            failure snapshots; None
             draws none (published runs come without logs).
         ranked: Variants ranked beside the tuned ones (a compared controller, tuned
             or not).
@@ -288,6 +331,10 @@ def heldout_report(rows: Sequence[Mapping[str, Any]], dest: Path, baseline: str,
         md += [f"![{scen}]({name})", ""]
         arts.append(Artefact(name, "-", f"every tuned variant on the first test world of "
                                         f"{scen}"))
+    if logs is not None and tuned_names:
+        lines, pictures = _failures(tuned_names, tuned_rows, logs, dest)
+        md += lines
+        arts += pictures
     atomic_write(dest / "heldout.md", "\n".join(md).rstrip("\n") + "\n")
     atomic_write(dest / "worlds.csv", _csv(
         [["scenario", "seed", "failure_rate", *sorted(ws[0].metrics)] if ws else []]
