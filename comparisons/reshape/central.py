@@ -260,12 +260,15 @@ class CentralPlanner:
         coord = self._coord
         if coord is not None and coord.watch(obs.t, s_c, pos, bool(obs.obstacles.mask.any())):
             self.counters["recoveries"] += 1
-        if self._path_blocked(s_c, k) or (coord is not None and coord.holding(obs.t, s_c)):
+        ahead = coord is not None and s_c > s_l  # past its leader: back to the slots
+        if not ahead and (self._path_blocked(s_c, k) or (
+                coord is not None and coord.holding(obs.t, s_c)
+                and not coord.released(obs.slot, centroid))):
             if self._follow_route(obs, pos, centroid, k):
                 self.plan_times.append(time.perf_counter() - t0)
                 return
         self._routes.clear()
-        if s_c + self.p.lookahead >= s_l and self._nominal_fits(obs, s_l):
+        if ahead or (s_c + self.p.lookahead >= s_l and self._nominal_fits(obs, s_l)):
             self._nominal_plan(obs, pos)  # nothing in the way: the scenario's formation
             self.plan_times.append(time.perf_counter() - t0)
             return
@@ -353,7 +356,8 @@ class CentralPlanner:
         centre, leader_near = self._route_centre(
             way, here, obs.leader, coord is not None and coord.uncapped(obs.t, obs.slot, centroid))
         ahead = centre + head
-        if here + self.p.route_lead + head >= way.length and leader_near:
+        at_goal = here + self.p.route_lead + head >= way.length and leader_near
+        if at_goal:
             template, scale = "scenario", 1.0
             if self.p.coordinate:  # the goal's formation where the leader stops
                 slots = obs.slot.copy()
@@ -373,7 +377,8 @@ class CentralPlanner:
         if template != self._template and self._template is not None:
             self.counters["switches"] += 1
         self.history.append((obs.t, template, scale))
-        reorder = coord is not None and coord.recovering(obs.t)  # who stands nearest goes
+        # a recovering team's route slots: who stands nearest goes (the goal's: each its own)
+        reorder = coord is not None and coord.recovering(obs.t) and not at_goal
         before, self._assign = self._assign, self._assignment(pos, slots, template, reorder)
         if reorder and template == self._template and np.any(before != self._assign):
             traded = np.flatnonzero(before != self._assign)  # new targets: not stuck on them

@@ -10,7 +10,9 @@ leader cap is off (docs/methods/reshape_passage.md, "The layer"):
 - a team that is stuck (:class:`~comparisons.reshape.progress.ProgressMonitor`)
   follows a route for ``recover_time``; the route is searched over the whole
   map, so it leaves the pocket that a region cannot;
-- a recovering team far behind its slots is not held by the leader cap.
+- a recovering team far behind its slots is not held by the leader cap;
+- a held team back within reach of its slots is released to them, where the
+  leader's path is free (:meth:`Coordination.released`).
 """
 
 from __future__ import annotations
@@ -69,6 +71,16 @@ class Coordination:
     def holding(self, t: float, s_c: float) -> bool:
         """Whether the formation stays on a route at ``t`` (s), at progress ``s_c`` (m)."""
         return s_c < self._route_until or self.recovering(t)
+
+    def released(self, slots: FloatArray, centroid: FloatArray) -> bool:
+        """Whether a held team is back at its slots ``(N, 2)`` (m): within ``far`` of them.
+
+        Where the leader's path is free, the planner then lets the scenario's
+        formation take over (if it fits) instead of a hold or a recovery: a
+        route that keeps the team off its slots while the leader comes near
+        would stand the team still beside them.
+        """
+        return float(np.hypot(*(slots.mean(axis=0) - centroid))) <= self.far
 
     def uncapped(self, t: float, slots: FloatArray, centroid: FloatArray) -> bool:
         """Whether the route's leader cap is off: a recovering team far behind its slots.

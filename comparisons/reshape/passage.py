@@ -8,7 +8,11 @@ with ``coordinate`` on and ``yield_time`` 1 s:
 - a formation stays on its route until it has passed the blocked stretch;
 - a stuck team (:class:`~comparisons.reshape.progress.ProgressMonitor`:
   progress along the leader's path, told apart from a queue or a team waiting
-  for a walker) takes a route through the whole map for ``recover_time``;
+  for a walker) takes a route through the whole map for ``recover_time``; on
+  it the robots take the route's slots in the order they stand (robots that
+  met head-on in a passage trade places instead of pushing);
+- a team back within reach of its slots leaves its hold for them, and a team
+  that got ahead of its leader along the path goes back to its slots;
 - the goal's formation is taken where the leader stops;
 - the tracking filter grows each moving disc by its speed times ``yield_time``.
 """
