@@ -160,14 +160,17 @@ def test_a_dead_end_leads_to_backing_off_and_another_way(outside):
         assert centroid[0, 0] > 6.0 and float(centroid[:, 0].min()) < 5.0  # backed out
 
 
-@pytest.mark.parametrize(("family", "seed"), [("rooms_10", 43), ("cellular", 38)])
+@pytest.mark.parametrize(("family", "seed"), [("rooms_10", 43), ("cellular", 38),
+                                             ("corridors", 64)])
 def test_passage_gets_through_where_reshape_deadlocks(family, seed):
     """Training worlds (no test seed) where reshape's planner freezes its own targets.
 
     rooms_10 43: a column placed around its centroid where the route bends
     back stands still (the front-led column goes on). cellular 38: a route
     whose points run ahead of the leader's path holds the team; the stuck team
-    recovers.
+    recovers. corridors 64: a route shorter than the leader's path brings the
+    team to the goal's room ahead of its leader, where the leader cap held it
+    off its slots; the team goes back to its slots.
     """
     sc = d.load(HELDOUT / f"{family}.toml", seed=seed, overrides=JUDGED)
     assert d.run(sc, "reshape", seed=seed).metrics["outcome"] == "deadlock"
