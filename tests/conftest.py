@@ -67,3 +67,23 @@ def one_numba_thread():
     numba.set_num_threads(1)
     yield
     numba.set_num_threads(before)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _plugins_leave_with_their_module():
+    """Ids a test module registers (plugins, test doubles) are unregistered after it.
+
+    A sweep's ``controllers = ["*"]`` expands to every registered id, so a plugin
+    that one module's ``dfcoa compare`` loaded would add runs to another module's
+    sweeps (``tests/test_sweep_atomic.py`` checks the shipped sweeps' run keys),
+    depending on which modules share a worker. Built-in ids (entry points) stay.
+    """
+    from dfcoa_opt.core import registry
+
+    tables = [r for r in vars(registry).values() if isinstance(r, registry.Registry)]
+    before = [set(r._table) for r in tables]
+    yield
+    for r, kept in zip(tables, before, strict=True):
+        declared = {ep.name for ep in r.entry_points()}
+        for name in set(r._table) - kept - declared:
+            del r._table[name]
