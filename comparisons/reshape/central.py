@@ -260,15 +260,15 @@ class CentralPlanner:
         coord = self._coord
         if coord is not None and coord.watch(obs.t, s_c, pos, bool(obs.obstacles.mask.any())):
             self.counters["recoveries"] += 1
-        ahead = coord is not None and s_c > s_l  # past its leader: back to the slots
-        if not ahead and (self._path_blocked(s_c, k) or (
+        past_leader = coord is not None and s_c > s_l  # ahead of its leader: to the slots
+        if not past_leader and (self._path_blocked(s_c, k) or (
                 coord is not None and coord.holding(obs.t, s_c)
                 and not coord.released(obs.slot, centroid))):
             if self._follow_route(obs, pos, centroid, k):
                 self.plan_times.append(time.perf_counter() - t0)
                 return
         self._routes.clear()
-        if ahead or (s_c + self.p.lookahead >= s_l and self._nominal_fits(obs, s_l)):
+        if past_leader or (s_c + self.p.lookahead >= s_l and self._nominal_fits(obs, s_l)):
             self._nominal_plan(obs, pos)  # nothing in the way: the scenario's formation
             self.plan_times.append(time.perf_counter() - t0)
             return

@@ -263,8 +263,7 @@ def heldout_report(rows: Sequence[Mapping[str, Any]], dest: Path, baseline: str,
         tuned_info: The ``[tuned]`` tables of the variants files, by tuned variant.
         header: The report's provenance lines (machine, packages, dates).
         logs: The results folder of the rows' logs, for the trajectory panels and the
-            failure snapshots; None
-            draws none (published runs come without logs).
+            failure snapshots; None draws none (published runs come without logs).
         ranked: Variants ranked beside the tuned ones (a compared controller, tuned
             or not).
     """
