@@ -380,9 +380,8 @@ class CentralPlanner:
         # a recovering team's route slots: who stands nearest goes (the goal's: each its own)
         reorder = coord is not None and coord.recovering(obs.t) and not at_goal
         before, self._assign = self._assign, self._assignment(pos, slots, template, reorder)
-        if reorder and template == self._template and np.any(before != self._assign):
-            traded = np.flatnonzero(before != self._assign)  # new targets: not stuck on them
-            self._stuck.restart(obs.t, self._rows.start + traded)
+        if reorder and template == self._template:  # traded targets: not stuck on them yet
+            self._stuck.restart(obs.t, self._rows.start + np.flatnonzero(before != self._assign))
         self._template, self._nominal, self._carried = template, False, None
         self._targets = slots[self._assign]
         self._waypoint = self._waypoints(obs.t, pos)

@@ -89,4 +89,4 @@ class Coordination:
         ``(N, 2)`` (m). A team that near could only get ahead of its leader,
         and stand there.
         """
-        return self.recovering(t) and float(np.hypot(*(slots.mean(axis=0) - centroid))) > self.far
+        return self.recovering(t) and not self.released(slots, centroid)

@@ -179,23 +179,27 @@ def _gap_and_defaults(methods: Sequence[str], rows: Sequence[Mapping[str, Any]],
     return gap, dvt
 
 
-def _failures(names: Sequence[str], rows: Sequence[Mapping[str, Any]], logs: Path,
+def _failures(best: ho.VariantStats, rows: Sequence[Mapping[str, Any]], logs: Path,
               dest: Path) -> tuple[list[str], list[Artefact]]:
     """Where the first-ranked tuned variant fails: each failing test world, by family.
 
-    First-ranked: the most successes over every test world (ties: the name).
     Each failing world gets a snapshot at its first contact, at the onset of
     its deadlock, or at its end (:func:`~dfcoa_opt.bench.report.failures.snapshot_time`).
+
+    Args:
+        best: The first row of the tuned variants' table (the most successes over
+            every test world; ties: the name).
+        rows: The tuned variants' runs.
+        logs: The results folder of their logs.
+        dest: Output folder of the snapshots.
 
     Returns:
         The section's lines, and its pictures.
     """
-    wins = {n: sum(is_success(r) for r in rows if variant_name(r) == n) for n in names}
-    best = min(names, key=lambda n: (-wins[n], n))
-    mine = [r for r in rows if variant_name(r) == best]
+    mine = [r for r in rows if variant_name(r) == best.variant]
     lines = ["## Where the first-ranked variant fails", "",
-             f"`{best}` ({wins[best]} of {len(mine)} test worlds): each world it did not "
-             "succeed in, by family, with the map and the robots at the first contact, at "
+             f"`{best.variant}` ({best.success} of {best.runs} test worlds): each world it "
+             "did not succeed in, by family, with the map and the robots at the first contact, at "
              "the onset of the deadlock, or at the end of the run.", ""]
     arts: list[Artefact] = []
     for scen in sorted({str(r["scenario"]) for r in mine}):
@@ -213,7 +217,7 @@ def _failures(names: Sequence[str], rows: Sequence[Mapping[str, Any]], logs: Pat
             name = f"fail_{safe_name(scen)}_s{r['seed']}.png"
             snapshot_figure(r, logs, dest / name, t)
             lines.append(f"{text}: [snapshot]({name})")
-            arts.append(Artefact(name, "-", f"{best} on {scen} seed {r['seed']}: "
+            arts.append(Artefact(name, "-", f"{best.variant} on {scen} seed {r['seed']}: "
                                             f"{run_outcome(r)}"))
         lines.append("")
     return lines, arts
@@ -290,7 +294,7 @@ def heldout_report(rows: Sequence[Mapping[str, Any]], dest: Path, baseline: str,
           f"- Spearman's rho between the difficulty index and the failure rate averaged over "
           f"the {len(tuned_names)} tuned variants, over the {n_rho} test worlds: "
           f"**{_num(rho)}** (p = {p_rho:.2g}).", ""]
-    table, _ = _variant_table(tuned_names, tuned_rows)
+    table, tuned_stats = _variant_table(tuned_names, tuned_rows)
     md += ["## Tuned variants over every test world", "", *table, "",
            "BARN score: success × T_ref / clip(T, T_ref, 2 T_ref), T_ref the leader's time "
            "along its reference path; CVaR(0.9): the mean of the worst 10 % (FCE RMS: of "
@@ -330,8 +334,9 @@ def heldout_report(rows: Sequence[Mapping[str, Any]], dest: Path, baseline: str,
         md += [f"![{scen}]({name})", ""]
         arts.append(Artefact(name, "-", f"every tuned variant on the first test world of "
                                         f"{scen}"))
-    if logs is not None and tuned_names:
-        lines, pictures = _failures(tuned_names, tuned_rows, logs, dest)
+    if logs is not None and tuned_stats:
+        best = min(tuned_stats, key=lambda v: (-v.success, v.variant))  # the table's first
+        lines, pictures = _failures(best, tuned_rows, logs, dest)
         md += lines
         arts += pictures
     atomic_write(dest / "heldout.md", "\n".join(md).rstrip("\n") + "\n")
