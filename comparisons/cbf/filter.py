@@ -173,6 +173,14 @@ class CbfFilter(BatchedController):
         """
         return 2.0 * (self._radius + self._offset) + self.p.margin
 
+    @property
+    def obstacle_distance(self) -> float:
+        """Distance (m) the filter keeps between a robot's controlled point and an obstacle.
+
+        ``r + offset + margin``: a gap narrower than twice this is closed to a robot.
+        """
+        return self._radius + self._offset + self.p.margin
+
     def _points(self, position: np.ndarray, heading: np.ndarray | None) -> np.ndarray:
         """The controlled points: centres, or the near-identity points of unicycles."""
         if self._offset == 0.0 or heading is None:
@@ -187,7 +195,7 @@ class CbfFilter(BatchedController):
             distributed mode halves it); obstacle rows (static, then moving) are
             each robot's alone.
         """
-        g, r, m = self._gamma, self._radius + self._offset, self.p.margin
+        g = self._gamma
         p = self._points(obs.pose[:, :2], obs.pose[:, 2])
         nb = obs.neighbours
         q = self._points(nb.position, nb.heading)
@@ -202,7 +210,7 @@ class CbfFilter(BatchedController):
         delta = np.concatenate([near.delta, d_mv], axis=1)
         normal = np.concatenate([near.normal, n_mv], axis=1)
         mask = np.concatenate([near.mask, mv.mask], axis=1)
-        h, _ = barrier(np.where(mask, delta, 1.0), normal, r + m)
+        h, _ = barrier(np.where(mask, delta, 1.0), normal, self.obstacle_distance)
         # a moving disc's own velocity: dh/dt = grad . (u - v_o)
         v_obs = np.concatenate([np.zeros(near.normal.shape), mv.velocity], axis=1)
         bound = -g * h / (2.0 * np.maximum(np.abs(delta), MIN_DELTA)) \

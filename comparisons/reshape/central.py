@@ -95,7 +95,7 @@ class RunMap:
 
     @classmethod
     def build(cls, scenario: Scenario, offsets: FloatArray, rho: float, wide: float,
-              column: bool) -> RunMap:
+              column: bool, guide: float, goal_reach: float = 0.0) -> RunMap:
         """The map objects of ``scenario``.
 
         Args:
@@ -104,10 +104,13 @@ class RunMap:
             rho: Robot radius plus margin, m.
             wide: Extra clearance that routes keep where they can, m.
             column: Whether single file is a template (its configuration space).
+            guide: The clearance of the guidance paths, m.
+            goal_reach: :class:`~comparisons.reshape.tracking.Guidance`'s, m.
         """
         grid = scenario.world.grid
         return cls(LeaderPath(scenario.leader_path), scenario.world,
-                   shape_segments(scenario.world.shapes), grid.extent, Guidance(grid, rho),
+                   shape_segments(scenario.world.shapes), grid.extent,
+                   Guidance(grid, guide, goal_reach),
                    ConfigurationSpace(grid, offsets, rho, wide),
                    ConfigurationSpace(grid, np.zeros((1, 2)), rho, wide) if column else None)
 
@@ -122,6 +125,8 @@ class CentralPlanner:
         stuck: The batch's stuck-robot monitor.
         rows: This run's rows in ``stuck`` (``env * N`` on), robot order.
         pair_distance: Distance the safety filter keeps between two robots, m.
+        obstacle_distance: Distance the safety filter keeps between a robot and an
+            obstacle (``coordinate``: the least clearance of a guidance path), m.
 
     Attributes:
         counters: ``replans``, ``shrinks``, ``waits``, ``switches``, ``unsticks``
@@ -131,7 +136,8 @@ class CentralPlanner:
     """
 
     def __init__(self, p: ReshapeParams, scenario: Scenario, maps: dict[int, RunMap],
-                 stuck: StuckMonitor, rows: slice, pair_distance: float) -> None:
+                 stuck: StuckMonitor, rows: slice, pair_distance: float,
+                 obstacle_distance: float = 0.0) -> None:
         self.p = p
         spec = scenario.spec
         self._n = scenario.n
@@ -155,7 +161,10 @@ class CentralPlanner:
         if id(scenario) not in maps:
             maps[id(scenario)] = RunMap.build(scenario, self._offsets - self._centre,
                                               self._r + p.margin, p.route_clearance,
-                                              "column" in self._templates)
+                                              "column" in self._templates,
+                                              max(self._r + p.margin, obstacle_distance)
+                                              if p.coordinate else self._r + p.margin,
+                                              2.0 * (self._r + p.margin) if p.coordinate else 0.0)
         m = maps[id(scenario)]
         self._path, self._world, self._segments = m.path, m.world, m.segments
         self._bounds, self._guide, self._cspace = m.bounds, m.guide, m.cspace
@@ -260,13 +269,15 @@ class CentralPlanner:
         coord = self._coord
         if coord is not None and coord.watch(obs.t, s_c, pos, bool(obs.obstacles.mask.any())):
             self.counters["recoveries"] += 1
-        past_leader = coord is not None and s_c > s_l  # ahead of its leader: to the slots
+        # ahead of its leader (along the leader's path, or along its own way): to the slots
+        past_leader = coord is not None and (s_c > s_l or coord.rejoining(obs.t))
         if not past_leader and (self._path_blocked(s_c, k) or (
                 coord is not None and coord.holding(obs.t, s_c)
                 and not coord.released(obs.slot, centroid))):
             if self._follow_route(obs, pos, centroid, k):
                 self.plan_times.append(time.perf_counter() - t0)
                 return
+            past_leader = coord is not None and coord.rejoining(obs.t)
         self._routes.clear()
         if past_leader or (s_c + self.p.lookahead >= s_l and self._nominal_fits(obs, s_l)):
             self._nominal_plan(obs, pos)  # nothing in the way: the scenario's formation
@@ -355,6 +366,10 @@ class CentralPlanner:
             here = way.front(pos, self._spacing, here + head) - head
         centre, leader_near = self._route_centre(
             way, here, obs.leader, coord is not None and coord.uncapped(obs.t, obs.slot, centroid))
+        if math.isnan(centre):  # less way left than its leader: it rejoins the slots
+            assert coord is not None
+            coord.rejoin(obs.t)
+            return False
         ahead = centre + head
         at_goal = here + self.p.route_lead + head >= way.length and leader_near
         if at_goal:
@@ -420,8 +435,9 @@ class CentralPlanner:
             return float(arcs[-1]), True
         if uncapped:  # as much route ahead as the leader's formation has path
             behind = np.flatnonzero(way.length - arcs >= self._path.length - cap - 1e-9)
-            if behind.size:
-                return float(arcs[behind[-1]]), False
+            if not behind.size:  # less way left than the leader: waiting would stall the team
+                return math.nan, False
+            return float(arcs[behind[-1]]), False
         within = np.flatnonzero(progress[:-1] <= cap + 1e-9)
         return (float(arcs[within[-1]]) if within.size else here), False
 

@@ -153,7 +153,7 @@ class Reshape(BatchedController):
         self._stuck = StuckMonitor(start, self.p.unstick_time, self.p.unstick_angle)
         maps: dict[int, RunMap] = {}  # runs of one scenario object share its map objects
         self.runs = [CentralPlanner(self.p, sc, maps, self._stuck, slice(e * n, (e + 1) * n),
-                                    self.safety.pair_distance)
+                                    self.safety.pair_distance, self.safety.obstacle_distance)
                      for e, sc in enumerate(scenarios)]
         self._next = np.zeros(runs)
         self._mode = np.full(runs, NOMINAL, dtype=np.int8)

@@ -44,6 +44,7 @@ class Coordination:
         self.recover_time, self.far, self.extent = recover_time, far, extent
         self._route_until = -math.inf  # on the route up to this progress, m
         self._recover_until = -math.inf  # on a route until then, s
+        self._rejoin_until = -math.inf  # to the slots until then, s
 
     def blocked_to(self, s: float) -> None:
         """The leader's path is blocked for the formation up to arc length ``s`` (m)."""
@@ -90,3 +91,19 @@ class Coordination:
         and stand there.
         """
         return self.recovering(t) and not self.released(slots, centroid)
+
+    def rejoin(self, t: float) -> None:
+        """The team has less way left than its leader: it goes to its slots for ``recover_time``.
+
+        A recovering team that took another way than its leader's path can reach
+        the point where the leader cap (:meth:`uncapped`'s rule: as much way left
+        as the leader has) holds it still; standing there until the leader
+        catches up is a stall. It heads for its slots instead, each robot on its
+        own guided path, for ``recover_time``.
+        """
+        self._rejoin_until = t + self.recover_time
+        self._recover_until = -math.inf
+
+    def rejoining(self, t: float) -> bool:
+        """Whether the team goes to its slots at ``t`` (s) (:meth:`rejoin`)."""
+        return t < self._rejoin_until

@@ -45,11 +45,15 @@ class Guidance:
         grid: The static occupancy grid (its exact clearance is used).
         clearance: Robot radius plus margin: the inflation of the A* map and the
             clearance a robot's line must keep, m.
+        goal_reach: When a path's goal lies in a blocked cell of the inflated
+            map (a slot nearer a wall than ``clearance``), the path ends at the
+            nearest free cell within this distance instead; 0: no path, m.
     """
 
-    def __init__(self, grid: OccupancyGrid, clearance: float) -> None:
+    def __init__(self, grid: OccupancyGrid, clearance: float, goal_reach: float = 0.0) -> None:
         self.grid = grid
         self.clearance = clearance
+        self.goal_reach = goal_reach
         self.inflated = grid.inflate(clearance)
 
     def free(self, a: FloatArray, b: FloatArray, clearance: float) -> bool:
@@ -102,8 +106,13 @@ class Guidance:
         grid = self.inflated
         occ = grid.occupied if blocked is None else blocked
         ca, cb = cell_of(grid, a), cell_of(grid, b)
-        if not (grid.in_bounds(*ca) and grid.in_bounds(*cb)) or occ[cb]:
+        if not (grid.in_bounds(*ca) and grid.in_bounds(*cb)):
             return None
+        if occ[cb]:  # a goal near a wall: to the nearest free cell within goal_reach
+            near = _nearest_free(occ, cb, int(math.ceil(self.goal_reach / grid.cell_size)))
+            if self.goal_reach <= 0.0 or near is None:
+                return None
+            cb = near
         if occ[ca]:
             near = _nearest_free(occ, ca, int(math.ceil(reach / grid.cell_size)))
             if near is None:
