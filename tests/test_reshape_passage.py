@@ -6,10 +6,16 @@ import numpy as np
 import pytest
 
 import dfcoa_opt as d
+from comparisons.reshape.controller import Reshape
+from comparisons.reshape.coordination import Coordination
+from comparisons.reshape.params import ReshapeParams
 from comparisons.reshape.passage import Passage, PassageParams
 from comparisons.reshape.progress import MOVING, STUCK, WAITING, ProgressMonitor
 from comparisons.reshape.routes import Route
+from comparisons.reshape.tracking import Guidance
 from dfcoa_opt.control.base import MovingObstacles, Observation
+from dfcoa_opt.world.grid import OccupancyGrid
+from dfcoa_opt.world.shapes import Rectangle
 
 ROOT = Path(__file__).resolve().parents[1]
 HELDOUT = ROOT / "scenarios" / "heldout"
@@ -101,6 +107,58 @@ def test_yielding_grows_each_sensed_disc_by_its_speed():
     assert Passage(PassageParams(yield_time=0.0))._yielding(obs) is obs
 
 
+def test_a_guidance_path_to_a_slot_by_a_wall_ends_at_the_nearest_free_cell():
+    """A slot nearer a wall than the guidance clearance lies in a blocked cell of the
+    inflated map: reshape's guidance finds no path to it, and a robot behind the wall heads
+    straight at it (into the wall); passage's path ends at the nearest free cell."""
+    grid = OccupancyGrid.from_shapes((10.0, 10.0), 10.0, [Rectangle((4.0, 0.0), (5.0, 7.0))])
+    pos, slot = np.array([3.0, 3.0]), np.array([5.15, 3.0])  # 0.15 m off the wall's far side
+    assert Guidance(grid, 0.3).path(pos, slot) is None
+    assert Guidance(grid, 0.3).waypoints(pos[None], slot[None]) == {}
+    guide = Guidance(grid, 0.3, goal_reach=0.6)
+    path = guide.path(pos, slot)
+    assert path is not None and path[:, 1].max() > 7.0  # over the wall
+    end = guide.inflated.world_to_cell(path[-1])
+    assert np.hypot(*(path[-1] - slot)) <= 0.6 and not guide.inflated.occupied[end]
+    wp = guide.waypoints(pos[None], slot[None])
+    assert set(wp) == {0} and wp[0][1] > pos[1]  # round the wall's top, not into it
+    assert Guidance(grid, 0.3, goal_reach=0.6).path(pos, np.array([4.5, 3.0])) is None  # in it
+
+
+def test_guidance_keeps_the_distance_the_filter_keeps_from_obstacles():
+    """A unicycle's filter keeps its near-identity point r + offset + margin (0.35 m) from
+    obstacles, more than the guidance's r + margin: reshape's guidance led robots into
+    0.5 m gaps where the filter stops them. Passage's paths keep the filter's distance."""
+    sc = d.load(HELDOUT / "cellular.toml", seed=1)
+    rngs = [np.random.default_rng(0)]
+    plain, passage = Reshape(ReshapeParams()), Passage(PassageParams())
+    plain.reset_batch([sc], rngs)
+    passage.reset_batch([sc], rngs)
+    keep = passage.safety.obstacle_distance
+    r, v = sc.spec.robots.radius, sc.spec.robots
+    assert keep == pytest.approx(r + v.nid_distance + 0.05)  # the filter's default margin
+    assert passage.runs[0]._guide.clearance == pytest.approx(max(keep, r + PassageParams().margin))
+    assert plain.runs[0]._guide.clearance == pytest.approx(r + ReshapeParams().margin)
+    # a 0.6 m gap in a wall: open to a path at r + margin (margin 0.05 m), closed at the
+    # filter's distance, which a robot in it could not keep
+    grid = OccupancyGrid.from_shapes((10.0, 10.0), 10.0, [Rectangle((4.0, 0.0), (5.0, 4.7)),
+                                                         Rectangle((4.0, 5.3), (5.0, 10.0))])
+    a, b = np.array([2.0, 5.0]), np.array([8.0, 5.0])
+    assert Guidance(grid, r + 0.05).path(a, b) is not None
+    assert Guidance(grid, keep).path(a, b) is None
+
+
+def test_a_team_with_less_way_left_than_its_leader_rejoins_its_slots():
+    coord = Coordination(stuck_window=4.0, recover_time=10.0, far=3.0, extent=1.5)
+    team = np.array([[0.0, 0.0], [1.0, 0.0]])
+    for k in range(10):  # standing still: stuck, a recovery starts
+        coord.watch(0.5 * k, 2.0, team, False)
+    assert coord.recovering(4.5) and not coord.rejoining(4.5)
+    coord.rejoin(5.0)  # the planner found its route shorter than the leader's path
+    assert coord.rejoining(5.0) and coord.rejoining(14.9) and not coord.rejoining(15.0)
+    assert not coord.recovering(5.0)  # it heads for its slots, not along its route
+
+
 def _crossings(x, line):
     """Steps at which ``x`` ``(T,)`` crosses ``line`` eastward, and westward."""
     side = np.sign(x - line)
@@ -161,7 +219,8 @@ def test_a_dead_end_leads_to_backing_off_and_another_way(outside):
 
 
 @pytest.mark.parametrize(("family", "seed"), [("rooms_10", 43), ("cellular", 38),
-                                             ("corridors", 64)])
+                                             ("corridors", 64), ("cellular", 270),
+                                             ("cellular", 336)])
 def test_passage_gets_through_where_reshape_deadlocks(family, seed):
     """Training worlds (no test seed) where reshape's planner freezes its own targets.
 
@@ -170,7 +229,10 @@ def test_passage_gets_through_where_reshape_deadlocks(family, seed):
     whose points run ahead of the leader's path holds the team; the stuck team
     recovers. corridors 64: a route shorter than the leader's path brings the
     team to the goal's room ahead of its leader, where the leader cap held it
-    off its slots; the team goes back to its slots.
+    off its slots; the team goes back to its slots. cellular 270: the recovery
+    route passes south of the blobs while the leader goes north; with less way
+    left than its leader the team stood still, and now rejoins its slots.
+    cellular 336: guidance through a gap the filter keeps closed held a robot.
     """
     sc = d.load(HELDOUT / f"{family}.toml", seed=seed, overrides=JUDGED)
     assert d.run(sc, "reshape", seed=seed).metrics["outcome"] == "deadlock"
