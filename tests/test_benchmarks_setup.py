@@ -31,3 +31,24 @@ def test_figures_row_can_be_left_out(monkeypatch, capsys):
     monkeypatch.setenv("BENCH_FIGURES", "0")
     assert bench_figures.run() == []
     assert "left out" in capsys.readouterr().out
+
+
+def test_each_recipe_cost_is_a_row_against_its_budget(tmp_path):
+    """make bench's recipe rows read the cost.json of dfcoa figures; run.py bounds each
+    by the recipe's budget."""
+    import json
+
+    from benchmarks import bench_figures, run
+    from dfcoa_opt.bench.figures import COST_FILE
+    from dfcoa_opt.bench.recipes import registered
+
+    for name, cost in (("heldout", 698.2), ("examples", 40.7)):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / COST_FILE).write_text(json.dumps({"recipe": name,
+                                                             "cost_cpu_s": cost}))
+    rows = bench_figures.recipe_rows(tmp_path)
+    assert [r["what"] for r in rows] == [bench_figures.recipe_title("examples"),
+                                        bench_figures.recipe_title("heldout")]
+    assert rows[1]["median_us"] == 698.2e6
+    budget = {r.name: r.budget for r in registered()}["heldout"]
+    assert run._target(rows[1]["what"]) == f"<= {budget * 1e6:g} us"

@@ -85,8 +85,8 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
     start = time.perf_counter()
     config = config or ExecutorConfig()
     jobs = config.jobs or os.cpu_count() or 1
-    with interruptible(), _Renderer(jobs if config.kind == "process" and jobs > 1 else 0) \
-            as renderer:
+    with interruptible(), _Renderer(jobs if config.kind == "process" and jobs > 1 else 0,
+                                    cache, judged=seeds is None and not overrides) as renderer:
         for r in todo:
             if only and r.name not in only:
                 continue
@@ -187,7 +187,8 @@ class _Renderer:
     local function) renders inline.
     """
 
-    def __init__(self, workers: int) -> None:
+    def __init__(self, workers: int, cache: Path, judged: bool = True) -> None:
+        self.cache, self.judged = cache, judged
         self.pool: ProcessPoolExecutor | None = None
         if workers:  # the sweeps' fork server: started here, so with their preload
             ctx = forkserver_context(worker_preload())
@@ -248,8 +249,10 @@ class _Renderer:
                 {"recipe": r.name, "title": r.title, "sweep": r.sweep,
                  "artefacts": [asdict(a) for a in arts]}, indent=1) + "\n")
             stale = remove_stale(dest, arts)
+            cost = record_cost(r, self.cache, seconds)
             print(f"{r.name}: {done}; {len(arts)} artefacts rendered in {seconds:.1f} s"
-                  + (f", {stale} stale file(s) removed" if stale else ""), file=sys.stderr)
+                  + (f", {stale} stale file(s) removed" if stale else "")
+                  + f"; {cost_text(r, cost, self.judged)}", file=sys.stderr)
 
     def __exit__(self, *exc: object) -> None:
         try:
@@ -264,6 +267,44 @@ class _Renderer:
                 self.pool.shutdown(cancel_futures=True)
             else:  # an error or an interrupt: do not wait for the render in progress
                 terminate(self.pool)
+
+
+#: Each recipe's cost, in its cache folder (read by ``make bench``).
+COST_FILE = "cost.json"
+
+
+def record_cost(r: Recipe, cache: Path, render_seconds: float) -> float:
+    """Write ``<cache>/<recipe>/cost.json`` and return the recipe's cost, CPU-s.
+
+    The cost is what the recipe's budget bounds (:mod:`dfcoa_opt.bench.recipes`): its
+    runs' simulation time (:meth:`~dfcoa_opt.bench.results.store.ResultsStore.simulation_cpu`,
+    cached runs counted at what they took) plus ``render_seconds``, its rendering's wall
+    time.
+    """
+    from dfcoa_opt.bench.results.store import ResultsStore
+
+    folder = cache / r.name
+    simulation = ResultsStore(folder).simulation_cpu() if r.sweep is not None else 0.0
+    cost = simulation + render_seconds
+    folder.mkdir(parents=True, exist_ok=True)
+    atomic_write(folder / COST_FILE, json.dumps(
+        {"recipe": r.name, "simulation_cpu_s": simulation, "render_s": render_seconds,
+         "cost_cpu_s": cost, "budget_cpu_s": r.budget}, indent=1) + "\n")
+    return cost
+
+
+def cost_text(r: Recipe, cost: float, judged: bool = True) -> str:
+    """``"cost 765 CPU-s of a 1000 budget"``, with ``OVER BUDGET`` when it is over.
+
+    ``judged`` False (a run reduced by ``seeds`` or ``overrides``): the cost alone, as
+    the budget bounds the recipe's own configuration.
+    """
+    if not judged:
+        return f"cost {cost:.0f} CPU-s (reduced run: no budget applies)"
+    if r.budget is None:
+        return f"cost {cost:.0f} CPU-s (no budget)"
+    over = " OVER BUDGET" if cost > r.budget else ""
+    return f"cost {cost:.0f} CPU-s of a {r.budget:g} budget{over}"
 
 
 def remove_stale(dest: Path, arts: Sequence[Artefact]) -> int:

@@ -33,6 +33,13 @@ Adding a recipe::
         ...                                    # read store.rows(), write into dest
         return [Artefact("table5.md", "paper 000 Table 5", "metrics of S1 and S2")]
 
+A recipe's ``budget`` is what it may cost, in CPU-s on :data:`BUDGET_MACHINE`: the
+simulation time of its runs (the rows' ``provenance.wall_time``, runs copied from
+another recipe excluded) plus its rendering's wall time. ``make figures`` prints
+each recipe's cost against it, ``make bench`` has a row per recipe, and
+``docs/performance.md`` holds :func:`budget_table`. A recipe over its budget is
+made cheaper, or its budget raised with the reason in ``budget_why``.
+
 and name the recipe's module in the entry-point group ``dfcoa_opt.recipes`` of
 ``pyproject.toml`` (``dfcoa_tables = "my_pkg.my_recipes"``), as the built-in
 ones are (:data:`RECIPES`, a :class:`~dfcoa_opt.core.registry.Registry`).
@@ -54,6 +61,10 @@ from dfcoa_opt.core.registry import Registry
 ORDER = ("examples", "comparison", "beyond", "reshape", "ladders", "heldout", "dfcoa_paper",
          "astar_comparison", "paper001_ivo", "paper001_consensus", "paper002_tables",
          "paper004_tables", "paper004_baseline")
+
+
+#: The machine class of the budgets: the one every budget was measured on.
+BUDGET_MACHINE = "a 2-core x86-64 cloud machine (AMD EPYC), one sweep worker per core"
 
 
 @dataclass(frozen=True)
@@ -87,26 +98,51 @@ class Recipe:
         title: Heading in the index.
         render: ``render(store, dest) -> artefacts`` (with a sweep) or
             ``render(scenarios, dest) -> artefacts`` (without).
+        budget: What the recipe may cost, CPU-s on :data:`BUDGET_MACHINE` (module
+            docstring); None: no budget (a plugin's recipe that sets none).
+        budget_why: Why the budget is what it is, when it was raised above what the
+            recipe cost when it was set.
     """
 
     name: str
     sweep: str | None
     title: str
     render: Renderer
+    budget: float | None = None
+    budget_why: str = ""
 
 
 #: The figure recipes (entry-point group ``dfcoa_opt.recipes``).
 RECIPES: Registry[Recipe] = Registry("figure recipe", "dfcoa_opt.recipes")
 
 
-def recipe(name: str, title: str, sweep: str | None = None) -> Callable[[Renderer], Renderer]:
-    """Decorator registering a renderer as the recipe ``name`` (see :class:`Recipe`)."""
+def recipe(name: str, title: str, sweep: str | None = None, budget: float | None = None,
+           budget_why: str = "") -> Callable[[Renderer], Renderer]:
+    """Decorator registering a renderer as the recipe ``name`` (see :class:`Recipe`).
+
+    Raises:
+        ValueError: A budget that is not a positive number of CPU-s.
+    """
+    if budget is not None and not (isinstance(budget, int | float) and budget > 0):
+        raise ValueError(f"recipe {name}: budget must be a positive number of CPU-s, "
+                         f"got {budget!r}")
 
     def deco(fn: Renderer) -> Renderer:
-        RECIPES.register(name)(Recipe(name, sweep, title, fn))
+        RECIPES.register(name)(Recipe(name, sweep, title, fn, budget, budget_why))
         return fn
 
     return deco
+
+
+def budget_table() -> str:
+    """The recipes' budgets as a markdown table (``docs/performance.md`` holds it)."""
+    lines = [f"Budgets in CPU-s on {BUDGET_MACHINE}: the simulation time of a recipe's "
+             "runs plus its rendering's wall time.", "",
+             "| recipe | budget (CPU-s) | why |", "|---|---|---|"]
+    for r in registered():
+        cell = "none" if r.budget is None else f"{r.budget:g}"
+        lines.append(f"| {r.name} | {cell} | {r.budget_why or '-'} |")
+    return "\n".join(lines) + "\n"
 
 
 def registered() -> list[Recipe]:

@@ -84,7 +84,7 @@ def _paths_figure(tasks: list[Task], planners: dict[str, AStarParams], path: Pat
 
 
 @recipe("astar_comparison",
-        title="Paper 000 section 4.1: traditional vs improved A* (planning only)")
+        title="Paper 000 section 4.1: traditional vs improved A* (planning only)", budget=10)
 def render_astar(scenarios: Path, dest: Path) -> list[Artefact]:
     """The comparison table (DFCOA maps and random maps), its CSV and the path figure."""
     tasks, inflate = dfcoa_tasks(scenarios)

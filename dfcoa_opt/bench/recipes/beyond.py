@@ -47,7 +47,7 @@ def solve_time_table(store: ResultsStore) -> list[str]:
 
 
 @recipe("beyond", sweep="sweeps/beyond.toml",
-        title="Beyond the papers: CBF-QP filter and distributed NMPC (3 seeds)")
+        title="Beyond the papers: CBF-QP filter and distributed NMPC (3 seeds)", budget=60)
 def render_beyond(store: ResultsStore, dest: Path) -> list[Artefact]:
     """The comparison report over this sweep, and the solve-time table."""
     arts = report_artefacts(store, dest, "no paper (beyond the papers: cbf, nmpc)")

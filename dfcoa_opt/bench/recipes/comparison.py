@@ -28,7 +28,7 @@ METRICS = tuple(dict.fromkeys((*DEFAULT_METRICS, *DEPLOY_KEYS, *PAIRED_METRICS))
 
 
 @recipe("comparison", sweep="sweeps/comparison.toml",
-        title="Cross-method comparison on the common scenarios (scenarios/bench/)")
+        title="Cross-method comparison on the common scenarios (scenarios/bench/)", budget=1000)
 def render_comparison(store: ResultsStore, dest: Path) -> list[Artefact]:
     """Mean ± 95 % CI tables, per-metric box plots and one-seed trajectory overlays.
 

@@ -259,7 +259,7 @@ def _metric_panels(log: RunLog, spec: Any, path: Path, title: str) -> Path:
 
 
 @recipe("dfcoa_paper", sweep="sweeps/dfcoa_paper.toml",
-        title="Paper 000 (DFCOA): Table 5 and Figs 11-20, truth and MCL")
+        title="Paper 000 (DFCOA): Table 5 and Figs 11-20, truth and MCL", budget=90)
 def render_dfcoa(store: ResultsStore, dest: Path) -> list[Artefact]:
     """Table 5 plus the figures of the first seed of each scenario and mode."""
     arts = [Artefact("table5.md", "paper 000 Table 5",

@@ -29,7 +29,7 @@ def _fmt(v: Any) -> str:
 
 
 @recipe("examples", sweep="sweeps/examples.toml",
-        title="Example runs: every controller on the example scenarios")
+        title="Example runs: every controller on the example scenarios", budget=60)
 def render_examples(store: ResultsStore, dest: Path) -> list[Artefact]:
     """A trajectory PNG per run and one metrics table (seed 0 of each pair)."""
     arts: list[Artefact] = []

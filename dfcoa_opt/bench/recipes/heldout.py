@@ -244,7 +244,8 @@ METRICS = ("fce_rms", "first_contact_time", "deadlock_time", *WORLD_KEYS)
 
 
 @recipe("heldout", sweep="sweeps/heldout.toml",
-        title="Held-out benchmark: generated worlds, test seeds, every method tuned alike")
+        title="Held-out benchmark: generated worlds, test seeds, every method tuned alike",
+        budget=900)
 def render_heldout(store: ResultsStore, dest: Path) -> list[Artefact]:
     """The tables and figures of the module docstring, from the published runs (``runs.csv``)."""
     rows = published_rows(store.rows(), dest / RUNS_FILE, METRICS, "heldout")

@@ -21,7 +21,7 @@ from dfcoa_opt.bench.results.store import ResultsStore
 
 
 @recipe("ladders", sweep="sweeps/ladders.toml",
-        title="Difficulty ladders: geometry, messages and the robot's limits")
+        title="Difficulty ladders: geometry, messages and the robot's limits", budget=700)
 def render_ladders(store: ResultsStore, dest: Path) -> list[Artefact]:
     """The report of the ladder sweep: a success-rate curve and table per ladder."""
     return report_artefacts(store, dest, "no paper (difficulty ladders)")

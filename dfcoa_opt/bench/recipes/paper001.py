@@ -127,7 +127,7 @@ def _fig_table1(log: RunLog, row: dict[str, Any], path: Path, title: str) -> Pat
 
 
 @recipe("paper001_ivo", title="Paper 001: Table I crossing, ORCA vs improved VO (Figs 5-6)",
-        sweep="sweeps/paper001_ivo.toml")
+        sweep="sweeps/paper001_ivo.toml", budget=15)
 def render_ivo(store: ResultsStore, dest: Path) -> list[Artefact]:
     """``table1.md`` and one Figs 5-6 like figure per obstacle mode (first seed)."""
     runs = ok_runs(store)
@@ -231,7 +231,7 @@ def _fig8(log: RunLog, row: dict[str, Any], path: Path, title: str) -> Path:
 
 
 @recipe("paper001_consensus", title="Paper 001: Table II consensus formation (Fig. 8)",
-        sweep="sweeps/paper001_consensus.toml")
+        sweep="sweeps/paper001_consensus.toml", budget=45)
 def render_consensus(store: ResultsStore, dest: Path) -> list[Artefact]:
     """``table2.md`` and one Fig. 8 like figure per controller variant (first seed)."""
     runs = sorted(ok_runs(store), key=lambda rl: (*_variant(rl[0]), rl[0]["seed"]))

@@ -155,7 +155,7 @@ def _figure(log: RunLog, row: dict[str, Any], path: Path, title: str) -> Path:
 
 
 @recipe("paper002_tables", title="Paper 002: Tables II-IV, V formation meeting humans "
-                                 "(Figs 8-16)", sweep="sweeps/paper002.toml")
+                                 "(Figs 8-16)", sweep="sweeps/paper002.toml", budget=20)
 def render_tables(store: ResultsStore, dest: Path) -> list[Artefact]:
     """``tables.md`` (Tables II-IV) and one figure per scenario (first seed)."""
     per: dict[str, list[dict[str, np.ndarray]]] = {}

@@ -227,7 +227,7 @@ def _four_panels(groups: dict[tuple[int, int], Runs], k: int, dest: Path, name: 
 
 
 @recipe("paper004_tables", title="Paper 004: Tables 2-4 and Figs 6, 7, 9-11, virtual-spring "
-                                 "formation", sweep="sweeps/paper004.toml")
+                                 "formation", sweep="sweeps/paper004.toml", budget=70)
 def render_tables(store: ResultsStore, dest: Path) -> list[Artefact]:
     """``tables.md`` and the improved model's figures (first seed of each setting)."""
     groups = _group(store, "virtual_spring")
@@ -245,7 +245,7 @@ def render_tables(store: ResultsStore, dest: Path) -> list[Artefact]:
 
 
 @recipe("paper004_baseline", title="Paper 004: the model without improvement (Figs 5 and 8)",
-        sweep="sweeps/paper004_baseline.toml")
+        sweep="sweeps/paper004_baseline.toml", budget=15)
 def render_baseline(store: ResultsStore, dest: Path) -> list[Artefact]:
     """Figs 5 and 8 (trajectories, both errors) and a basic-vs-improved table, n = 5."""
     lines = ["# Paper 004: without improvement (Figs 5, 8) against the improved model, n = 5",

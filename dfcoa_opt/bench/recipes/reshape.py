@@ -24,7 +24,7 @@ COUNTERS = ("replans", "switches", "shrinks", "waits", "unsticks")
 
 
 @recipe("reshape", sweep="sweeps/reshape.toml",
-        title="reshape: the formation that changes shape to get through (seed 0)")
+        title="reshape: the formation that changes shape to get through (seed 0)", budget=15)
 def render_reshape(store: ResultsStore, dest: Path) -> list[Artefact]:
     """A trajectory PNG per run, the corridor GIF and a summary table."""
     arts: list[Artefact] = []

@@ -182,6 +182,20 @@ class ResultsStore:
         keys = self.manifest().get("keys", []) if keys is None else keys
         return [r for r in (self.read_row(k) for k in keys) if r is not None]
 
+    def simulation_cpu(self) -> float:
+        """CPU-s the manifest's runs took when simulated (their ``provenance.wall_time``).
+
+        Each worker runs on one thread, so a run's wall time is its CPU time. Runs
+        copied from another store (``provenance.reused_from``) cost this store nothing
+        and are left out.
+        """
+        total = 0.0
+        for row in self.rows():
+            prov = row.get("provenance") or {}
+            if not prov.get("reused_from"):
+                total += float(prov.get("wall_time") or 0.0)
+        return total
+
     def write_csv(self) -> Path:
         """Write ``results.csv``: the current sweep's rows, metrics flattened."""
         rows = self.rows()
