@@ -99,6 +99,26 @@ def executable_source(text: str) -> str:
     return ast.dump(tree, annotate_fields=False)
 
 
+@functools.lru_cache(maxsize=4096)
+def _reduce(name: str, path: Path, text: str,
+            known: frozenset[str]) -> tuple[str, bool, frozenset[str]]:
+    """One source reduced: its executable source, dynamic imports and imported modules.
+
+    Returns :func:`executable_source`, whether it calls one of :data:`DYNAMIC_IMPORTS`,
+    and the known modules it imports (old names resolved). A source that does not parse
+    is kept whole, and counts as importing by a computed name. Cached by the text:
+    :func:`_sources` runs again only when the sources may have changed (tests that edit
+    one file), and then only the edited files are parsed again.
+    """
+    tree = _parse(text)
+    if tree is None:
+        return text, True, frozenset()
+    moved = moved_names()
+    deps = frozenset(moved.get(m, m) for m in module_imports(name, path, tree, known))
+    calls_dynamic = _strip_docstrings(tree)
+    return ast.dump(tree, annotate_fields=False), calls_dynamic, deps
+
+
 def _read_source(path: Path) -> str:
     """The text of a source file (the one place the fingerprint reads sources)."""
     return path.read_text(encoding="utf-8")
@@ -147,23 +167,17 @@ def _sources() -> _Sources:
     """Read, reduce and parse every source of ``dfcoa_opt`` and ``comparisons``, then select."""
     files = module_files([_package_folder("dfcoa_opt"), _package_folder("comparisons")])
     moved = moved_names()
-    known = set(files) | set(moved)
+    known = frozenset(files) | frozenset(moved)
     code: dict[str, tuple[str, str]] = {}
     imports: dict[str, list[str]] = {}
     dynamic = set()
     for name, path in files.items():
         rel = name.replace(".", "/") + ("/__init__.py" if path.name == "__init__.py" else ".py")
-        text = _read_source(path)
-        tree = _parse(text)
-        if tree is None:  # as executable_source: kept whole; its imports cannot be read
-            code[name] = (rel, text)
+        reduced, calls_dynamic, imported = _reduce(name, path, _read_source(path), known)
+        code[name] = (rel, reduced)
+        if calls_dynamic:
             dynamic.add(name)
-            deps: set[str] = set()
-        else:
-            deps = {moved.get(m, m) for m in module_imports(name, path, tree, known)}
-            if _strip_docstrings(tree):
-                dynamic.add(name)
-            code[name] = (rel, ast.dump(tree, annotate_fields=False))
+        deps = set(imported)
         parts = name.split(".")
         deps.update(".".join(parts[:i]) for i in range(1, len(parts)))  # parent packages run
         imports[name] = sorted(deps & files.keys())
