@@ -159,12 +159,12 @@ class CentralPlanner:
         self._spacing = spacing
         self._centre = self._offsets.mean(axis=0)
         if id(scenario) not in maps:
-            maps[id(scenario)] = RunMap.build(scenario, self._offsets - self._centre,
-                                              self._r + p.margin, p.route_clearance,
-                                              "column" in self._templates,
-                                              max(self._r + p.margin, obstacle_distance)
-                                              if p.coordinate else self._r + p.margin,
-                                              2.0 * (self._r + p.margin) if p.coordinate else 0.0)
+            rho = self._r + p.margin
+            # reshape_passage's guidance keeps what the filter keeps, and reaches slots by walls
+            guide, reach = (max(rho, obstacle_distance), 2.0 * rho) if p.coordinate else (rho, 0.0)
+            maps[id(scenario)] = RunMap.build(scenario, self._offsets - self._centre, rho,
+                                              p.route_clearance, "column" in self._templates,
+                                              guide, reach)
         m = maps[id(scenario)]
         self._path, self._world, self._segments = m.path, m.world, m.segments
         self._bounds, self._guide, self._cspace = m.bounds, m.guide, m.cspace

@@ -12,7 +12,9 @@ leader cap is off (docs/methods/reshape_passage.md, "The layer"):
   map, so it leaves the pocket that a region cannot;
 - a recovering team far behind its slots is not held by the leader cap;
 - a held team back within reach of its slots is released to them, where the
-  leader's path is free (:meth:`Coordination.released`).
+  leader's path is free (:meth:`Coordination.released`);
+- a recovering team with less way left than its leader heads for its slots
+  (:meth:`Coordination.rejoin`).
 """
 
 from __future__ import annotations

@@ -43,8 +43,8 @@ class Guidance:
 
     Args:
         grid: The static occupancy grid (its exact clearance is used).
-        clearance: Robot radius plus margin: the inflation of the A* map and the
-            clearance a robot's line must keep, m.
+        clearance: The inflation of the A* map and the clearance a robot's line
+            must keep (``reshape``: robot radius plus margin), m.
         goal_reach: When a path's goal lies in a blocked cell of the inflated
             map (a slot nearer a wall than ``clearance``), the path ends at the
             nearest free cell within this distance instead; 0: no path, m.
@@ -109,8 +109,9 @@ class Guidance:
         if not (grid.in_bounds(*ca) and grid.in_bounds(*cb)):
             return None
         if occ[cb]:  # a goal near a wall: to the nearest free cell within goal_reach
-            near = _nearest_free(occ, cb, int(math.ceil(self.goal_reach / grid.cell_size)))
-            if self.goal_reach <= 0.0 or near is None:
+            near = (_nearest_free(occ, cb, int(math.ceil(self.goal_reach / grid.cell_size)))
+                    if self.goal_reach > 0.0 else None)
+            if near is None:
                 return None
             cb = near
         if occ[ca]:
