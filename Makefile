@@ -52,8 +52,8 @@ $(VENV)/.bench-installed: $(DEV)
 	$(BIN)/python -m pip install --quiet -e '.[tune,dev,dask,rl,bench]'
 	touch $(VENV)/.bench-installed
 
-# BENCH_FIGURES=0 leaves out row (f), a whole `dfcoa figures` in a fresh clone (about 23 min
-# on a 2-core Intel Xeon, docs/performance.md), and the numba compilation row.
+# BENCH_FIGURES=0 leaves out row (f), a whole `dfcoa figures` in a fresh clone (about 20 min
+# on 2 cores, docs/performance.md), the recipes' cost rows and the numba compilation row.
 BENCH_FIGURES ?= 1
 
 bench: $(VENV)/.bench-installed
