@@ -366,7 +366,7 @@ class CentralPlanner:
             here = way.front(pos, self._spacing, here + head) - head
         centre, leader_near = self._route_centre(
             way, here, obs.leader, coord is not None and coord.uncapped(obs.t, obs.slot, centroid))
-        if math.isnan(centre):  # less way left than its leader: it rejoins the slots
+        if centre is None:  # less way left than its leader: it rejoins the slots
             assert coord is not None
             coord.rejoin(obs.t)
             return False
@@ -403,7 +403,7 @@ class CentralPlanner:
         return True
 
     def _route_centre(self, way: Route, here: float, leader: FloatArray,
-                      uncapped: bool = False) -> tuple[float, bool]:
+                      uncapped: bool = False) -> tuple[float | None, bool]:
         """Arc length (m) along the route where the formation's centre is sent.
 
         ``route_lead`` beyond ``here`` (the centroid's projection on the route,
@@ -425,7 +425,9 @@ class CentralPlanner:
 
         Returns:
             The arc length, and whether the cap is off (so the formation may take
-            its goal slots).
+            its goal slots). The arc length is None when ``uncapped`` and the
+            route has less way left than the leader's formation has path: the
+            team would stand still there (it rejoins its slots instead).
         """
         nominal = leader[:2] + rotate(self._centre, float(leader[2]))
         cap = float(self._path.arc_length(nominal[None])[0])
@@ -436,7 +438,7 @@ class CentralPlanner:
         if uncapped:  # as much route ahead as the leader's formation has path
             behind = np.flatnonzero(way.length - arcs >= self._path.length - cap - 1e-9)
             if not behind.size:  # less way left than the leader: waiting would stall the team
-                return math.nan, False
+                return None, False
             return float(arcs[behind[-1]]), False
         within = np.flatnonzero(progress[:-1] <= cap + 1e-9)
         return (float(arcs[within[-1]]) if within.size else here), False

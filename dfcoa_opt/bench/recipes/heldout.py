@@ -57,6 +57,11 @@ def _num(x: float, digits: int = 2) -> str:
     return f"{x:.{digits}f}" if math.isfinite(x) else "—"
 
 
+def _table_order(s: ho.VariantStats) -> tuple[int, str]:
+    """The order of the variants' table: the most successes first (ties: the name)."""
+    return -s.success, s.variant
+
+
 def _variant_table(names: Sequence[str], rows: Sequence[Mapping[str, Any]]
                    ) -> tuple[list[str], list[ho.VariantStats]]:
     out = [ho.variant_stats(n, [r for r in rows if variant_name(r) == n]) for n in names]
@@ -64,7 +69,7 @@ def _variant_table(names: Sequence[str], rows: Sequence[Mapping[str, Any]]
     lines = ["| variant | worlds | success | collision | deadlock | timeout | failed | "
              "BARN score | CVaR(0.9) FCE RMS (m) | CVaR(0.9) time to goal of the successes (s) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
-    for s in sorted(out, key=lambda s: (-s.success, s.variant)):
+    for s in sorted(out, key=_table_order):
         cells = [_pct(s.outcomes.get(o, 0), s.runs) for o in OUTCOMES]
         lines.append(f"| {md_escape(s.variant)} | {s.runs} | " + " | ".join(cells)
                      + f" | {s.outcomes.get('failed', 0)} | {_num(s.barn)} | "
@@ -336,7 +341,7 @@ def heldout_report(rows: Sequence[Mapping[str, Any]], dest: Path, baseline: str,
         arts.append(Artefact(name, "-", f"every tuned variant on the first test world of "
                                         f"{scen}"))
     if logs is not None and tuned_stats:
-        best = min(tuned_stats, key=lambda v: (-v.success, v.variant))  # the table's first
+        best = min(tuned_stats, key=_table_order)  # the table's first row
         lines, pictures = _failures(best, tuned_rows, logs, dest)
         md += lines
         arts += pictures
