@@ -265,6 +265,32 @@ def test_infeasible_programs_apply_the_policy_and_are_counted(policy):
         assert abs(log.command[0, 1, 0]) < 1e-4 and log.command[0, 1, 1] > 0.5
 
 
+def test_keep_static_relaxes_the_walker_and_never_the_wall():
+    """A robot inside its wall margin (must move right at 0.1 m/s) with a moving disc
+    closing in from the right (must move left at 0.5 m/s): no velocity meets both rows.
+    The least violation splits the violation, 0.3 m/s on each row, and drives the robot
+    towards the wall at 0.2 m/s; ``keep_static`` keeps the wall's row hard, capped at 0
+    (never nearer), and gives way to the disc alone."""
+    from comparisons.cbf.qp import BarrierRows, solve_distributed_exact
+
+    pairs = BarrierRows(np.zeros((1, 0, 2)), np.zeros((1, 0)), np.zeros((1, 0), bool),
+                        np.zeros((1, 0), np.intp))
+    rows = BarrierRows(np.array([[[1.0, 0.0], [-1.0, 0.0]]]), np.array([[0.1, 0.5]]),
+                       np.ones((1, 2), bool), None)
+    nominal = np.array([[0.0, 0.3]])
+    least, st, slack = solve_distributed_exact(nominal, pairs, rows, 1.0, "exact",
+                                               "least_violation", 1)
+    assert st[0] == STATUS_FALLBACK and slack[0] == pytest.approx(0.3)
+    assert least[0, 0] == pytest.approx(-0.2)  # towards the wall
+    kept, st, slack = solve_distributed_exact(nominal, pairs, rows, 1.0, "exact",
+                                              "keep_static", 1)
+    assert st[0] == STATUS_FALLBACK and slack[0] == pytest.approx(0.5)
+    assert kept[0, 0] == pytest.approx(0.0, abs=1e-12)  # not towards the wall
+    # with static_rows = 0 no row is the wall's: the least violation again
+    again, _, _ = solve_distributed_exact(nominal, pairs, rows, 1.0, "exact", "keep_static", 0)
+    np.testing.assert_array_equal(again, least)
+
+
 def test_solver_errors_are_counted_and_stop_the_robot(monkeypatch):
     """Every qpsolvers call raises: each robot that needed a solve is a counted solver
     failure and stops; the run completes."""
@@ -284,6 +310,7 @@ def test_solver_errors_are_counted_and_stop_the_robot(monkeypatch):
 @pytest.mark.parametrize(("table", "key"), [
     ({"mode": "centralized", "solver": "exact"}, "controllers.cbf.solver"),
     ({"solver": "osqpp"}, "controllers.cbf.solver"),
+    ({"solver": "osqp", "infeasible": "keep_static"}, "controllers.cbf.infeasible"),
 ])
 def test_bad_settings_are_scenario_errors(table, key):
     with pytest.raises(ScenarioError, match=key.replace(".", r"\.")):

@@ -148,6 +148,34 @@ def test_guidance_keeps_the_distance_the_filter_keeps_from_obstacles():
     assert Guidance(grid, keep).path(a, b) is None
 
 
+def test_guidance_measures_its_clearance_on_the_shapes_the_filter_keeps_off():
+    """The grid marks a cell occupied when its centre lies in a disc, so a disc's edge lies
+    up to a cell beyond its outermost occupied centre, and an inflation from the cell
+    centres leaves free cells 0.28 m from a disc at a 0.35 m clearance: a gap closed to the
+    filter stays open to the path (a robot of clutter seed 10 stood in one). Passage's map
+    measures the distance to the shapes themselves: every free cell keeps the clearance
+    less half a cell, as the grid's inflation does along walls on cell edges."""
+    from dfcoa_opt.scenario.loader import scenario_from_dict
+
+    a, r = 4.58, 0.3
+    b = a + (2.0 * r + 0.55) / np.sqrt(2.0)  # a diagonal gap of 0.55 m between the discs
+    data = {"dt": 0.1, "t_max": 1.0, "sensors": {"lidar": {"enabled": False}},
+            "world": {"size": [10.0, 10.0], "resolution": 10, "obstacles": [
+                {"type": "circle", "center": [a, a], "radius": r},
+                {"type": "circle", "center": [b, b], "radius": r}]},
+            "team": {"n": 4}, "leader": {"start": [2.0, 8.0], "goal": [3.0, 8.0]}}
+    world = scenario_from_dict(data, "<gap>").world
+    keep, half = 0.35, 0.5 * world.grid.cell_size
+    centres = world.grid.cell_centers().reshape(-1, 2)
+
+    def least(guide: Guidance) -> float:
+        return float(world.clearance(centres[~guide.inflated.occupied.reshape(-1)]).min())
+
+    assert least(Guidance(world.grid, keep)) < keep - half - 0.01  # the rasterised edge
+    exact = Guidance(world.grid, keep, exact=lambda p: world.clearance(p, cap=keep))
+    assert least(exact) >= keep - half
+
+
 def test_a_team_with_less_way_left_than_its_leader_rejoins_its_slots():
     coord = Coordination(stuck_window=4.0, recover_time=10.0, far=3.0, extent=1.5)
     team = np.array([[0.0, 0.0], [1.0, 0.0]])

@@ -37,7 +37,10 @@ Infeasible programs (a robot already inside a margin, a moving disc too
 fast) go to the ``infeasible`` policy and are counted (``STATUS_FALLBACK``):
 ``least_violation`` takes the velocity closest to the nominal one among
 those whose largest row violation is least (an LP, then the QP with the rows
-relaxed by it); ``stop``; ``pass_through``.
+relaxed by it); ``keep_static`` does the same with the static obstacle rows
+kept, as RVO2 keeps its obstacle lines (a robot squeezed between a moving disc
+and a wall gives way to the disc, never to the wall; exact solver only);
+``stop``; ``pass_through``.
 A solver error is ``STATUS_SOLVER_FAIL`` with the ``stop`` command, or the
 nominal one under ``pass_through``. Method notes: ``docs/methods/cbf.md``.
 """
@@ -102,8 +105,9 @@ class CbfFilter(BatchedController):
                                       tune=(1.0, 5.0))
         max_obstacles: int = param(6, doc="Most static obstacles per robot (nearest first); "
                                           "each is a QP row.", ge=0, le=1000)
-        infeasible: Literal["least_violation", "stop", "pass_through"] = param(
-            "least_violation", doc="Policy when the barrier rows have no common point.")
+        infeasible: Literal["least_violation", "keep_static", "stop", "pass_through"] = param(
+            "least_violation", doc="Policy when the barrier rows have no common point "
+                                   "('keep_static': the solver 'exact' only).")
         solver: str = param("auto", doc="'auto': 'exact' in distributed mode, 'osqp' in "
                                         "centralized mode; 'exact' (distributed mode only): "
                                         "ORCA's exact 2D solver, the QP's optimum, 47-146x "
@@ -144,6 +148,10 @@ class CbfFilter(BatchedController):
                                                           "needs mode = 'distributed'")
         else:
             check_solver(self._solver, scenario.source, key)
+            if self.p.infeasible == "keep_static":
+                raise ScenarioError(scenario.source, f"controllers.{self._owner}.infeasible",
+                                    "'keep_static' needs solver = 'exact' (mode = "
+                                    f"'distributed'), not {self._solver!r}")
         rob = scenario.spec.robots
         self._radius = rob.radius
         self._offset = rob.nid_distance if rob.model == "unicycle" else 0.0
@@ -225,9 +233,13 @@ class CbfFilter(BatchedController):
         if self.p.mode == "centralized":
             vel, status, slack = self._centralized(obs, nominal, pairs, obstacles)
         else:
-            solve = solve_distributed_exact if self._solver == "exact" else solve_distributed
-            vel, status, slack = solve(nominal, pairs, obstacles, self._v_box, self._solver,
-                                       self.p.infeasible)
+            if self._solver == "exact":
+                vel, status, slack = solve_distributed_exact(
+                    nominal, pairs, obstacles, self._v_box, self._solver, self.p.infeasible,
+                    self.p.max_obstacles)
+            else:
+                vel, status, slack = solve_distributed(nominal, pairs, obstacles, self._v_box,
+                                                       self._solver, self.p.infeasible)
         per_robot = (time.perf_counter() - t0) / max(obs.n, 1)
         return FilterResult(vel, status, slack, np.full(obs.n, per_robot))
 

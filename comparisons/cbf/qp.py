@@ -174,28 +174,55 @@ def solve_distributed(nominal: FloatArray, pairs: BarrierRows, obstacles: Barrie
 
 
 def solve_distributed_exact(nominal: FloatArray, pairs: BarrierRows, obstacles: BarrierRows,
-                            v_box: float, solver: str, policy: str) -> Answer:
+                            v_box: float, solver: str, policy: str,
+                            static_rows: int = 0) -> Answer:
     """The distributed programs through the exact 2D solver of ORCA (:func:`lp.solve_lines`).
 
     The box is four hard lines (the speed disc, of radius ``sqrt 2 v_box``, never
     binds); barrier rows are soft lines. Feasible programs get the same optimum as
     the QP; an infeasible one gets the velocity of least largest violation with the
-    box kept, as the QP path. ``solver`` is unused. Arguments and returns as
-    :func:`solve_distributed`.
+    box kept, as the QP path.
+
+    Under the ``keep_static`` policy the static obstacle rows, with their bounds
+    capped at 0 (never nearer to a static obstacle), are hard lines too, as
+    RVO2 keeps its obstacle lines: an infeasible program relaxes the pair and
+    moving-disc rows (and the static rows' push outwards) but never moves a
+    robot towards a wall. ``u = 0`` meets every hard line, so they stay feasible.
+
+    Args:
+        nominal: ``(N, 2)`` nominal velocities, m/s.
+        pairs: Pair rows (whole ``gamma h``).
+        obstacles: Obstacle rows, the static ones first.
+        v_box: Speed box half-width, m/s.
+        solver: Unused (the exact solver).
+        policy: ``least_violation``, ``keep_static``, ``stop`` or ``pass_through``.
+        static_rows: The leading obstacle rows that are static obstacles
+            (``keep_static`` only).
+
+    Returns:
+        ``(velocity (N, 2) m/s, status (N,) int8, slack (N,) m/s)``.
     """
     n = len(nominal)
-    normal = np.concatenate([np.broadcast_to(_BOX_NORMALS, (n, 4, 2)), pairs.normal,
-                             obstacles.normal], axis=1)
-    bound = np.concatenate([np.full((n, 4), -v_box), 0.5 * pairs.bound, obstacles.bound],
-                           axis=1)
-    used = np.concatenate([np.ones((n, 4), bool), pairs.mask, obstacles.mask], axis=1)
-    order = np.argsort(~used, axis=1, kind="stable")  # used rows first, box leading
+    box_normal = np.broadcast_to(_BOX_NORMALS, (n, 4, 2))
+    box_bound = np.full((n, 4), -v_box)
+    box_used = np.ones((n, 4), bool)
+    if policy == "keep_static":
+        statics = slice(0, static_rows)
+        box_normal = np.concatenate([box_normal, obstacles.normal[:, statics]], axis=1)
+        box_bound = np.concatenate([box_bound, np.minimum(obstacles.bound[:, statics], 0.0)],
+                                   axis=1)
+        box_used = np.concatenate([box_used, obstacles.mask[:, statics]], axis=1)
+    hard = box_used.sum(axis=1)
+    normal = np.concatenate([box_normal, pairs.normal, obstacles.normal], axis=1)
+    bound = np.concatenate([box_bound, 0.5 * pairs.bound, obstacles.bound], axis=1)
+    used = np.concatenate([box_used, pairs.mask, obstacles.mask], axis=1)
+    order = np.argsort(~used, axis=1, kind="stable")  # used rows first, hard ones leading
     normal = take_rows(normal, order)
     bound = take_rows(np.where(used, bound, 0.0), order)
     # n . u >= b  <=>  left of the line through b n with direction (n_y, -n_x)
     points = bound[..., None] * normal
     directions = np.stack([normal[..., 1], -normal[..., 0]], axis=-1)
-    vel, st, slack = lp.solve_lines(points, directions, used.sum(axis=1), np.full(n, 4),
+    vel, st, slack = lp.solve_lines(points, directions, used.sum(axis=1), hard,
                                     nominal, np.full(n, np.sqrt(2.0) * v_box))
     status = np.where(np.abs(vel - nominal).max(axis=1) > UNCHANGED_TOL, STATUS_MODIFIED,
                       STATUS_OK).astype(np.int8)

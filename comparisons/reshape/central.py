@@ -95,7 +95,8 @@ class RunMap:
 
     @classmethod
     def build(cls, scenario: Scenario, offsets: FloatArray, rho: float, wide: float,
-              column: bool, guide: float, goal_reach: float = 0.0) -> RunMap:
+              column: bool, guide: float, goal_reach: float = 0.0,
+              exact: bool = False) -> RunMap:
         """The map objects of ``scenario``.
 
         Args:
@@ -106,11 +107,14 @@ class RunMap:
             column: Whether single file is a template (its configuration space).
             guide: The clearance of the guidance paths, m.
             goal_reach: :class:`~comparisons.reshape.tracking.Guidance`'s, m.
+            exact: Measure the guidance clearance on the world's shapes, as the
+                safety filter does, rather than between cell centres.
         """
-        grid = scenario.world.grid
-        return cls(LeaderPath(scenario.leader_path), scenario.world,
-                   shape_segments(scenario.world.shapes), grid.extent,
-                   Guidance(grid, guide, goal_reach),
+        world = scenario.world
+        grid = world.grid
+        measure = (lambda p: world.clearance(p, cap=guide)) if exact else None
+        return cls(LeaderPath(scenario.leader_path), world, shape_segments(world.shapes),
+                   grid.extent, Guidance(grid, guide, goal_reach, measure),
                    ConfigurationSpace(grid, offsets, rho, wide),
                    ConfigurationSpace(grid, np.zeros((1, 2)), rho, wide) if column else None)
 
@@ -164,7 +168,7 @@ class CentralPlanner:
             guide, reach = (max(rho, obstacle_distance), 2.0 * rho) if p.coordinate else (rho, 0.0)
             maps[id(scenario)] = RunMap.build(scenario, self._offsets - self._centre, rho,
                                               p.route_clearance, "column" in self._templates,
-                                              guide, reach)
+                                              guide, reach, p.coordinate)
         m = maps[id(scenario)]
         self._path, self._world, self._segments = m.path, m.world, m.segments
         self._bounds, self._guide, self._cspace = m.bounds, m.guide, m.cspace

@@ -144,8 +144,12 @@ class Reshape(BatchedController):
         # the box |u_x|, |u_y| <= v_max (the filter's default, v_max / sqrt 2, would hold
         # a formation moving along an axis to 71 % of its speed), the result clipped to
         # |u| <= v_max afterwards: a uniform saturation, which keeps every barrier row
+        # reshape_passage keeps the static rows when a program is infeasible: a robot
+        # squeezed between a walker and a wall gives way to the walker, never to the wall
+        policy = "keep_static" if self.p.coordinate else "least_violation"
         self.safety = CbfFilter(CbfFilter.Params(solver="exact", v_max=spec.robots.v_max,
-                                                 gamma=self.p.gamma), owner="reshape")
+                                                 gamma=self.p.gamma, infeasible=policy),
+                                owner="reshape")
         self.safety.reset_batch(scenarios, rngs)
         n, runs = scenarios[0].n, len(scenarios)
         self._n, self._v_max = n, spec.robots.v_max

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,13 +49,26 @@ class Guidance:
         goal_reach: When a path's goal lies in a blocked cell of the inflated
             map (a slot nearer a wall than ``clearance``), the path ends at the
             nearest free cell within this distance instead; 0: no path, m.
+        exact: The exact distance (m) of points ``(P, 2)`` to the static
+            obstacles (:meth:`~dfcoa_opt.scenario.scenario.World.clearance`, the
+            shapes the safety filter keeps off). When given, a cell is blocked
+            when its centre is nearer than ``clearance`` to them. When None, the
+            map is the grid inflated from its cell centres, which lets a path
+            through gaps up to about a cell narrower (a disc's edge lies up to
+            a cell beyond its outermost occupied centre).
     """
 
-    def __init__(self, grid: OccupancyGrid, clearance: float, goal_reach: float = 0.0) -> None:
+    def __init__(self, grid: OccupancyGrid, clearance: float, goal_reach: float = 0.0,
+                 exact: Callable[[FloatArray], FloatArray] | None = None) -> None:
         self.grid = grid
         self.clearance = clearance
         self.goal_reach = goal_reach
-        self.inflated = grid.inflate(clearance)
+        if exact is None:
+            self.inflated = grid.inflate(clearance)
+        else:
+            face = exact(grid.cell_centers().reshape(-1, 2)).reshape(grid.shape)
+            near = face + 0.5 * grid.cell_size < clearance
+            self.inflated = OccupancyGrid(grid.occupied | near, grid.resolution, grid.origin)
 
     def free(self, a: FloatArray, b: FloatArray, clearance: float) -> bool:
         """Whether the segment ``[a, b]`` keeps ``clearance`` (m) from every static obstacle.
