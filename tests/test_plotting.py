@@ -374,3 +374,30 @@ def test_animation_frames_are_the_full_redraw_pictures(tmp_path: Path, n_robots:
     # blitting itself is exact: the frames before quantisation are the full redraws
     for k in (steps[0], steps[5], steps[-1]):
         assert np.array_equal(np.asarray(old.render(k)), np.asarray(old.render_full(k)))
+
+
+def test_a_frozen_fit_is_laid_out_twice_and_keeps_no_engine(monkeypatch) -> None:
+    """A failure snapshot is saved as it is: once its size has settled, the fit keeps its
+    last layout (two passes, not three with the save's); a figure a caller may add to keeps
+    its engine and is laid out again when saved."""
+    from matplotlib.layout_engine import ConstrainedLayoutEngine
+
+    calls: list[int] = []
+    execute = ConstrainedLayoutEngine.execute
+    monkeypatch.setattr(ConstrainedLayoutEngine, "execute",
+                        lambda self, fig: (calls.append(1), execute(self, fig))[1])
+    sizes = []
+    for freeze in (True, False):
+        calls.clear()
+        grid = make_grid()
+        fig = figure_layout.map_figure(grid, None, 80.0)
+        ax = fig.add_subplot()
+        ax.plot([0.0, 20.0], [0.0, 10.0], label="path")
+        ax.set_xlim(0.0, 20.0)
+        ax.set_ylim(0.0, 10.0)
+        figure_layout.legend_and_fit(fig, ax, [(0.0, 0.0, 1.0)], fit=True, freeze=freeze)
+        assert (fig.get_layout_engine() is None) == freeze
+        figure_layout.png_bytes(fig)
+        assert len(calls) == (2 if freeze else 3)
+        sizes.append(tuple(fig.get_size_inches()))
+    assert sizes[0] == sizes[1]  # the same fit either way

@@ -99,13 +99,13 @@ def map_figure(grid: OccupancyGrid, figsize: tuple[float, float] | None,
 
 
 def legend_and_fit(fig: Figure, ax: Axes, colors: Sequence[tuple[float, float, float]],
-                    fit: bool) -> None:
+                    fit: bool, freeze: bool = False) -> None:
     """The figure legend (robots' entries, or a colour bar of their indices), then the fit.
 
     Up to :data:`MAX_LEGEND_ROBOTS` robots, the legend (robots and the other
     labelled artists) is right of the map; for more, the robots get a colour bar
     and the other artists a one-row legend under the map. With ``fit``, the
-    figure is trimmed to the map (:func:`fit_to_map`).
+    figure is trimmed to the map (:func:`fit_to_map`, ``freeze`` passed on).
     """
     if len(colors) <= MAX_LEGEND_ROBOTS:
         legend = fig.legend(loc="outside right upper", fontsize="small")
@@ -115,7 +115,7 @@ def legend_and_fit(fig: Figure, ax: Axes, colors: Sequence[tuple[float, float, f
         legend = fig.legend(loc="outside lower center", fontsize="small",
                             ncols=max(n_entries, 1))
     if fit:
-        fit_to_map(fig, ax, legend)
+        fit_to_map(fig, ax, legend, freeze)
 
 
 def index_colorbar(fig: Figure, ax: Axes, colors: Sequence[tuple[float, float, float]],
@@ -138,14 +138,24 @@ def index_colorbar(fig: Figure, ax: Axes, colors: Sequence[tuple[float, float, f
     return bar
 
 
-def fit_to_map(fig: Figure, ax: Axes, legend: Legend) -> None:
+def fit_to_map(fig: Figure, ax: Axes, legend: Legend, freeze: bool = False) -> None:
     """Resize ``fig`` (same width or narrower) so that the map ``ax`` fills its layout box.
 
-    Lays ``fig`` out with its layout engine (kept) with the map's aspect off, so
+    Lays ``fig`` out with its layout engine with the map's aspect off, so
     the axes box is the space left by the decorations (labels, title, legend,
     colour bar; their size in inches barely depends on the figure's), then sets
     the height for which that box has the map's aspect (at most 1.6 times the
     width; for a taller map the width shrinks). The legend keeps room.
+
+    Args:
+        fig: The figure.
+        ax: The map's axes.
+        legend: The figure's legend.
+        freeze: For a figure that is saved as it is: when the size has settled,
+            keep the last pass's layout and remove the engine (:func:`freeze_layout`
+            would lay it out a third time: a fifth of a failure snapshot's time,
+            and the images differ by a few anti-aliased pixels). Without
+            it the engine stays, for a figure that its caller may add to.
     """
     engine = fig.get_layout_engine()
     if engine is None:
@@ -165,6 +175,8 @@ def fit_to_map(fig: Figure, ax: Axes, legend: Legend) -> None:
         new_h = float(np.clip(deco_h + (w - deco_w) * aspect, leg.height + 0.2, 1.6 * width))
         new_w = min(width, max(deco_w + (new_h - deco_h) / aspect, leg.width + 0.2))
         if max(abs(new_w - w), abs(new_h - h)) * fig.dpi < 0.5:
+            if freeze:
+                fig.set_layout_engine(None)
             break
         fig.set_size_inches(new_w, new_h)
     ax.set_aspect("equal")

@@ -326,5 +326,5 @@ def snapshot_figure(row: Row, results_dir: str | Path, path: str | Path, t: floa
                      f"{describe(contacts) or 'no contact'}")
     width = max(float(fig.get_size_inches()[0]) - 2.0, 3.0)  # the legend takes ~2 in
     ax.set_title(wrap_text(head, width, TITLE_PT), fontsize=TITLE_PT)
-    legend_and_fit(fig, ax, colors, fit=True)
+    legend_and_fit(fig, ax, colors, fit=True, freeze=True)
     return save_png(fig, path)
