@@ -52,10 +52,11 @@ class Guidance:
         exact: The exact distance (m) of points ``(P, 2)`` to the static
             obstacles (:meth:`~dfcoa_opt.scenario.scenario.World.clearance`, the
             shapes the safety filter keeps off). When given, a cell is blocked
-            when its centre is nearer than ``clearance`` to them. When None, the
-            map is the grid inflated from its cell centres, which lets a path
-            through gaps up to about a cell narrower (a disc's edge lies up to
-            a cell beyond its outermost occupied centre).
+            when its centre's distance to them plus half a cell is short of
+            ``clearance`` (along walls on cell edges, the grid's own measure).
+            When None, the map is the grid inflated from its cell centres, which
+            lets a path through gaps up to about a cell narrower (a disc's edge
+            lies up to a cell beyond its outermost occupied centre).
     """
 
     def __init__(self, grid: OccupancyGrid, clearance: float, goal_reach: float = 0.0,
