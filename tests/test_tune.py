@@ -12,7 +12,14 @@ from dfcoa_opt.bench.executors import ExecutorConfig
 from dfcoa_opt.bench.results.store import ResultsStore
 from dfcoa_opt.bench.runner import is_success
 from dfcoa_opt.bench.sweep import load_sweep, sweep_from_dict
-from dfcoa_opt.bench.tune import objective, tune_variant, tuning_sweep, validation_runs
+from dfcoa_opt.bench.tune import (
+    Trial,
+    choose,
+    objective,
+    tune_variant,
+    tuning_sweep,
+    validation_runs,
+)
 from dfcoa_opt.cli import main
 from dfcoa_opt.control.registry import available, check_overrides, controller_tunables
 from dfcoa_opt.core.errors import DfcoaError, ScenarioError
@@ -189,9 +196,10 @@ def test_the_best_training_trials_are_chosen_again_on_validation_seeds(tmp_path:
     # the budget: 2 training trials and 2 finalists, each 2 runs
     assert len(res.trials) == 2 and len(res.validated) == 2 and res.ran == 8
     assert sorted(t.number for t in res.validated) == [0, 1]
-    train = {t.number: t for t in res.trials}
-    chosen = max(res.validated, key=lambda t: (t.value, train[t.number].value, -t.number))
-    assert res.best.number == chosen.number and res.best.params == chosen.params
+    # the defaults are a finalist; on 2 worlds no lead is significant, so they stay
+    assert res.validated[0].number == 0 and res.best.number == 0
+    chosen = res.validated[0]
+    assert res.best.params == chosen.params
     text = read_toml(res.path)
     assert text["tuned"]["validation_trials"] == 2
     assert text["tuned"]["validation_seeds"] == "10000-10001"  # cellular's validation range
@@ -210,9 +218,69 @@ def test_the_best_training_trials_are_chosen_again_on_validation_seeds(tmp_path:
     assert again.ran == 0 and again.path.read_text() == res.path.read_text()
     body["tune"]["validation_trials"] = 4
     sweep_path.write_text(_toml(body))
-    with pytest.raises(ScenarioError, match=r"tune\.validation_trials: 4 leaves no training "
-                                            r"trial of the 4 trials"):
+    with pytest.raises(ScenarioError, match=r"tune\.validation_trials: 4 finalists x 1 leave "
+                                            r"no training trial of the 4 trials"):
         tuning_sweep(sweep_path)
+    body["tune"]["validation_trials"], body["tune"]["validation_repeat"] = 2, 2
+    sweep_path.write_text(_toml(body))
+    with pytest.raises(ScenarioError, match=r"tune\.validation_repeat: 2 finalists x 2 leave "):
+        tuning_sweep(sweep_path)
+    body["tune"]["validation_trials"], body["tune"]["validation_repeat"] = 1, 1
+    sweep_path.write_text(_toml(body))
+    with pytest.raises(ScenarioError, match=r"tune\.validation_trials: 1 finalist is the "
+                                            r"defaults alone"):
+        tuning_sweep(sweep_path)
+
+
+def _finalist(number: int, wins: list[bool]) -> Trial:
+    rows = [{"status": "ok", "metrics": {"outcome": "success" if w else "deadlock",
+                                         "fce_rms": 0.1}} for w in wins]
+    return Trial(number, {}, objective(rows)[0], sum(wins), len(wins), 0.1)
+
+
+def test_a_finalist_replaces_the_defaults_only_with_a_significant_lead() -> None:
+    defaults = [True] * 45 + [False] * 5
+    lucky = [True] * 50  # 5 more worlds, none lost: one-sided p = 2^-5 = 0.031
+    narrow = [True] * 48 + [False] * 2  # 3 more worlds: p = 1/8
+    worse = [False] * 10 + [True] * 40
+    train = {0: 0.9, 1: 0.98, 2: 0.98, 3: 1.0}
+    for f, expect in ((lucky, 1), (narrow, 0)):
+        out = {0: defaults, 1: f, 3: worse}
+        val = [_finalist(0, defaults), _finalist(1, f), _finalist(3, worse)]
+        number, best, test = choose(val, out, train, 0.05)
+        assert number == expect and best == 1 and test is not None and test.b01 == 0
+    number, _, test = choose(val, out, train, 1.0)  # alpha 1: any lead replaces the defaults
+    assert number == 1
+    # the defaults best on validation: no test
+    assert choose([_finalist(0, lucky), _finalist(3, worse)], {0: lucky, 3: worse}, train,
+                  0.05) == (0, 0, None)
+    # a lead of won minus lost worlds, not of totals on other worlds
+    swapped = [False] * 5 + [True] * 45
+    number, _, test = choose([_finalist(0, defaults), _finalist(2, [True] * 50)],
+                             {0: swapped, 2: [True] * 50}, train, 0.05)
+    assert number == 2 and test is not None and (test.b10, test.b01) == (5, 0)
+
+
+def test_validation_repeat_scores_a_finalist_on_more_worlds_within_the_budget(
+        tmp_path: Path) -> None:
+    sweep_path = _mini(tmp_path, 4)
+    body = read_toml(sweep_path)
+    body["tune"]["trials"] = 6
+    body["tune"]["validation_trials"], body["tune"]["validation_repeat"] = 2, 2
+    sweep_path.write_text(_toml(body))
+    sweep, spec = tuning_sweep(sweep_path)
+    res = tune_variant(sweep, spec, "goto_slot+cbf", tmp_path / "a", ExecutorConfig("serial"),
+                       tmp_path / "o")
+    # the budget stays 6 trials x 2 runs: 2 training trials, 2 finalists on 4 validation worlds
+    assert len(res.trials) == 2 and len(res.validated) == 2 and res.ran == 12
+    chosen = res.validated[0]
+    assert [t.runs for t in res.validated] == [4, 4] and res.best.number == chosen.number == 0
+    base = [r for r in sweep.runs if r.variant_name == "goto_slot+cbf"]
+    runs = validation_runs(base, "goto_slot+cbf", chosen, 2)
+    # the first repeat is the seeds repeat = 1 gives; then the next ones, none twice
+    assert [r.seed for r in runs] == [10000, 10001, 10002, 10003]
+    assert [r.seed for r in validation_runs(base, "goto_slot+cbf", chosen)] == [10000, 10001]
+    assert read_toml(res.path)["tuned"]["validation_seeds"] == "10000-10003"
 
 
 def test_tune_names_an_unknown_variant(tmp_path: Path) -> None:
