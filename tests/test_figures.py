@@ -18,8 +18,16 @@ QUICK = {"t_max": 3.0}
 def test_figures_smoke_renders_every_recipe_and_reuses_the_cache(tmp_path):
     out, cache = tmp_path / "out", tmp_path / "cache"
     cfg = ExecutorConfig("process", 2)
-    index = make_figures(SCENARIOS, out, cache, cfg, seeds=1, progress=False, overrides=QUICK)
+    # one failure snapshot a scenario: under 3 s missions every variant fails, and drawing
+    # the comparison's 105 failures took most of this test's time
+    index = make_figures(SCENARIOS, out, cache, cfg, seeds=1, progress=False, overrides=QUICK,
+                         snapshots=1)
     text = index.read_text()
+    report = (out / "comparison" / "report.md").read_text()
+    sections = report.split("### Why it fails")[1:]
+    assert sections and all(s.count("snapshot left out") >= 1 for s in sections)
+    drawn = sorted(p.name for p in (out / "comparison").glob("fail_*.png"))
+    assert len(drawn) == len(sections)
     for r in registry.registered():
         meta = json.loads((out / r.name / "artefacts.json").read_text())
         assert meta["artefacts"], r.name

@@ -18,7 +18,7 @@ import pytest
 
 from dfcoa_opt import metrics as run_metrics
 from dfcoa_opt.bench.report import document as report
-from dfcoa_opt.bench.report import paired, plots, stats, tables, trajectories
+from dfcoa_opt.bench.report import failures, paired, plots, stats, tables, trajectories
 from dfcoa_opt.core.errors import DfcoaError
 from dfcoa_opt.core.runtime import dispatch, provenance
 from dfcoa_opt.scenario.loader import read_toml, scenario_from_dict
@@ -415,6 +415,23 @@ def test_make_report_end_to_end(results, tmp_path):
     first = (out / "report.md").read_bytes()
     report.make_report(results, out, metrics=("fce_rms", "time_to_goal"))
     assert (out / "report.md").read_bytes() == first  # cached results -> identical file
+
+
+def test_a_snapshot_limit_draws_fewer_failures_and_says_so(results, tmp_path):
+    rows = [r for r in report.load_rows(results) if r["variant"] == "goto_slot"]
+    rows += [{**r, "variant": "goto_slot_b"} for r in rows]
+    groups = [{"scenario": "example_empty", "variant": v, "success_rate": 0.0,
+               "ladder_value": None} for v in ("goto_slot", "goto_slot_b")]
+    lines, shots = failures.explain(groups, rows, results, tmp_path / "all")
+    assert len(shots) == 2 and not any("left out" in line for line in lines)
+    with failures.snapshot_limit(1):
+        lines, shots = failures.explain(groups, rows, results, tmp_path / "one")
+    assert [p.name for p in shots] == ["fail_example_empty_goto_slot_s0.png"]
+    assert "goto_slot_b` on `example_empty`" in lines[1] and "snapshot left out" in lines[1]
+    assert len(failures.explain(groups, rows, results, tmp_path / "after")[1]) == 2  # reset
+    with pytest.raises(ValueError, match="snapshot limit 0: must be at least 1"):
+        with failures.snapshot_limit(0):
+            pass
 
 
 def test_default_out_dir_and_explicit_overlay_seed(results):

@@ -48,7 +48,8 @@ __all__ = ["Artefact", "Recipe", "make_figures", "recipe", "recipes",
 def make_figures(scenarios: Path, out: Path, cache: Path,
                  config: ExecutorConfig | None = None, only: Sequence[str] | None = None,
                  seeds: int | None = None, progress: bool | None = None,
-                 overrides: dict[str, Any] | None = None, compact: bool = True) -> Path:
+                 overrides: dict[str, Any] | None = None, compact: bool = True,
+                 snapshots: int | None = None) -> Path:
     """Run every recipe's sweep (reusing cached runs) and render its artefacts.
 
     After the last render, the logs that a renderer read are pruned to the
@@ -69,6 +70,10 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
             with ``seeds``, a reduced configuration for smoke tests.
         progress: Progress bars; default when stdout is a terminal.
         compact: Compact the logs no figure reads (False: keep every full log).
+        snapshots: Failure snapshots a report draws at most per scenario
+            (:func:`~dfcoa_opt.bench.report.failures.snapshot_limit`; None: every
+            one). For reduced runs, where every variant fails and drawing each
+            failure would test one function a hundred times.
 
     Returns:
         Path of the index ``README.md``.
@@ -86,7 +91,8 @@ def make_figures(scenarios: Path, out: Path, cache: Path,
     config = config or ExecutorConfig()
     jobs = config.jobs or os.cpu_count() or 1
     with interruptible(), _Renderer(jobs if config.kind == "process" and jobs > 1 else 0,
-                                    cache, judged=seeds is None and not overrides) as renderer:
+                                    cache, judged=seeds is None and not overrides,
+                                    snapshots=snapshots) as renderer:
         for r in todo:
             if only and r.name not in only:
                 continue
@@ -160,18 +166,19 @@ _Rendered = tuple[list[Artefact], float, dict[str, set[str]]]
 
 
 def _render(render: Renderer, source: Path, is_store: bool,
-            dest: Path) -> _Rendered:
+            dest: Path, snapshots: int | None = None) -> _Rendered:
     """Run one renderer (in the render process or inline); ``source``: store root or scenarios.
 
     Returns:
         The artefacts, the rendering's wall time (s) and the runs whose logs it read, with
         the fields read.
     """
+    from dfcoa_opt.bench.report.failures import snapshot_limit
     from dfcoa_opt.bench.results.logs import tracing
     from dfcoa_opt.bench.results.store import ResultsStore
 
     t0 = time.perf_counter()
-    with tracing() as keys:
+    with tracing() as keys, snapshot_limit(snapshots):
         arts = render(ResultsStore(source) if is_store else source, dest)
     return arts, time.perf_counter() - t0, keys
 
@@ -187,8 +194,9 @@ class _Renderer:
     local function) renders inline.
     """
 
-    def __init__(self, workers: int, cache: Path, judged: bool = True) -> None:
-        self.cache, self.judged = cache, judged
+    def __init__(self, workers: int, cache: Path, judged: bool = True,
+                 snapshots: int | None = None) -> None:
+        self.cache, self.judged, self.snapshots = cache, judged, snapshots
         self.pool: ProcessPoolExecutor | None = None
         if workers:  # the sweeps' fork server: started here, so with their preload
             ctx = forkserver_context(worker_preload())
@@ -209,7 +217,7 @@ class _Renderer:
 
         ``done`` (what the sweep did) starts the recipe's progress line.
         """
-        args = (r.render, source, r.sweep is not None, dest)
+        args = (r.render, source, r.sweep is not None, dest, self.snapshots)
         fut: Future[_Rendered] = Future()
         if self.pool is not None and _picklable(r.render):
             with deferred():  # the first submit starts the render process
@@ -223,7 +231,7 @@ class _Renderer:
     def render_now(self, r: Recipe, source: Path, dest: Path, done: str) -> None:
         """Render ``r`` in this process and write its artefact list at once."""
         fut: Future[_Rendered] = Future()
-        fut.set_result(_render(r.render, source, True, dest))
+        fut.set_result(_render(r.render, source, True, dest, self.snapshots))
         self.pending.append((r, dest, done, fut))
         self._collect(block=True)
 

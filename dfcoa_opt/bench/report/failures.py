@@ -5,12 +5,18 @@ names the most frequent non-success outcome (collision, deadlock, timeout, or
 ``failed`` for runs that raised) and links a snapshot of the smallest seed that
 ended that way: the map and the robots at the first contact (collision), at the
 onset of the deadlock, or at the end of the run (timeout).
+
+A reduced ``make figures`` (the smoke test's 3 s missions, where every variant
+fails) may draw fewer: inside :func:`snapshot_limit`, each :func:`explain`
+call draws at most that many snapshots and says of the other groups that
+their snapshot was left out.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +30,28 @@ Row = Mapping[str, Any]
 EXPLAIN_BELOW = 0.5
 #: The failure classes, in the order used to break ties of equal counts.
 FAILURES = ("collision", "deadlock", "timeout", "failed")
+#: The snapshots an :func:`explain` call draws at most (None: every one), set by
+#: :func:`snapshot_limit` in the process that renders.
+_LIMIT: list[int | None] = [None]
+
+
+@contextmanager
+def snapshot_limit(n: int | None) -> Iterator[None]:
+    """Within the block, each :func:`explain` call draws at most ``n`` snapshots (None: all).
+
+    Args:
+        n: Snapshots per call, at least 1; None leaves every snapshot in.
+
+    Raises:
+        ValueError: ``n`` below 1.
+    """
+    if n is not None and n < 1:
+        raise ValueError(f"snapshot limit {n}: must be at least 1 (None: no limit)")
+    before, _LIMIT[0] = _LIMIT[0], n
+    try:
+        yield
+    finally:
+        _LIMIT[0] = before
 
 
 def run_outcome(row: Row) -> str:
@@ -81,6 +109,10 @@ def explain(groups: Sequence[Mapping[str, Any]], rows: Sequence[Row], results_di
                 f" most runs end in **{why}** ({share}/{len(mine)}); first: seed {first['seed']}")
         if why == "failed":
             lines.append(f"{text}: {' '.join(str(first.get('error')).split())[:160]}")
+            continue
+        if _LIMIT[0] is not None and len(written) >= _LIMIT[0]:
+            lines.append(f"{text} (snapshot left out: this reduced run draws {_LIMIT[0]} per "
+                         "scenario)")
             continue
         t = snapshot_time(first)
         stem = f"fail_{safe_name(g['scenario'])}_{safe_name(g['variant'])}_s{first['seed']}"
