@@ -11,6 +11,7 @@ parameter overrides, and :func:`describe` renders the key reference.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import types
 import typing
@@ -206,6 +207,16 @@ def _dataclass_of(tp: Any) -> type | None:
     return tp if isinstance(tp, type) and dataclasses.is_dataclass(tp) else None
 
 
+@functools.cache
+def _hints(cls: type) -> dict[str, Any]:
+    """``typing.get_type_hints(cls)``, evaluated once a class (read it, never change it).
+
+    Evaluating the string annotations again on every build was most of a
+    scenario load's time: 1365 calls for 30 loads.
+    """
+    return get_type_hints(cls)
+
+
 def _unknown_keys(cls: type, data: Any, prefix: str) -> typing.Iterator[tuple[str, str]]:
     """Every key of ``data`` (and of its nested tables) that ``cls`` does not have.
 
@@ -214,7 +225,7 @@ def _unknown_keys(cls: type, data: Any, prefix: str) -> typing.Iterator[tuple[st
     """
     if not isinstance(data, Mapping):
         return
-    hints = get_type_hints(cls)
+    hints = _hints(cls)
     fields = {f.name for f in dataclasses.fields(cls) if f.init}
     for k, v in data.items():
         key = f"{prefix}.{k}" if prefix else str(k)
@@ -246,7 +257,7 @@ def build(cls: type[T], data: Mapping[str, Any], src: str, prefix: str = "") -> 
         ScenarioError: On an unknown key, a missing required key, a wrong type,
             NaN/inf or a value out of bounds.
     """
-    hints = get_type_hints(cls)
+    hints = _hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     unknown = list(_unknown_keys(cls, data, prefix))
     if unknown:
@@ -314,7 +325,7 @@ def describe(cls: type, prefix: str = "") -> list[tuple[str, str, str, str, str]
     Nested dataclasses are expanded; arrays of tables use ``key[]``.
     """
     rows: list[tuple[str, str, str, str, str]] = []
-    hints = get_type_hints(cls)
+    hints = _hints(cls)
     for f in dataclasses.fields(cls):
         tp = hints[f.name]
         key = f"{prefix}.{f.name}" if prefix else f.name
@@ -371,7 +382,7 @@ class Tunable:
 def tunables(cls: type, prefix: str = "") -> list[Tunable]:
     """The tunable fields of a ``Params`` dataclass, nested tables included, in field order."""
     out: list[Tunable] = []
-    hints = get_type_hints(cls)
+    hints = _hints(cls)
     for f in dataclasses.fields(cls):
         key = f"{prefix}{f.name}"
         tp = hints[f.name]
