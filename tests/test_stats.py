@@ -136,6 +136,11 @@ def test_mcnemar_textbook_example_and_binomial_sum():
     assert m.difference == pytest.approx(8 / 15)
     assert stats.mcnemar_exact([True, False], [True, False]).p_value == 1.0
     assert math.isnan(stats.mcnemar_exact([], []).p_value)
+    # one-sided, the variant better: P(X >= 9), X ~ Bin(10, 1/2) = 11 / 2^10, half the above
+    assert stats.mcnemar_greater_p(m) == pytest.approx(11 / 2 ** 10)
+    worse = stats.mcnemar_exact(b, a)  # the baseline better: P(X >= 1) = 1 - 1 / 2^10
+    assert stats.mcnemar_greater_p(worse) == pytest.approx(1 - 1 / 2 ** 10)
+    assert stats.mcnemar_greater_p(stats.mcnemar_exact([True, False], [True, False])) == 1.0
 
 
 # --------------------------------------------------------------------------- Holm

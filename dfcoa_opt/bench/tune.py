@@ -50,7 +50,7 @@ from typing import Any
 from dfcoa_opt.bench.executors import ExecutorConfig, kept_workers
 from dfcoa_opt.bench.harness import run_sweep
 from dfcoa_opt.bench.report.plots import as_number
-from dfcoa_opt.bench.report.stats import McNemar, cvar, mcnemar_exact
+from dfcoa_opt.bench.report.stats import McNemar, cvar, mcnemar_exact, mcnemar_greater_p
 from dfcoa_opt.bench.results.logs import compact_log
 from dfcoa_opt.bench.results.store import ResultsStore, display_path
 from dfcoa_opt.bench.runner import is_success
@@ -349,10 +349,11 @@ def choose(validated: Sequence[Trial], outcomes: Mapping[int, Sequence[bool]],
 
     The best finalist has the highest validation objective (then the higher
     training objective, then the earlier trial). It replaces the defaults
-    (trial 0) only when it wins more of the same validation worlds than they
-    do and McNemar's exact one-sided p-value (half the two-sided one then) is
-    below ``alpha``: a winner's lead over the defaults must be more than the
-    luck of being the best of many trials.
+    (trial 0) only when McNemar's exact one-sided p-value, that it wins more
+    of the same validation worlds than they do, is below ``alpha``
+    (:func:`~dfcoa_opt.bench.report.stats.mcnemar_greater_p`): a winner's lead
+    over the defaults must be more than the luck of being the best of many
+    trials.
 
     Args:
         validated: The finalists' validation scores, the defaults among them.
@@ -369,15 +370,14 @@ def choose(validated: Sequence[Trial], outcomes: Mapping[int, Sequence[bool]],
     if best.number == 0:
         return 0, 0, None
     test = mcnemar_exact(outcomes[best.number], outcomes[0])
-    wins = test.b10 > test.b01 and test.p_value / 2.0 < alpha
-    return (best.number if wins else 0), best.number, test
+    return (best.number if mcnemar_greater_p(test) < alpha else 0), best.number, test
 
 
 def _choice_text(chosen: int, best: int, test: McNemar | None) -> str:
     """One line on :func:`choose`'s choice."""
     if test is None:
         return "the defaults are the best finalist on validation seeds"
-    p = test.p_value / 2.0 if test.b10 > test.b01 else 1.0 - test.p_value / 2.0
+    p = mcnemar_greater_p(test)
     lead = (f"trial {best} won {test.b10} validation worlds the defaults lost and lost "
             f"{test.b01} they won (one-sided p {p:.3g})")
     return f"{lead}: chosen" if chosen else f"{lead}: the defaults stay"

@@ -190,6 +190,15 @@ def mcnemar_exact(a: Sequence[bool], b: Sequence[bool]) -> McNemar:
     return McNemar(n, b01, b10, p, (b10 - b01) / n)
 
 
+def mcnemar_greater_p(test: McNemar) -> float:
+    """One-sided p-value of McNemar's exact test that ``a`` succeeds more often than ``b``.
+
+    ``P(X >= b10)`` for ``X ~ Binomial(b01 + b10, 1/2)``: 1 without discordant pairs.
+    """
+    n = test.b01 + test.b10
+    return 1.0 if n == 0 else float(sps.binom.sf(test.b10 - 1, n, 0.5))
+
+
 def mcnemar_sample_size(p_only_a: float, p_only_b: float, alpha: float = 0.05,
                         power: float = 0.8) -> float:
     """Pairs McNemar's test needs to tell two paired success rates apart (Connor 1987).
