@@ -277,3 +277,25 @@ def test_a_batch_of_passage_runs_is_its_single_runs_with_recoveries():
     assert [r.metrics.get("ctl_recoveries") for r in batch] == \
         [r.metrics.get("ctl_recoveries") for r in alone]
     assert sum(r.metrics.get("ctl_recoveries", 0) for r in alone) > 0  # the layer acted
+
+
+def test_the_filter_gain_never_asks_for_more_braking_than_the_wheels_give(monkeypatch):
+    """S1 with wheels that accelerate at most 0.5 m/s^2 (the acceleration ladder's rung).
+
+    ``reshape_passage`` caps the barrier's gain at ``a / v_max`` (0.5 / 0.6 here):
+    seed 0 succeeds without a contact. With the gain as tuned (5 /s) the barrier asks
+    a robot to brake at 5 v, ten times what its wheels give, and it grazes a wall.
+    ``reshape`` and unlimited wheels keep the gain.
+    """
+    ov = {**JUDGED, "robots.dynamics": "actuated", "robots.wheel_accel_max": 0.5}
+    sc = d.load(ROOT / "scenarios" / "dfcoa_s1.toml", overrides=ov)
+    robots = sc.spec.robots
+    passage, reshape = Reshape(ReshapeParams(coordinate=True)), Reshape(ReshapeParams())
+    assert passage.gamma_for(robots) == pytest.approx(0.5 / 0.6)
+    assert reshape.gamma_for(robots) == reshape.p.gamma == passage.p.gamma
+    free = d.load(ROOT / "scenarios" / "dfcoa_s1.toml").spec.robots
+    assert passage.gamma_for(free) == passage.p.gamma
+    run = d.run(sc, "reshape_passage", seed=0)
+    assert run.metrics["outcome"] == "success" and run.metrics["collisions"] == 0
+    monkeypatch.setattr(Reshape, "gamma_for", lambda self, robots: self.p.gamma)
+    assert d.run(sc, "reshape_passage", seed=0).metrics["collisions"] > 0

@@ -76,6 +76,7 @@ from dfcoa_opt.core.geometry import rotate
 
 if TYPE_CHECKING:
     from dfcoa_opt.scenario.scenario import Scenario
+    from dfcoa_opt.world.robots.spec import RobotSpec
 
 FloatArray = NDArray[np.float64]
 #: How a run's robots track, by its latest plan: their own slots on the leader ...
@@ -132,6 +133,21 @@ class Reshape(BatchedController):
         self._template: str | None = None
 
     # ---------------------------------------------------------------------- set-up
+    def gamma_for(self, robots: RobotSpec) -> float:
+        """The filter's class-K gain for these robots, 1/s.
+
+        The barrier lets a robot close in on an obstacle at ``gamma * h`` (``h``
+        the distance beyond the margin, m), so following it decelerates at
+        ``gamma * v``. A robot whose wheels brake at most ``a`` (m/s^2,
+        ``robots.wheel_accel_max``) cannot follow a gain above ``a / v_max``: it
+        overshoots the barrier into the wall. ``reshape_passage`` caps its gain
+        there (S1 at 0.5 m/s^2: 12/12 runs, 4/12 uncapped); ``reshape`` keeps
+        ``gamma`` as it was published. Without a limit (``inf``) it is ``gamma``.
+        """
+        if not self.p.coordinate:
+            return self.p.gamma
+        return min(self.p.gamma, robots.wheel_accel_max / robots.v_max)
+
     def reset_batch(self, scenarios: list[Scenario], rngs: list[np.random.Generator]) -> None:
         """Build the filter, the stuck-robot monitor and one planner per run.
 
@@ -148,7 +164,8 @@ class Reshape(BatchedController):
         # squeezed between a walker and a wall gives way to the walker, never to the wall
         policy = "keep_static" if self.p.coordinate else "least_violation"
         self.safety = CbfFilter(CbfFilter.Params(solver="exact", v_max=spec.robots.v_max,
-                                                 gamma=self.p.gamma, infeasible=policy),
+                                                 gamma=self.gamma_for(spec.robots),
+                                                 infeasible=policy),
                                 owner="reshape")
         self.safety.reset_batch(scenarios, rngs)
         n, runs = scenarios[0].n, len(scenarios)
