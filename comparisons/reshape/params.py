@@ -69,7 +69,8 @@ class ReshapeParams:
                                         "(docs/methods/reshape_passage.md): a column led by its "
                                         "front robot, a route kept past the blocked stretch, "
                                         "a stuck team's recovery route, the goal's formation "
-                                        "on the stopped leader.")
+                                        "on the stopped leader, a filter gain capped at "
+                                        "wheel_accel_max / v_max.")
     yield_time: float = param(0.0, doc="The tracking filter grows each sensed moving disc "
                                         "by its speed times this: robots give way earlier "
                                         "to faster discs.", unit="s", ge=0.0)
