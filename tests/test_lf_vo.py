@@ -328,13 +328,15 @@ def test_numba_and_numpy_kernels_give_the_same_commands(params):
     circles = [(tuple(rng.uniform(0, 8, 2)), float(rng.uniform(0.2, 0.6))) for _ in range(10)]
     sc = v_scenario(circles=circles)
     fast, ref = ctrl(sc, **params), ctrl(sc, kernel="numpy", **params)
+    # 3 x 60 robots (each robot's choice is its own; the numpy reference takes about 25 ms a
+    # robot, which made 3 x 150 the slowest test of the module)
     fell = 0
     for _ in range(3):
-        obs = random_observation(rng, 150)
+        obs = random_observation(rng, 60)
         np.testing.assert_array_equal(fast.act(obs), ref.act(obs))
         assert fast.last_fallbacks == ref.last_fallbacks
         fell += fast.last_fallbacks
-    assert 0 < fell < 3 * 150  # both branches (safe argmin, fallback argmax) are exercised
+    assert 0 < fell < 3 * 60  # both branches (safe argmin, fallback argmax) are exercised
 
 
 def test_numba_and_numpy_kernels_give_the_same_run():
