@@ -249,7 +249,7 @@ def test_a_finalist_replaces_the_defaults_only_with_a_significant_lead() -> None
         val = [_finalist(0, defaults), _finalist(1, f), _finalist(3, worse)]
         number, best, test = choose(val, out, train, 0.05)
         assert number == expect and best == 1 and test is not None and test.b01 == 0
-    number, _, test = choose(val, out, train, 1.0)  # alpha 1: any lead replaces the defaults
+    number, _, test = choose(val, out, train, 0.2)  # at alpha 0.2, p = 1/8 replaces them
     assert number == 1
     # the defaults best on validation: no test
     assert choose([_finalist(0, lucky), _finalist(3, worse)], {0: lucky, 3: worse}, train,

@@ -92,10 +92,9 @@ class TuneSpec:
                                           "validation seeds of a scenario as a trial has "
                                           "training seeds.", ge=1, le=100)
     validation_alpha: float = param(0.05, doc="The best finalist replaces the defaults only "
-                                              "when it beats them on the same validation "
-                                              "worlds with McNemar's exact one-sided p below "
-                                              "this (1: whenever it wins more of them).",
-                                    gt=0.0, le=1.0)
+                                              "when McNemar's exact one-sided p, that it wins "
+                                              "more of the same validation worlds than they "
+                                              "do, is below this.", gt=0.0, le=1.0)
 
 
 @dataclass(frozen=True)
