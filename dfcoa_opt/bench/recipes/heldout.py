@@ -169,16 +169,22 @@ def _gap_and_defaults(methods: Sequence[str], rows: Sequence[Mapping[str, Any]],
         cells.append((m, info, shared, sum(b), sum(a), mc))
         ps.append(mc.p_value)
     adjusted = stats.holm(ps)
-    dvt = ["| method | training: defaults | training: tuned | test: defaults | test: tuned "
-           "(same worlds) | tuned − defaults | McNemar p (Holm) |",
-           "|---|---|---|---|---|---|---|"]
+    dvt = ["| method | training: defaults | training: tuned | validation: defaults | "
+           "validation: tuned | test: defaults | test: tuned (same worlds) | tuned − defaults "
+           "| McNemar p (Holm) |",
+           "|---|---|---|---|---|---|---|---|---|"]
     for (m, info, shared, kb, ka, mc), p in zip(cells, adjusted, strict=True):
         n_tr = int(info.get("train_runs", 0))
         tr_d = _pct(int(info["default_train_success"]), n_tr) if info else "—"
         tr_t = _pct(int(info["train_success"]), n_tr) if info else "—"
+        n_va = int(info.get("validation_runs", 0))
+        va_d = _pct(int(info["default_validation_success"]), n_va) \
+            if "default_validation_success" in info else "—"
+        va_t = _pct(int(info["validation_success"]), n_va) if n_va else "—"
         verdict = stats.verdict(mc.difference, float(p), True)
         mark = f" **{verdict}**" if verdict != "no difference" else ""
-        dvt.append(f"| {md_escape(m)} | {tr_d} | {tr_t} | {_pct(kb, len(shared))} | "
+        dvt.append(f"| {md_escape(m)} | {tr_d} | {tr_t} | {va_d} | {va_t} | "
+                   f"{_pct(kb, len(shared))} | "
                    f"{_pct(ka, len(shared))} | {100 * mc.difference:+.0f} pts | "
                    f"{float(p):.3g}{mark} |")
     return gap, dvt
@@ -327,7 +333,9 @@ def heldout_report(rows: Sequence[Mapping[str, Any]], dest: Path, baseline: str,
     md += ["## Generalisation gap", "", "Training success of the best trial (the tuning "
            "seeds it was chosen on) against test success:", "", *gap, "",
            "## Defaults against tuned", "", "On the test worlds both ran (paired by world); "
-           "training columns from the variants files:", "", *dvt, ""]
+           "training and validation columns from the variants files (the tuned parameters "
+           "are the defaults' unless a finalist beat them significantly on the validation "
+           "worlds, docs/heldout.md):", "", *dvt, ""]
     default_table, _ = _variant_table(methods, [r for r in rows if variant_name(r) in methods])
     md += ["### Defaults over their test worlds", "", *default_table, ""]
     arts = [Artefact("success_vs_difficulty.png", "-", "success against the difficulty "
