@@ -222,8 +222,13 @@ class _Renderer:
         if self.pool is not None and _picklable(r.render):
             with deferred():  # the first submit starts the render process
                 fut = self.pool.submit(_render, *args)
-        else:
-            fut.set_result(_render(*args))
+        else:  # inline: a compacted log goes to _collect as from a render process
+            from dfcoa_opt.bench.results.logs import LogCompacted
+
+            try:
+                fut.set_result(_render(*args))
+            except LogCompacted as exc:
+                fut.set_exception(exc)
         self.pending.append((r, dest, done, fut))
         with deferred():  # takes the futures' locks, which the pool's manager thread needs
             self._collect(block=False)
